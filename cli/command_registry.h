@@ -8,6 +8,8 @@
 //     return [opts] { return run_inspect(*opts); };
 //   });
 //
+// LAYERSNET_BENCH(linear, ...) registers `layersnet bench linear` the same way.
+//
 // The setup function adds options to `sub` and returns the action to run when the
 // subcommand is chosen; the action's return value is the process exit code.
 #include <CLI/CLI.hpp>
@@ -29,14 +31,23 @@ struct CommandEntry {
 
 // Registered commands, sorted by name when --help lists them.
 std::vector<CommandEntry>& command_registry();
+// Benchmarks, listed under `layersnet bench <name>`.
+std::vector<CommandEntry>& bench_registry();
 
 struct CommandRegistrar {
-  CommandRegistrar(std::string name, std::string description, CommandSetup setup) {
-    command_registry().push_back({std::move(name), std::move(description), std::move(setup)});
+  CommandRegistrar(std::vector<CommandEntry>& registry, std::string name, std::string description,
+                   CommandSetup setup) {
+    registry.push_back({std::move(name), std::move(description), std::move(setup)});
   }
 };
 
 }  // namespace layersnet::cli
 
-#define LAYERSNET_COMMAND(name, description, setup_fn) \
-  static ::layersnet::cli::CommandRegistrar layersnet_command_registrar_##name(#name, description, setup_fn)
+#define LAYERSNET_COMMAND(name, description, setup_fn)                                              \
+  static ::layersnet::cli::CommandRegistrar layersnet_command_registrar_##name(                     \
+      ::layersnet::cli::command_registry(), #name, description, setup_fn)
+
+// Same, for a benchmark run as `layersnet bench <name>`.
+#define LAYERSNET_BENCH(name, description, setup_fn)                                                \
+  static ::layersnet::cli::CommandRegistrar layersnet_bench_registrar_##name(                       \
+      ::layersnet::cli::bench_registry(), #name, description, setup_fn)

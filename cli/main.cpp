@@ -12,20 +12,35 @@ std::vector<CommandEntry>& command_registry() {
   static std::vector<CommandEntry> entries;
   return entries;
 }
+std::vector<CommandEntry>& bench_registry() {
+  static std::vector<CommandEntry> entries;
+  return entries;
+}
 }  // namespace layersnet::cli
 
+namespace {
+using namespace layersnet::cli;
+
+void add_entries(CLI::App& parent, std::vector<CommandEntry>& entries, std::map<CLI::App*, CommandAction>& actions) {
+  std::sort(entries.begin(), entries.end(), [](const auto& a, const auto& b) { return a.name < b.name; });
+  for (auto& entry : entries) {
+    CLI::App* sub = parent.add_subcommand(entry.name, entry.description);
+    actions[sub] = entry.setup(*sub);
+  }
+}
+}  // namespace
+
 int main(int argc, char** argv) {
-  using namespace layersnet::cli;
   CLI::App app{"LayersNet: learned simulation of multi-layered garments (ICCV 2023), on CPUs", "layersnet"};
   app.set_version_flag("--version", std::string("layersnet ") + LAYERSNET_VERSION);
   app.require_subcommand(0, 1);
 
-  auto& entries = command_registry();
-  std::sort(entries.begin(), entries.end(), [](const auto& a, const auto& b) { return a.name < b.name; });
   std::map<CLI::App*, CommandAction> actions;
-  for (auto& entry : entries) {
-    CLI::App* sub = app.add_subcommand(entry.name, entry.description);
-    actions[sub] = entry.setup(*sub);
+  add_entries(app, command_registry(), actions);
+  if (!bench_registry().empty()) {
+    CLI::App* bench = app.add_subcommand("bench", "Measure speed (ratios against a reference in the same run)");
+    bench->require_subcommand(1);
+    add_entries(*bench, bench_registry(), actions);
   }
 
   try {
