@@ -1,0 +1,125 @@
+#pragma once
+// Reverse-mode tape over tensors (one node per tensor op, never per scalar).
+//
+// Forward: each op wrapper computes its result into the arena and, when the tape is
+// recording and an input needs a gradient, appends a Node. Nodes are stored in
+// construction order, which is a topological order, so backward is a plain reverse walk
+// with one switch over OpKind (generated from op_list.h).
+//
+// Backward ADDS into input gradients. The caller zeroes parameter gradients between
+// steps (ParamStore::zero_grads); tape tensors get zeroed gradients when created.
+//
+// One step:   tape.reset(); ...forward ops...; tape.backward(loss); optimizer step.
+// Rollout:    NoRecord guard(tape); ...forward ops... (no nodes, no gradient buffers).
+#include "autodiff/arena.h"
+#include "autodiff/check.h"
+#include "autodiff/op_list.h"
+#include "autodiff/var.h"
+
+#include <array>
+#include <cstdint>
+#include <initializer_list>
+#include <span>
+#include <vector>
+
+namespace layersnet::ad {
+
+enum class OpKind : int32_t {
+#define LAYERSNET_OP_ENUM(Enum, stem) Enum,
+  LAYERSNET_ALL_OPS(LAYERSNET_OP_ENUM)
+#undef LAYERSNET_OP_ENUM
+      Count
+};
+
+constexpr int32_t kOpCount = static_cast<int32_t>(OpKind::Count);
+const char* op_name(OpKind op);
+
+// What backward needs of one op. Fields are op-specific; each op's header says which it uses.
+template <class T>
+struct Node {
+  OpKind op{};
+  Var<T> out;
+  std::array<Var<T>, 4> in{};
+  const Var<T>* more_in = nullptr;  // ops with a variable number of inputs (concat)
+  int32_t n_more = 0;
+  std::array<const int32_t*, 3> idx{};  // index arrays (in the arena)
+  std::array<int64_t, 3> idx_len{};
+  std::array<T, 4> s{};        // scalar parameters
+  std::array<int64_t, 4> i{};  // integer parameters
+  T* saved = nullptr;          // forward intermediates kept for backward (in the arena)
+};
+
+template <class T>
+class Tape {
+ public:
+  explicit Tape(std::size_t first_block_bytes = std::size_t{1} << 20) : arena_(first_block_bytes) {
+    nodes_.reserve(1024);
+  }
+
+  Arena& arena() { return arena_; }
+  bool recording() const { return recording_; }
+  void set_recording(bool on) { recording_ = on; }
+
+  // A fresh (rows, cols) tensor; values uninitialised; gradient zeroed when `with_grad`
+  // and the tape is recording, else null.
+  Var<T> new_var(int64_t rows, int64_t cols, bool with_grad);
+  // Copies `data` (rows*cols values, row-major) into the arena; no gradient.
+  Var<T> constant(const T* data, int64_t rows, int64_t cols);
+  // A leaf that needs a gradient (for checks and inputs we differentiate by).
+  Var<T> leaf(const T* data, int64_t rows, int64_t cols);
+  Var<T> zeros(int64_t rows, int64_t cols, bool with_grad = false);
+
+  // Copies an index list into the arena (nodes keep pointers, callers' vectors may die).
+  const int32_t* copy_indices(std::span<const int32_t> indices);
+  T* scratch(std::size_t count) { return arena_.allocate_array<T>(count); }
+
+  // True when an op with these inputs must record a node and produce a gradient.
+  bool wants_grad(std::initializer_list<Var<T>> inputs) const {
+    if (!recording_) return false;
+    for (const auto& v : inputs)
+      if (v.grad) return true;
+    return false;
+  }
+  Node<T>& record(OpKind op, const Var<T>& out, std::initializer_list<Var<T>> inputs);
+
+  // Seeds d loss / d loss = 1 (loss must be 1x1) and walks the nodes backwards.
+  void backward(const Var<T>& loss);
+  // Walks the nodes backwards with output gradients already seeded by the caller.
+  void backward_seeded();
+
+  // Forgets every node and rewinds the arena; capacity is kept for the next step.
+  void reset();
+
+  const std::vector<Node<T>>& nodes() const { return nodes_; }
+
+ private:
+  Arena arena_;
+  std::vector<Node<T>> nodes_;
+  bool recording_ = true;
+};
+
+// Scope without recording (rollouts, evaluation, the no-grad part of noisy rollouts).
+template <class T>
+class NoRecord {
+ public:
+  explicit NoRecord(Tape<T>& tape) : tape_(tape), was_(tape.recording()) { tape.set_recording(false); }
+  ~NoRecord() { tape_.set_recording(was_); }
+  NoRecord(const NoRecord&) = delete;
+  NoRecord& operator=(const NoRecord&) = delete;
+
+ private:
+  Tape<T>& tape_;
+  bool was_;
+};
+
+// Backward of each op, defined next to its forward in ops_*.cpp.
+#define LAYERSNET_OP_BACKWARD_DECL(Enum, stem) \
+  template <class T>                           \
+  void backward_##stem(const Node<T>& node);
+LAYERSNET_ALL_OPS(LAYERSNET_OP_BACKWARD_DECL)
+#undef LAYERSNET_OP_BACKWARD_DECL
+
+extern template class Tape<float>;
+extern template class Tape<double>;
+
+}  // namespace layersnet::ad

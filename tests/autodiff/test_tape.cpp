@@ -1,0 +1,120 @@
+// The tape's mechanics: arena reuse, no-record mode, accumulation, parameter table.
+#include "autodiff/ops_dense.h"
+#include "autodiff/params.h"
+#include "gradcheck_registry.h"
+
+namespace layersnet::ad::testing {
+
+// A step of fixed shape; returns the loss-free output so the test can run backward on it.
+template <class T>
+Var<T> some_step(Tape<T>& tape, ParamStore<T>& params, int rows) {
+  std::vector<T> data(static_cast<std::size_t>(rows * 8), T(0.5));
+  Var<T> x = tape.constant(data.data(), rows, 8);
+  Var<T> y = x;
+  for (int layer = 0; layer < 20; ++layer) y = add(tape, y, params.var(0));
+  return y;
+}
+
+TEST(Arena, SteadyStateStepsMakeNoHeapAllocation) {
+  Tape<float> tape(/*first_block_bytes=*/256);  // tiny first block: forces growth on step 1
+  ParamStore<float> params;
+  params.add("bias", 1, 8);
+  params.finalize();
+  std::size_t bytes_first = 0, heap_after_first = 0;
+  for (int step = 0; step < 6; ++step) {
+    tape.reset();
+    Var<float> y = some_step(tape, params, 1000);
+    std::fill_n(y.grad, y.size(), 1.0f);
+    tape.backward_seeded();
+    if (step == 0) {
+      bytes_first = tape.arena().bytes_in_use();
+      heap_after_first = tape.arena().heap_allocations();
+      EXPECT_GT(heap_after_first, 1u) << "the test must start with a too-small arena";
+    } else if (step >= 2) {
+      // Step 1 merges the blocks of step 0 into one; from then on nothing new.
+      EXPECT_EQ(tape.arena().bytes_in_use(), bytes_first);
+      EXPECT_EQ(tape.arena().heap_allocations(), heap_after_first + 1);
+      EXPECT_GE(tape.arena().capacity(), bytes_first);
+    }
+  }
+}
+
+TEST(Arena, AllocationsAreAlignedAndDistinct) {
+  Arena arena(128);
+  std::set<void*> seen;
+  for (int k = 0; k < 100; ++k) {
+    void* p = arena.allocate(static_cast<std::size_t>(k * 7));
+    EXPECT_EQ(reinterpret_cast<std::uintptr_t>(p) % Arena::kAlignment, 0u);
+    EXPECT_TRUE(seen.insert(p).second);
+  }
+  arena.rewind();
+  EXPECT_EQ(arena.bytes_in_use(), 0u);
+}
+
+TEST(Tape, NoRecordMakesNoNodesAndNoGradients) {
+  Tape<double> tape;
+  const RowMat<double> a = random_matrix(3, 4, 1), b = random_matrix(3, 4, 2);
+  Var<double> va = tape.leaf(a.data(), 3, 4);
+  {
+    NoRecord<double> off(tape);
+    Var<double> vb = tape.leaf(b.data(), 3, 4);
+    EXPECT_EQ(vb.grad, nullptr);
+    Var<double> y = add(tape, va, vb);
+    EXPECT_EQ(y.grad, nullptr);
+    EXPECT_TRUE(tape.nodes().empty());
+    EXPECT_TRUE(y.val().isApprox(a + b));
+  }
+  EXPECT_TRUE(tape.recording());
+  Var<double> y = add(tape, va, va);
+  EXPECT_EQ(tape.nodes().size(), 1u);
+  EXPECT_NE(y.grad, nullptr);
+}
+
+TEST(Tape, ConstantsGetNoGradientAndStopRecording) {
+  Tape<double> tape;
+  const RowMat<double> a = random_matrix(2, 2, 3);
+  Var<double> c1 = tape.constant(a.data(), 2, 2), c2 = tape.constant(a.data(), 2, 2);
+  Var<double> y = add(tape, c1, c2);
+  EXPECT_EQ(y.grad, nullptr);
+  EXPECT_TRUE(tape.nodes().empty());
+}
+
+TEST(Tape, BackwardAccumulatesWhenAVariableIsUsedTwice) {
+  Tape<double> tape;
+  const RowMat<double> a = random_matrix(2, 3, 4);
+  Var<double> x = tape.leaf(a.data(), 2, 3);
+  Var<double> y = add(tape, x, x);  // dy/dx = 2
+  std::fill_n(y.grad, y.size(), 1.0);
+  tape.backward_seeded();
+  for (int64_t k = 0; k < x.size(); ++k) EXPECT_EQ(x.grad[k], 2.0);
+}
+
+TEST(Tape, BackwardNeedsAScalarLoss) {
+  Tape<double> tape;
+  const RowMat<double> a = random_matrix(2, 3, 5);
+  Var<double> x = tape.leaf(a.data(), 2, 3);
+  Var<double> y = add(tape, x, x);
+  EXPECT_THROW(tape.backward(y), CheckError);
+}
+
+TEST(ParamStore, NameTableAndFlatBuffers) {
+  ParamStore<float> params;
+  const int q = params.add("encoder.layers.0.attn.q_proj.weight", 128, 128);
+  const int b = params.add("encoder.layers.0.attn.q_proj.bias", 1, 128);
+  params.finalize();
+  EXPECT_EQ(params.index_of("encoder.layers.0.attn.q_proj.bias"), b);
+  EXPECT_EQ(params.entries()[static_cast<std::size_t>(q)].rows, 128);
+  EXPECT_GE(params.total_size(), 128u * 128u + 128u);
+  Var<float> vb = params.var(b);
+  EXPECT_EQ(vb.value, params.values().data() + params.entries()[static_cast<std::size_t>(b)].offset);
+  EXPECT_EQ(reinterpret_cast<std::uintptr_t>(vb.value) % 4, 0u);
+  try {
+    params.index_of("encoder.layers.0.attn.q_proj.wieght");
+    FAIL() << "unknown name accepted";
+  } catch (const CheckError& e) {
+    EXPECT_NE(std::string(e.what()).find("closest: 'encoder.layers.0.attn.q_proj."), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(params.add("late", 1, 1), CheckError);
+}
+
+}  // namespace layersnet::ad::testing
