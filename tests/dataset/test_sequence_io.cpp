@@ -1,0 +1,153 @@
+// Reader/writer round trips, data-set folders, and agreement with the shared validator.
+#include "dataset/manifest.h"
+#include "dataset/sequence.h"
+#include "dataset/synthetic.h"
+#include "test_util.h"
+
+#include <fstream>
+
+namespace layersnet::dataset {
+namespace {
+
+using testing::temp_dir;
+
+void expect_same(const Sequence& a, const Sequence& b, float tol) {
+  ASSERT_EQ(a.info.num_frames, b.info.num_frames);
+  ASSERT_EQ(a.info.num_body_vertices, b.info.num_body_vertices);
+  EXPECT_EQ(a.info.body_faces, b.info.body_faces);
+  EXPECT_TRUE(a.frames.body.isApprox(b.frames.body, tol));
+  EXPECT_TRUE(a.info.translation.isApprox(b.info.translation, tol) ||
+              (a.info.translation.norm() == 0 && b.info.translation.norm() == 0));
+  EXPECT_FLOAT_EQ(a.info.fps, b.info.fps);
+  EXPECT_EQ(a.info.up_axis, b.info.up_axis);
+  EXPECT_TRUE(a.info.gravity.isApprox(b.info.gravity));
+  EXPECT_FLOAT_EQ(a.info.body_friction, b.info.body_friction);
+  ASSERT_EQ(a.info.num_garments(), b.info.num_garments());
+  for (int g = 0; g < a.info.num_garments(); ++g) {
+    const auto &ga = a.info.garments[g], &gb = b.info.garments[g];
+    EXPECT_EQ(ga.name, gb.name);
+    EXPECT_EQ(ga.type, gb.type);
+    EXPECT_EQ(ga.faces, gb.faces);
+    EXPECT_EQ(ga.panel, gb.panel);
+    EXPECT_TRUE(ga.uv.isApprox(gb.uv, tol));
+    EXPECT_TRUE(ga.rest.isApprox(gb.rest, tol));
+    EXPECT_FLOAT_EQ(ga.attributes.mass, gb.attributes.mass);
+    EXPECT_FLOAT_EQ(ga.attributes.tension_stiffness, gb.attributes.tension_stiffness);
+    EXPECT_TRUE(a.frames.garments[g].isApprox(b.frames.garments[g], tol));
+  }
+  ASSERT_EQ(a.info.has_wind, b.info.has_wind);
+  if (a.info.has_wind) {
+    EXPECT_TRUE(a.info.wind_rotation.isApprox(b.info.wind_rotation));
+    EXPECT_TRUE(a.info.wind_strength.isApprox(b.info.wind_strength));
+  }
+}
+
+TEST(SequenceIo, SyntheticSceneHasTheAdvertisedShape) {
+  SyntheticOptions o;
+  o.frames = 5;
+  o.garments = 2;
+  o.rings = 4;
+  o.segments = 8;
+  o.wind = true;
+  const Sequence s = make_synthetic_sequence(o);
+  EXPECT_EQ(s.info.num_frames, 5);
+  ASSERT_EQ(s.info.num_garments(), 2);
+  EXPECT_EQ(s.info.garments[0].num_vertices, 32);
+  EXPECT_EQ(s.info.garments[0].num_faces(), 2 * 3 * 8);
+  EXPECT_EQ(s.frames.garments[1].rows(), 5 * 32);
+  // Two panels, half of the faces each.
+  int p1 = 0;
+  for (int p : s.info.garments[0].panel) p1 += p;
+  EXPECT_EQ(p1, 24);
+  // Body: 4 rings... default body_rings 6 x 16 + 2 cap centres.
+  EXPECT_EQ(s.info.num_body_vertices, 6 * 16 + 2);
+  EXPECT_NO_THROW(validate_sequence(s, "synthetic"));
+}
+
+TEST(SequenceIo, RoundTripFloat32Int32) {
+  const auto dir = temp_dir("rt");
+  SyntheticOptions o;
+  o.garments = 2;
+  o.wind = true;
+  const Sequence s = make_synthetic_sequence(o);
+  write_sequence((dir / "a.h5").string(), s);
+  const Sequence r = read_sequence((dir / "a.h5").string());
+  expect_same(s, r, 0.f);
+  EXPECT_TRUE(r.info.has_translation);
+}
+
+TEST(SequenceIo, RoundTripFloat64Int64GzipWithoutWindOrTranslation) {
+  const auto dir = temp_dir("rt64");
+  SyntheticOptions o;
+  o.garments = 1;
+  const Sequence s = make_synthetic_sequence(o);
+  SequenceWriteOptions w;
+  w.float64 = true;
+  w.int64 = true;
+  w.gzip = 4;
+  w.write_translation = false;
+  write_sequence((dir / "b.h5").string(), s, w);
+  const Sequence r = read_sequence((dir / "b.h5").string());
+  EXPECT_FALSE(r.info.has_translation);
+  EXPECT_EQ(r.info.translation.rows(), s.info.num_frames);
+  EXPECT_EQ(r.info.translation.norm(), 0.f);
+  EXPECT_FALSE(r.info.has_wind);
+  EXPECT_TRUE(s.frames.body.isApprox(r.frames.body, 1e-7f));
+  EXPECT_EQ(s.info.garments[0].faces, r.info.garments[0].faces);
+}
+
+TEST(SequenceIo, FrameWindowsMatchTheWholeSequence) {
+  const auto dir = temp_dir("win");
+  SyntheticOptions o;
+  o.frames = 10;
+  o.garments = 2;
+  const Sequence s = make_synthetic_sequence(o);
+  SequenceWriteOptions w;
+  w.gzip = 1;
+  write_sequence((dir / "c.h5").string(), s, w);
+  SequenceFile f((dir / "c.h5").string());
+  const FrameWindow win = f.read_frames(4, 3);
+  EXPECT_EQ(win.first, 4);
+  EXPECT_EQ(win.count, 3);
+  for (int t = 4; t < 7; ++t) {
+    EXPECT_EQ(win.body_at(t, s.info.num_body_vertices), s.body_at(t));
+    EXPECT_EQ(win.garment_at(1, t, s.info.garments[1].num_vertices), s.garment_at(1, t));
+  }
+  EXPECT_THROW(f.read_frames(8, 3), DatasetError);
+}
+
+TEST(SequenceIo, WrittenFilesPassTheSharedValidator) {
+  if (!testing::validator_available()) GTEST_SKIP() << "/usr/bin/python3 with h5py or the validator is missing";
+  const auto dir = temp_dir("val");
+  SyntheticOptions o;
+  o.garments = 2;
+  o.wind = true;
+  SequenceWriteOptions w;
+  w.gzip = 2;
+  write_synthetic_dataset(dir.string(), 2, 1, 1, o, w);
+  std::string out;
+  EXPECT_EQ(testing::run_validator(dir.string(), &out), 0) << out;
+  EXPECT_NE(out.find("0 problems"), std::string::npos) << out;
+}
+
+TEST(Manifest, RoundTripAndSplits) {
+  const auto dir = temp_dir("man");
+  const DatasetManifest m = write_synthetic_dataset(dir.string(), 3, 1, 2);
+  const DatasetManifest r = read_manifest(dir.string());
+  EXPECT_EQ(r.train, m.train);
+  EXPECT_EQ(r.val, m.val);
+  EXPECT_EQ(r.test, m.test);
+  EXPECT_EQ(r.all_ids().size(), 6u);
+  EXPECT_EQ(r.sequence_path("s0000"), (dir / "s0000.h5").string());
+  EXPECT_THROW(r.split("training"), DatasetError);
+}
+
+TEST(Manifest, AcceptsMissingSplitsAndExtraKeys) {
+  const DatasetManifest m = parse_manifest(
+      R"({"format":"dlayers-h5","version":1,"source":"x","splits":{"train":["a","b"]},"extra":3})", "m.json");
+  EXPECT_EQ(m.train.size(), 2u);
+  EXPECT_TRUE(m.test.empty());
+}
+
+}  // namespace
+}  // namespace layersnet::dataset

@@ -1,0 +1,44 @@
+#pragma once
+// Helpers shared by the data-layer tests: a fresh temporary folder per test and a runner
+// for ../shared/tools/check_dlayers_h5.py.
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <random>
+#include <string>
+
+namespace layersnet::dataset::testing {
+
+inline std::filesystem::path temp_dir(const std::string& name) {
+  const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+  std::filesystem::path p = std::filesystem::temp_directory_path() /
+                            ("layersnet_ds_" + std::to_string(::getpid()) + "_" + info->name() + "_" + name);
+  std::filesystem::remove_all(p);
+  std::filesystem::create_directories(p);
+  return p;
+}
+
+inline std::string validator_path() {
+  return std::string(LAYERSNET_SOURCE_DIR) + "/../shared/tools/check_dlayers_h5.py";
+}
+
+// True when /usr/bin/python3 has h5py and the shared validator exists.
+inline bool validator_available() {
+  if (!std::filesystem::exists(validator_path())) return false;
+  return std::system("/usr/bin/python3 -c 'import h5py, numpy' >/dev/null 2>&1") == 0;
+}
+
+// Runs the validator on `path`; returns its exit status and its output in `out`.
+inline int run_validator(const std::string& path, std::string* out) {
+  const std::string cmd = "/usr/bin/python3 '" + validator_path() + "' '" + path + "' 2>&1";
+  FILE* pipe = popen(cmd.c_str(), "r");
+  if (!pipe) return -1;
+  char buf[512];
+  while (fgets(buf, sizeof buf, pipe)) *out += buf;
+  const int status = pclose(pipe);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+}  // namespace layersnet::dataset::testing
