@@ -1,0 +1,36 @@
+#pragma once
+// Sizes and switches of the LayersNet model. Defaults are the official implementation's
+// (../shared/reference/official-implementation.md §2); configs/*.toml override them
+// under [model]. Distances are in scene units (D-LAYERS: 10 units per metre).
+#include <string>
+
+namespace layersnet {
+
+struct ModelConfig {
+  int width = 128;                  // d: token channels
+  int heads = 8;                    // H: attention heads (half world, half mesh)
+  int layers = 4;                   // transformer layers of the simulator
+  int ffn_width = 256;              // hidden width of each layer's FFN
+  int decoder_width = 268;          // decoder MLP width (official: 12 + 2·128)
+  double patch_size = 0.04;         // UV grid cell, UV units (metres of rest cloth)
+  double world_radius = 0.4;        // R: patch-to-patch world edges
+  double body_radius = 0.6;         // R_b: patch-to-body neighbours
+  int body_neighbors = 16;          // K: body vertices per patch
+  std::string body_query = "nearest";  // "nearest" K, or "first" K in index order (official ball query)
+  int decoder_patch_candidates = 4;    // patches per vertex in the decoder
+  std::string attention = "ria";    // "ria" (paper eq. 5–7) or "tie" (TIE's LayerNorm logits)
+  bool rotation_equivalent = true;  // RET (eq. 8–11); false = the "vanilla" ablation
+  std::string orthogonality = "penalty";  // W_R: "penalty" (official) or "exact" (QR parametrisation)
+};
+
+struct LossConfig {
+  double vertex = 1.0;           // λ_m, garment vertex position MSE (eq. 16)
+  double patch = 1.0;            // patch-centre MSE
+  double normal = 1.0;           // λ_n (eq. 17)
+  double collision_body = 1.3;   // λ_b (eq. 18 against the ground-truth body)
+  double collision_layer = 0.1;  // λ_g (eq. 18 outer vs inner layer; official: not × λ_b)
+  double collision_eps = 0.001;  // d_ε, scene units
+  double orthogonality = 1.0;    // ||W Wᵀ − I||² + ||Wᵀ W − I||² penalty
+};
+
+}  // namespace layersnet

@@ -1,0 +1,339 @@
+#include "train/config.h"
+
+#include <toml++/toml.h>
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <filesystem>
+#include <functional>
+#include <limits>
+#include <sstream>
+#include <type_traits>
+
+namespace layersnet {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+// Where a value came from, for error messages: "configs/tiny.toml:12:1" or "--set".
+std::string where(const std::string& origin, const toml::node& node) {
+  const auto& src = node.source();
+  if (src.begin.line == 0) return origin;
+  return origin + ":" + std::to_string(src.begin.line) + ":" + std::to_string(src.begin.column);
+}
+
+// One config key: how to read it from TOML into the struct, and how to print it.
+struct KeySpec {
+  std::string key;
+  std::string type;
+  std::string doc;
+  std::function<void(Config&, const toml::node&, const std::string& at)> set;
+  std::function<std::string(const Config&)> print;
+};
+
+template <class V>
+std::string type_name() {
+  if constexpr (std::is_same_v<V, bool>) return "bool";
+  else if constexpr (std::is_integral_v<V>) return "integer";
+  else if constexpr (std::is_floating_point_v<V>) return "float";
+  else if constexpr (std::is_same_v<V, std::string>) return "string";
+  else return "list of integers";
+}
+
+template <class V>
+std::string print_value(const V& v) {
+  std::ostringstream out;
+  if constexpr (std::is_same_v<V, bool>) out << (v ? "true" : "false");
+  else if constexpr (std::is_integral_v<V>) out << v;
+  else if constexpr (std::is_floating_point_v<V>) {
+    // Shortest text that reads back bit-exact.
+    char buf[64];
+    const auto end = std::to_chars(buf, buf + sizeof buf, v).ptr;
+    const std::string s(buf, end);
+    out << s;
+    if (s.find_first_of(".eEn") == std::string::npos) out << ".0";  // keep it a TOML float
+  } else if constexpr (std::is_same_v<V, std::string>) {
+    out << toml::value<std::string>(v);
+  } else {
+    out << "[";
+    for (std::size_t k = 0; k < v.size(); ++k) out << (k ? ", " : "") << v[k];
+    out << "]";
+  }
+  return out.str();
+}
+
+struct Range {
+  double min = -std::numeric_limits<double>::infinity();
+  double max = std::numeric_limits<double>::infinity();
+  std::vector<std::string> choices;  // strings only
+};
+
+template <class V>
+V read_value(const toml::node& node, const std::string& key, const std::string& at, const Range& range) {
+  auto bad_type = [&] {
+    return ConfigError(at + ": key '" + key + "' must be " + (std::is_same_v<V, std::vector<int>> ? "a " : "a ") +
+                       type_name<V>());
+  };
+  auto check_range = [&](double x) {
+    if (!(x >= range.min && x <= range.max)) {
+      std::ostringstream msg;
+      msg << at << ": key '" << key << "' = " << x << " is out of range [" << range.min << ", " << range.max << "]";
+      throw ConfigError(msg.str());
+    }
+  };
+  if constexpr (std::is_same_v<V, bool>) {
+    if (!node.is_boolean()) throw bad_type();
+    return node.as_boolean()->get();
+  } else if constexpr (std::is_integral_v<V>) {
+    if (!node.is_integer()) throw bad_type();
+    const int64_t x = node.as_integer()->get();
+    check_range(static_cast<double>(x));
+    return static_cast<V>(x);
+  } else if constexpr (std::is_floating_point_v<V>) {
+    if (!node.is_number()) throw bad_type();
+    const double x = node.is_integer() ? static_cast<double>(node.as_integer()->get()) : node.as_floating_point()->get();
+    if (!std::isfinite(x)) throw ConfigError(at + ": key '" + key + "' must be finite");
+    check_range(x);
+    return static_cast<V>(x);
+  } else if constexpr (std::is_same_v<V, std::string>) {
+    if (!node.is_string()) throw bad_type();
+    std::string s = node.as_string()->get();
+    if (!range.choices.empty() && std::find(range.choices.begin(), range.choices.end(), s) == range.choices.end()) {
+      std::string list;
+      for (const auto& c : range.choices) list += (list.empty() ? "" : ", ") + ("\"" + c + "\"");
+      throw ConfigError(at + ": key '" + key + "' = \"" + s + "\" is not one of " + list);
+    }
+    return s;
+  } else {
+    if (!node.is_array()) throw bad_type();
+    V out;
+    for (const auto& element : *node.as_array()) {
+      if (!element.is_integer()) throw bad_type();
+      const int64_t x = element.as_integer()->get();
+      check_range(static_cast<double>(x));
+      out.push_back(static_cast<int>(x));
+    }
+    return out;
+  }
+}
+
+class Schema {
+ public:
+  template <class Field>
+  void add(const std::string& key, Field field, const std::string& doc, Range range = {}) {
+    using V = std::remove_reference_t<decltype(field(std::declval<Config&>()))>;
+    KeySpec spec;
+    spec.key = key;
+    spec.type = type_name<V>();
+    spec.doc = doc;
+    spec.set = [field, key, range](Config& c, const toml::node& node, const std::string& at) {
+      field(c) = read_value<V>(node, key, at, range);
+    };
+    spec.print = [field](const Config& c) { return print_value(field(const_cast<Config&>(c))); };
+    specs_.push_back(std::move(spec));
+  }
+  const std::vector<KeySpec>& specs() const { return specs_; }
+  const KeySpec* find(const std::string& key) const {
+    for (const auto& s : specs_)
+      if (s.key == key) return &s;
+    return nullptr;
+  }
+
+ private:
+  std::vector<KeySpec> specs_;
+};
+
+const Schema& schema() {
+  static const Schema s = [] {
+    Schema k;
+    const Range positive{1, 1e9, {}};
+    // [model]
+    k.add("model.width", [](Config& c) -> int& { return c.model.width; }, "token channels d", {8, 4096, {}});
+    k.add("model.heads", [](Config& c) -> int& { return c.model.heads; }, "attention heads (even: world + mesh)", {2, 64, {}});
+    k.add("model.layers", [](Config& c) -> int& { return c.model.layers; }, "simulator transformer layers", {1, 64, {}});
+    k.add("model.ffn_width", [](Config& c) -> int& { return c.model.ffn_width; }, "FFN hidden width", positive);
+    k.add("model.decoder_width", [](Config& c) -> int& { return c.model.decoder_width; }, "decoder MLP width", positive);
+    k.add("model.patch_size", [](Config& c) -> double& { return c.model.patch_size; }, "UV patch cell size", {1e-4, 10, {}});
+    k.add("model.world_radius", [](Config& c) -> double& { return c.model.world_radius; }, "patch world-edge radius R (scene units)", {0, 100, {}});
+    k.add("model.body_radius", [](Config& c) -> double& { return c.model.body_radius; }, "patch-to-body radius R_b (scene units)", {0, 100, {}});
+    k.add("model.body_neighbors", [](Config& c) -> int& { return c.model.body_neighbors; }, "body vertices per patch K", {0, 256, {}});
+    k.add("model.body_query", [](Config& c) -> std::string& { return c.model.body_query; }, "which K body vertices: nearest, or first in index order (official)", {0, 0, {"nearest", "first"}});
+    k.add("model.decoder_patch_candidates", [](Config& c) -> int& { return c.model.decoder_patch_candidates; }, "patches decoding each vertex", {1, 64, {}});
+    k.add("model.attention", [](Config& c) -> std::string& { return c.model.attention; }, "attention normalisation", {0, 0, {"ria", "tie"}});
+    k.add("model.rotation_equivalent", [](Config& c) -> bool& { return c.model.rotation_equivalent; }, "Rotation Equivalent Transformation on/off");
+    k.add("model.orthogonality", [](Config& c) -> std::string& { return c.model.orthogonality; }, "how W_R stays orthogonal", {0, 0, {"penalty", "exact"}});
+    // [loss]
+    const Range weight{0, 1e6, {}};
+    k.add("loss.vertex", [](Config& c) -> double& { return c.loss.vertex; }, "vertex position MSE weight", weight);
+    k.add("loss.patch", [](Config& c) -> double& { return c.loss.patch; }, "patch centre MSE weight", weight);
+    k.add("loss.normal", [](Config& c) -> double& { return c.loss.normal; }, "vertex normal loss weight", weight);
+    k.add("loss.collision_body", [](Config& c) -> double& { return c.loss.collision_body; }, "garment-body collision weight", weight);
+    k.add("loss.collision_layer", [](Config& c) -> double& { return c.loss.collision_layer; }, "outer-inner layer collision weight", weight);
+    k.add("loss.collision_eps", [](Config& c) -> double& { return c.loss.collision_eps; }, "collision margin d_eps (scene units)", {0, 10, {}});
+    k.add("loss.orthogonality", [](Config& c) -> double& { return c.loss.orthogonality; }, "W_R orthogonality penalty weight", weight);
+    // [data]
+    k.add("data.dataset", [](Config& c) -> std::string& { return c.data.dataset; }, "data set folder");
+    k.add("data.first_frame", [](Config& c) -> int& { return c.data.first_frame; }, "first input frame of a sample", {2, 1e6, {}});
+    k.add("data.max_frames", [](Config& c) -> int& { return c.data.max_frames; }, "frames used per sequence (0 = all)", {0, 1e6, {}});
+    k.add("data.cache_sequences", [](Config& c) -> int& { return c.data.cache_sequences; }, "sequences cached in memory", positive);
+    // [train]
+    k.add("train.epochs", [](Config& c) -> int& { return c.train.epochs; }, "epochs", positive);
+    k.add("train.batch_size", [](Config& c) -> int& { return c.train.batch_size; }, "samples per update", positive);
+    k.add("train.learning_rate", [](Config& c) -> double& { return c.train.learning_rate; }, "Adam learning rate", {0, 10, {}});
+    k.add("train.lr_decay_epochs", [](Config& c) -> std::vector<int>& { return c.train.lr_decay_epochs; }, "epochs after which lr *= lr_gamma", {1, 1e6, {}});
+    k.add("train.lr_gamma", [](Config& c) -> double& { return c.train.lr_gamma; }, "step decay factor", {0, 1, {}});
+    k.add("train.adam_beta1", [](Config& c) -> double& { return c.train.adam_beta1; }, "Adam beta1", {0, 0.999999, {}});
+    k.add("train.adam_beta2", [](Config& c) -> double& { return c.train.adam_beta2; }, "Adam beta2", {0, 0.999999999, {}});
+    k.add("train.adam_eps", [](Config& c) -> double& { return c.train.adam_eps; }, "Adam epsilon", {0, 1, {}});
+    k.add("train.grad_clip", [](Config& c) -> double& { return c.train.grad_clip; }, "global gradient norm clip (0 = off)", {0, 1e9, {}});
+    k.add("train.rollout_steps", [](Config& c) -> std::vector<int>& { return c.train.rollout_steps; }, "max self-fed steps T_n per epoch", {0, 1000, {}});
+    k.add("train.seed", [](Config& c) -> int64_t& { return c.train.seed; }, "random seed", {0, 9.0e15, {}});
+    k.add("train.threads", [](Config& c) -> int& { return c.train.threads; }, "OpenMP threads (0 = all)", {0, 1024, {}});
+    k.add("train.keep_checkpoints", [](Config& c) -> int& { return c.train.keep_checkpoints; }, "last N checkpoints kept", positive);
+    k.add("train.max_nonfinite_in_row", [](Config& c) -> int& { return c.train.max_nonfinite_in_row; }, "stop after this many non-finite steps in a row", positive);
+    k.add("train.log_every", [](Config& c) -> int& { return c.train.log_every; }, "steps between progress lines", positive);
+    // [eval]
+    k.add("eval.split", [](Config& c) -> std::string& { return c.eval.split; }, "split to evaluate", {0, 0, {"train", "val", "test"}});
+    k.add("eval.frames", [](Config& c) -> int& { return c.eval.frames; }, "predicted frames per sequence", positive);
+    return k;
+  }();
+  return s;
+}
+
+std::size_t edit_distance(const std::string& a, const std::string& b) {
+  std::vector<std::size_t> row(b.size() + 1);
+  for (std::size_t j = 0; j <= b.size(); ++j) row[j] = j;
+  for (std::size_t i = 1; i <= a.size(); ++i) {
+    std::size_t diag = row[0];
+    row[0] = i;
+    for (std::size_t j = 1; j <= b.size(); ++j) {
+      const std::size_t up = row[j];
+      row[j] = std::min({row[j] + 1, row[j - 1] + 1, diag + (a[i - 1] == b[j - 1] ? 0 : 1)});
+      diag = up;
+    }
+  }
+  return row[b.size()];
+}
+
+std::string closest_key(const std::string& key) {
+  std::string best;
+  std::size_t best_d = std::numeric_limits<std::size_t>::max();
+  for (const auto& s : schema().specs()) {
+    const std::size_t d = edit_distance(key, s.key);
+    if (d < best_d) best_d = d, best = s.key;
+  }
+  return best;
+}
+
+void apply_value(Config& config, const std::string& key, const toml::node& node, const std::string& at) {
+  const KeySpec* spec = schema().find(key);
+  if (!spec) throw ConfigError(at + ": unknown key '" + key + "'; did you mean '" + closest_key(key) + "'?");
+  spec->set(config, node, at);
+}
+
+void apply_table(Config& config, const toml::table& table, const std::string& prefix, const std::string& origin) {
+  for (auto&& [name, node] : table) {
+    const std::string key = prefix.empty() ? std::string(name.str()) : prefix + "." + std::string(name.str());
+    if (prefix.empty() && key == "include") continue;  // handled by apply_config_file
+    if (node.is_table()) {
+      apply_table(config, *node.as_table(), key, origin);
+    } else {
+      apply_value(config, key, node, where(origin, node));
+    }
+  }
+}
+
+void apply_file(Config& config, const fs::path& path, std::vector<fs::path>& stack) {
+  const fs::path canonical = fs::weakly_canonical(path);
+  if (std::find(stack.begin(), stack.end(), canonical) != stack.end())
+    throw ConfigError(path.string() + ": include cycle (the file includes itself, directly or through its bases)");
+  if (!fs::exists(path)) {
+    const std::string from = stack.empty() ? "" : " (included from " + stack.back().string() + ")";
+    throw ConfigError(path.string() + ": config file not found" + from);
+  }
+  toml::table table;
+  try {
+    table = toml::parse_file(path.string());
+  } catch (const toml::parse_error& e) {
+    std::ostringstream msg;
+    msg << path.string() << ":" << e.source().begin.line << ":" << e.source().begin.column << ": " << e.description();
+    throw ConfigError(msg.str());
+  }
+  stack.push_back(canonical);
+  if (const toml::node* inc = table.get("include")) {
+    std::vector<std::string> bases;
+    if (inc->is_string()) {
+      bases.push_back(inc->as_string()->get());
+    } else if (inc->is_array()) {
+      for (const auto& b : *inc->as_array()) {
+        if (!b.is_string()) throw ConfigError(where(path.string(), *inc) + ": 'include' must be a string or a list of strings");
+        bases.push_back(b.as_string()->get());
+      }
+    } else {
+      throw ConfigError(where(path.string(), *inc) + ": 'include' must be a string or a list of strings");
+    }
+    for (const auto& base : bases) apply_file(config, path.parent_path() / base, stack);
+  }
+  apply_table(config, table, "", path.string());
+  stack.pop_back();
+}
+
+}  // namespace
+
+void apply_config_file(Config& config, const std::string& path) {
+  std::vector<fs::path> stack;
+  apply_file(config, path, stack);
+}
+
+void apply_override(Config& config, const std::string& assignment) {
+  const auto eq = assignment.find('=');
+  if (eq == std::string::npos || eq == 0)
+    throw ConfigError("--set " + assignment + ": expected key=value, e.g. --set train.epochs=2");
+  std::string key = assignment.substr(0, eq);
+  key.erase(key.find_last_not_of(" \t") + 1);
+  const std::string text = assignment.substr(eq + 1);
+  const std::string at = "--set " + assignment;
+  toml::table parsed;
+  try {
+    parsed = toml::parse("value = " + text);
+  } catch (const toml::parse_error&) {
+    // A bare word such as data/default or nearest: take it as a string.
+    parsed = toml::table{{"value", text}};
+  }
+  apply_value(config, key, *parsed.get("value"), at);
+}
+
+Config load_config(const std::vector<std::string>& files, const std::vector<std::string>& overrides) {
+  Config config;
+  for (const auto& f : files) apply_config_file(config, f);
+  for (const auto& o : overrides) apply_override(config, o);
+  return config;
+}
+
+std::string to_toml(const Config& config) {
+  std::ostringstream out;
+  std::string section;
+  out << "# Fully resolved LayersNet configuration (every key; defaults included).\n";
+  for (const auto& spec : schema().specs()) {
+    const auto dot = spec.key.find('.');
+    const std::string sec = spec.key.substr(0, dot);
+    if (sec != section) {
+      out << "\n[" << sec << "]\n";
+      section = sec;
+    }
+    out << spec.key.substr(dot + 1) << " = " << spec.print(config) << "\n";
+  }
+  return out.str();
+}
+
+std::string describe_keys() {
+  std::ostringstream out;
+  const Config defaults;
+  for (const auto& spec : schema().specs())
+    out << spec.key << " (" << spec.type << ", default " << spec.print(defaults) << "): " << spec.doc << "\n";
+  return out.str();
+}
+
+}  // namespace layersnet

@@ -1,0 +1,73 @@
+#pragma once
+// The resolved configuration of a run: plain structs whose defaults live here, in code.
+//
+// A TOML file overrides some keys; `include = "base.toml"` (or a list) at the top of a
+// file applies the base first, relative to the including file; `--set key=value` applies
+// last. Unknown keys, wrong types and out-of-range values are ConfigErrors naming the
+// file, line and key, with the closest valid key. `to_toml()` writes the fully resolved
+// config (every key) for the run directory and every checkpoint.
+#include "model/model_config.h"
+
+#include <cstdint>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace layersnet {
+
+struct DataConfig {
+  std::string dataset = "data/default";  // D-LAYERS-H5 data set folder (dataset.json, stats.h5)
+  int first_frame = 2;    // first input frame t of a sample (t−1 must have a velocity: ≥ 2)
+  int max_frames = 0;     // frames per sequence used from first_frame on; 0 = to the end
+  int cache_sequences = 8;  // sequences kept in memory by the lazy reader
+};
+
+struct TrainConfig {
+  int epochs = 10;
+  int batch_size = 4;                   // samples per update, spread over threads
+  double learning_rate = 1e-3;
+  std::vector<int> lr_decay_epochs = {2, 4, 6, 8};  // lr ×= lr_gamma after each of these epochs
+  double lr_gamma = 0.5;
+  double adam_beta1 = 0.9;
+  double adam_beta2 = 0.999;
+  double adam_eps = 1e-8;
+  double grad_clip = 0.0;               // global L2 norm; 0 = off (official)
+  std::vector<int> rollout_steps = {0, 1, 2, 3, 4, 5, 7, 7, 8, 9};  // max T_n per epoch (last repeats)
+  int64_t seed = 0;
+  int threads = 0;                      // 0 = all cores
+  int keep_checkpoints = 3;             // last N kept, plus the best by validation error
+  int max_nonfinite_in_row = 10;        // stop after this many skipped updates in a row
+  int log_every = 10;                   // steps between progress lines
+};
+
+struct EvalConfig {
+  std::string split = "test";
+  int frames = 36;  // predicted frames per sequence (official test: 36)
+};
+
+struct Config {
+  ModelConfig model;
+  LossConfig loss;
+  DataConfig data;
+  TrainConfig train;
+  EvalConfig eval;
+};
+
+class ConfigError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+// Defaults, then each file in order (with its includes), then every "key=value".
+Config load_config(const std::vector<std::string>& files, const std::vector<std::string>& overrides = {});
+// Applies one file (and its includes) on top of `config`.
+void apply_config_file(Config& config, const std::string& path);
+// Applies one "section.key=value" (value in TOML syntax; a bare word is a string).
+void apply_override(Config& config, const std::string& assignment);
+
+// Every key with its value, as TOML that load_config reads back to the same Config.
+std::string to_toml(const Config& config);
+// Every valid key, with its type and documentation (for `layersnet config --keys`).
+std::string describe_keys();
+
+}  // namespace layersnet
