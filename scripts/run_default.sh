@@ -1,0 +1,26 @@
+#!/usr/bin/env bash
+# The main job on the embedded default: install what is missing, build, make (or find)
+# the default data set, prepare its statistics, and run every stage the program has.
+# Idempotent: existing data, statistics and runs are reused.
+set -euo pipefail
+cd "$(dirname "${BASH_SOURCE[0]}")/.."
+bash scripts/setup.sh
+bin=build/bin/layersnet
+data=data/default
+
+has() { "$bin" --help | grep -qE "^  $1( |$)"; }
+
+if has generate; then
+  "$bin" generate --out "$data" --preset default
+fi
+if [ -f "$data/dataset.json" ]; then
+  has prepare && "$bin" prepare "$data"
+  has inspect && "$bin" inspect "$data"
+fi
+if has train && [ -f "$data/stats.h5" ]; then
+  "$bin" train --config configs/default.toml --run runs/default
+fi
+if has eval && [ -d runs/default ]; then
+  "$bin" eval --run runs/default --out runs/default/eval
+fi
+"$bin" --version
