@@ -178,7 +178,9 @@ void write_attr(hid_t obj, const std::string& name, hid_t file_type, hid_t mem_t
   Handle a(H5Acreate2(obj, name.c_str(), file_type, space.get(), H5P_DEFAULT, H5P_DEFAULT),
            H5Aclose);
   if (!a.valid()) throw DatasetError("(writing)", name, "cannot create attribute");
-  check_write(H5Awrite(a.get(), mem_type, data), name);
+  hsize_t total = 1;
+  for (auto d : dims) total *= d;
+  if (total > 0) check_write(H5Awrite(a.get(), mem_type, data), name);
 }
 
 }  // namespace
@@ -426,7 +428,7 @@ void check_array(const ArrayInfo& info, Kind kind, const std::vector<int64_t>& w
       std::string w = "(";
       for (size_t b = 0; b < want.size(); ++b)
         w += (b ? ", " : "") + (want[b] >= 0 ? std::to_string(want[b]) : std::string("*"));
-      where.fail("shape " + shape_string(info.dims) + " does not match " + w + ")");
+      where.fail("shape " + shape_string(info.dims) + " does not match " + w + (want.size() == 1 ? ",)" : ")"));
     }
   }
 }
