@@ -1,3 +1,9 @@
 #pragma once
-// Graph and geometry ops (autodiff/ops_graph.h): X(EnumName, function_stem). Add a line per new op.
-#define LAYERSNET_GRAPH_OPS(X)
+// Graph and geometry ops (autodiff/ops_graph.h, ops_geometry.h, ops_attention.h):
+// X(EnumName, function_stem). Add a line per new op.
+#define LAYERSNET_GRAPH_OPS(X)      \
+  X(GatherRows, gather_rows)        \
+  X(ScatterAddRows, scatter_add_rows) \
+  X(SegmentSum, segment_sum)        \
+  X(SegmentSoftmax, segment_softmax) \
+  X(ConcatRows, concat_rows)
