@@ -1,0 +1,277 @@
+"""The MakeHuman body from assimp-testmodels, skinned to a CMU mocap skeleton (bpy).
+
+Recipe (../shared/reference/ground-truth-generation.md): import the Collada body
+(z up after import, faces -y, feet at z = 0), decimate it, scale the world x10; import
+the BVH clip; copy its armature as the rig, move the rig's joints onto the body's
+A-pose joints (landmarks measured on this mesh), bind the body with bone-heat weights,
+then drive the rig from the mocap with world-space copy-rotation constraints whose
+influence ramps 0 -> 1, so garments start around the rest-pose body.
+"""
+import builtins
+import math
+import os
+import tempfile
+import zipfile
+
+import bpy
+import mathutils
+import numpy as np
+
+from garments import SCENE_SCALE
+
+HUMAN_ZAE = "/usr/share/assimp/models/Collada/human.zae"
+BVH_DIR = "/usr/share/assimp/models/BVH"
+BVH_HZ = 120.0
+S = SCENE_SCALE
+
+# A-pose joint landmarks of the MakeHuman test body (metres, left side; the right side
+# mirrors x). Measured from cross-sections of the mesh; limb joints are refined to the
+# local centroid of the surface at run time.
+_L = {
+    "Hips": ((0, -0.03, 0.93), (0, -0.03, 0.98)),
+    "LHipJoint": ((0, -0.03, 0.93), (0.09, -0.03, 0.88)),
+    "LeftUpLeg": ((0.09, -0.03, 0.88), (0.14, -0.03, 0.48)),
+    "LeftLeg": ((0.14, -0.03, 0.48), (0.185, -0.02, 0.08)),
+    "LeftFoot": ((0.185, -0.02, 0.08), (0.19, -0.10, 0.025)),
+    "LeftToeBase": ((0.19, -0.10, 0.025), (0.19, -0.18, 0.015)),
+    "LowerBack": ((0, -0.03, 0.93), (0, -0.03, 1.05)),
+    "Spine": ((0, -0.03, 1.05), (0, -0.03, 1.20)),
+    "Spine1": ((0, -0.03, 1.20), (0, -0.03, 1.36)),
+    "Neck": ((0, -0.02, 1.36), (0, -0.02, 1.45)),
+    "Neck1": ((0, -0.02, 1.45), (0, -0.03, 1.53)),
+    "Head": ((0, -0.03, 1.53), (0, -0.03, 1.66)),
+    "LeftShoulder": ((0.03, -0.02, 1.36), (0.17, -0.02, 1.34)),
+    "LeftArm": ((0.17, -0.02, 1.30), (0.36, -0.04, 1.10)),
+    "LeftForeArm": ((0.36, -0.04, 1.10), (0.44, -0.16, 1.00)),
+    "LeftHand": ((0.44, -0.16, 1.00), (0.49, -0.27, 0.95)),
+    "LeftFingerBase": ((0.47, -0.22, 0.97), (0.49, -0.27, 0.95)),
+    "LFingers": ((0.49, -0.27, 0.95), (0.50, -0.31, 0.93)),
+    "LThumb": ((0.45, -0.20, 0.99), (0.46, -0.25, 0.98)),
+}
+_REFINE = ("LeftLeg", "LeftFoot", "LeftForeArm", "LeftHand")  # heads snapped to local centroid
+ARM_BONES = ("Shoulder", "Arm", "ForeArm", "Hand", "Finger", "Thumb")
+
+
+def _mirror_name(name):
+    return name.replace("Left", "Right").replace("LHip", "RHip").replace("LFingers", "RFingers") \
+        .replace("LThumb", "RThumb")
+
+
+def landmarks():
+    """bone -> (head, tail) in metres for every bone of the CMU skeleton."""
+    out = {}
+    for name, (h, t) in _L.items():
+        out[name] = (np.array(h, float), np.array(t, float))
+        m = _mirror_name(name)
+        if m != name:
+            out[m] = (np.array(h, float) * [-1, 1, 1], np.array(t, float) * [-1, 1, 1])
+    return out
+
+
+def _mesh_world(obj):
+    n = len(obj.data.vertices)
+    co = np.empty(n * 3)
+    obj.data.vertices.foreach_get("co", co)
+    w = np.array(obj.matrix_world)
+    return co.reshape(-1, 3) @ w[:3, :3].T + w[:3, 3]
+
+
+def import_body(decimate_ratio):
+    """The decimated body at x10 scale, transforms applied. Returns the mesh object."""
+    tmp = tempfile.mkdtemp(prefix="layersnet_body_")
+    with zipfile.ZipFile(HUMAN_ZAE) as z:
+        z.extract("human.dae", tmp)
+    bpy.ops.wm.collada_import(filepath=os.path.join(tmp, "human.dae"))
+    body = bpy.data.objects["human-base"]
+    for o in list(bpy.data.objects):
+        if o is not body:
+            bpy.data.objects.remove(o, do_unlink=True)
+    bpy.context.view_layer.objects.active = body
+    body.select_set(True)
+    body.parent = None
+    body.matrix_world = mathutils.Matrix.Scale(S, 4) @ body.matrix_world
+    bpy.ops.object.transform_apply(location=True, rotation=True, scale=True)
+    mod = body.modifiers.new("decimate", "DECIMATE")
+    mod.ratio = decimate_ratio
+    bpy.ops.object.modifier_apply(modifier=mod.name)
+    body.name = "body"
+    return body
+
+
+def import_bvh(clip):
+    """Imports a CMU clip at the body's scale (x10). Returns the armature object."""
+    import io_anim_bvh.import_bvh as import_bvh
+    # This Blender's importer opens files with mode 'rU', which Python 3.11 rejects.
+    import_bvh.open = lambda p, mode="r", *a, **k: builtins.open(p, mode.replace("U", ""), *a, **k)
+    # CMU/cgspeed units: hip-to-ankle 13.8 units vs 0.80 m on the MakeHuman body.
+    bpy.ops.import_anim.bvh(filepath=os.path.join(BVH_DIR, clip), global_scale=0.058 * S,
+                            rotate_mode="NATIVE", update_scene_fps=False, update_scene_duration=False)
+    arm = bpy.context.view_layer.objects.active
+    arm.name = "mocap"
+    return arm
+
+
+def build_rig(mocap, body):
+    """A copy of the mocap armature with its joints moved onto the body's A-pose joints."""
+    rig = mocap.copy()
+    rig.data = mocap.data.copy()
+    rig.animation_data_clear()
+    rig.name = "rig"
+    # The copy keeps the mocap's current pose values (hips location of the clip): clear them.
+    for pb in rig.pose.bones:
+        pb.location = (0.0, 0.0, 0.0)
+        pb.rotation_euler = (0.0, 0.0, 0.0)
+        pb.rotation_quaternion = (1.0, 0.0, 0.0, 0.0)
+        pb.scale = (1.0, 1.0, 1.0)
+    bpy.context.scene.collection.objects.link(rig)
+    verts = _mesh_world(body)
+    lm = landmarks()
+    for base in _REFINE:
+        for name in (base, _mirror_name(base)):
+            head = lm[name][0] * S
+            for _ in range(3):
+                near = verts[np.linalg.norm(verts - head, axis=1) < 0.05 * S]
+                if len(near) > 10:
+                    head = near.mean(0)
+            lm[name] = (head / S, lm[name][1])
+            parent = {"LeftLeg": "LeftUpLeg", "LeftFoot": "LeftLeg", "LeftForeArm": "LeftArm",
+                      "LeftHand": "LeftForeArm"}[base]
+            pname = parent if name == base else _mirror_name(parent)
+            lm[pname] = (lm[pname][0], head / S)
+    bpy.ops.object.select_all(action="DESELECT")
+    bpy.context.view_layer.objects.active = rig
+    rig.select_set(True)
+    bpy.ops.object.mode_set(mode="EDIT")
+    for eb in rig.data.edit_bones:
+        if eb.name in lm:
+            # Rotate the mocap's rest frame by the smallest rotation taking its bone direction
+            # onto the body's: the rig keeps the mocap's roll, so world-space rotation copies
+            # give the mocap pose without twisting the limbs.
+            h, t = (mathutils.Vector(x * S) for x in lm[eb.name])
+            d_cur = (eb.tail - eb.head).normalized()
+            q = d_cur.rotation_difference((t - h).normalized())
+            m = (q.to_matrix() @ eb.matrix.to_3x3()).to_4x4()
+            m.translation = h
+            eb.use_connect = False
+            eb.length = (t - h).length
+            eb.matrix = m
+    bpy.ops.object.mode_set(mode="OBJECT")
+    return rig
+
+
+def bind_body(body, rig):
+    """Bone-heat weights; returns (B, nbones) weights and the bone names."""
+    bpy.ops.object.select_all(action="DESELECT")
+    body.select_set(True)
+    rig.select_set(True)
+    bpy.context.view_layer.objects.active = rig
+    bpy.ops.object.parent_set(type="ARMATURE_AUTO")
+    names = [b.name for b in rig.data.bones]
+    w = np.zeros((len(body.data.vertices), len(names)))
+    gidx = {g.index: names.index(g.name) for g in body.vertex_groups if g.name in names}
+    for v in body.data.vertices:
+        for g in v.groups:
+            if g.group in gidx:
+                w[v.index, gidx[g.group]] = g.weight
+    return w, names
+
+
+def retime_mocap(mocap, rig, bvh_start, speed, scene_start, yaw_deg, arm_abduction_deg):
+    """Maps BVH frame `bvh_start` to scene frame `scene_start`, played at `speed` x real time
+    at 30 fps; rotates the clip about z by `yaw_deg` around its hips at that frame, moves it
+    so its hips start on the rig's hips, and raises both upper arms by `arm_abduction_deg`
+    so hanging hands do not trap skirts and coats against the hips."""
+    action = mocap.animation_data.action
+    step = BVH_HZ / 30.0 * speed
+    for fc in action.fcurves:
+        n = len(fc.keyframe_points)
+        co = np.empty(2 * n)
+        fc.keyframe_points.foreach_get("co", co)
+        co = co.reshape(-1, 2)
+        co[:, 0] = (co[:, 0] - bvh_start) / step + scene_start
+        fc.keyframe_points.foreach_set("co", co.ravel())
+        for kp in fc.keyframe_points:
+            kp.interpolation = "LINEAR"
+        fc.update()
+    _abduct_arms(mocap, arm_abduction_deg)
+    scene = bpy.context.scene
+    scene.frame_set(scene_start)
+    hips = mocap.matrix_world @ mocap.pose.bones["Hips"].head
+    rot = mathutils.Matrix.Rotation(math.radians(yaw_deg), 4, "Z")
+    target = rig.matrix_world @ rig.data.bones["Hips"].head_local
+    mocap.matrix_world = mathutils.Matrix.Translation(target) @ rot @ \
+        mathutils.Matrix.Translation(-hips) @ mocap.matrix_world
+    bpy.context.view_layer.update()
+
+
+def _abduct_arms(mocap, deg):
+    """Left-multiplies each upper arm's local rotation by a rotation about the axis that
+    raises the arm sideways in the rest frame (world -y for the left arm, +y for the right)."""
+    action = mocap.animation_data.action
+    for name, axis in (("LeftArm", (0, -1, 0)), ("RightArm", (0, 1, 0))):
+        pb = mocap.pose.bones[name]
+        rest = pb.bone.matrix_local.to_3x3()
+        local_axis = rest.inverted() @ mathutils.Vector(axis)
+        q = mathutils.Matrix.Rotation(math.radians(deg), 3, local_axis)
+        path = f'pose.bones["{name}"].rotation_euler'
+        fcs = [action.fcurves.find(path, index=i) for i in range(3)]
+        n = len(fcs[0].keyframe_points)
+        cos = []
+        for fc in fcs:
+            c = np.empty(2 * n)
+            fc.keyframe_points.foreach_get("co", c)
+            cos.append(c.reshape(-1, 2))
+        order = pb.rotation_mode
+        for k in range(n):
+            e = mathutils.Euler((cos[0][k, 1], cos[1][k, 1], cos[2][k, 1]), order)
+            e2 = (q @ e.to_matrix()).to_euler(order, e)
+            for i in range(3):
+                cos[i][k, 1] = e2[i]
+        for fc, c in zip(fcs, cos):
+            fc.keyframe_points.foreach_set("co", c.ravel())
+            fc.update()
+
+
+def drive_rig(rig, mocap, ramp_start, ramp_frames):
+    """World-space copy-rotation constraints (and copy-location on the hips) from the
+    mocap, with influence 0 before `ramp_start` rising linearly to 1 over `ramp_frames`."""
+    for pb in rig.pose.bones:
+        kinds = ["COPY_ROTATION"] + (["COPY_LOCATION"] if pb.name == "Hips" else [])
+        for kind in kinds:
+            c = pb.constraints.new(kind)
+            c.target = mocap
+            c.subtarget = pb.name
+            c.target_space = "WORLD"
+            c.owner_space = "WORLD"
+            c.influence = 0.0
+            c.keyframe_insert("influence", frame=ramp_start)
+            c.influence = 1.0
+            c.keyframe_insert("influence", frame=ramp_start + ramp_frames)
+    for fc in rig.animation_data.action.fcurves:
+        for kp in fc.keyframe_points:
+            kp.interpolation = "LINEAR"
+
+
+def body_mesh_frame(body, depsgraph):
+    """(B, 3) evaluated body vertices in world coordinates."""
+    ev = body.evaluated_get(depsgraph)
+    return _mesh_world_eval(ev)
+
+
+def _mesh_world_eval(ev):
+    me = ev.data
+    n = len(me.vertices)
+    co = np.empty(n * 3)
+    me.vertices.foreach_get("co", co)
+    w = np.array(ev.matrix_world)
+    return co.reshape(-1, 3) @ w[:3, :3].T + w[:3, 3]
+
+
+def triangles(obj):
+    """(F, 3) triangles of a mesh object (its polygons fan-triangulated by Blender)."""
+    me = obj.data
+    me.calc_loop_triangles()
+    n = len(me.loop_triangles)
+    tri = np.empty(n * 3, np.int64)
+    me.loop_triangles.foreach_get("vertices", tri)
+    return tri.reshape(-1, 3)

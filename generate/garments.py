@@ -1,0 +1,277 @@
+"""Garment templates sewn from panels around the rest-pose body (numpy only, no bpy).
+
+Every garment is built as rings of vertices around the body at a sequence of heights;
+the panels are angular sectors of the rings, joined at their seam columns (the
+welded result of sewing). Each panel's UV island is its flattening in metres: u is
+the arc length along the ring from the panel's first seam, v the distance down the
+column from the garment's top. These strips are near-developable, so one metre of
+UV is about one metre of rest cloth on every panel and garment (a common metric
+UV scale, which LayersNet's 0.04 patch size assumes).
+
+Units: positions in scene units (SCENE_SCALE per metre, the body is z-up and faces
+-y); UV in metres. Faces wind counter-clockwise seen from outside the body.
+"""
+import math
+
+import numpy as np
+
+SCENE_SCALE = 10.0  # scene units per metre (D-LAYERS scales the world x10)
+
+
+class Garment:
+    """verts: (N, 3) scene units; faces: (F, 3); uv: (F, 3, 2) metres; panel: (F,);
+    pin: (N,) weight 0..1 of the cloth pin group (waistband / top edge)."""
+
+    def __init__(self, name, kind, verts, faces, uv, panel, pin):
+        self.name, self.kind = name, kind
+        self.verts = np.asarray(verts, np.float64)
+        self.faces = np.asarray(faces, np.int64)
+        self.uv = np.asarray(uv, np.float64)
+        self.panel = np.asarray(panel, np.int64)
+        self.pin = np.asarray(pin, np.float64)
+
+
+class BodyProfile:
+    """Horizontal cross-sections of the rest-pose body, measured per angle bin.
+
+    body: (B, 3) rest vertices in scene units. centre: torso axis (x, y) in scene units.
+    arm_x: |x| beyond which vertices above the crotch belong to the arms (scene units).
+    """
+
+    def __init__(self, body, centre, arm_x, bins=64, slab=0.15):
+        self.body = body
+        self.centre = np.asarray(centre, np.float64)
+        self.arm_x = arm_x
+        self.bins = bins
+        self.slab = slab
+
+    def hull(self, z, max_x):
+        """(bins,) largest radius around the torso axis of body points near height z with
+        |x| < max_x, per angle bin (angle 0 = front, -y; increasing towards +x)."""
+        pts = self.body[np.abs(self.body[:, 2] - z) < self.slab]
+        pts = pts[np.abs(pts[:, 0]) < max_x]
+        r = np.zeros(self.bins)
+        if len(pts) == 0:
+            return r
+        d = pts[:, :2] - self.centre
+        ang = np.arctan2(d[:, 0], -d[:, 1]) % (2 * math.pi)
+        idx = (ang / (2 * math.pi) * self.bins).astype(int) % self.bins
+        np.maximum.at(r, idx, np.hypot(d[:, 0], d[:, 1]))
+        return _fill_and_smooth(r)
+
+    def leg_hull(self, z, side, centre):
+        """(bins,) radius around a leg axis `centre` (x, y) of the leg on `side` (+1 left, -1 right)."""
+        pts = self.body[np.abs(self.body[:, 2] - z) < self.slab]
+        pts = pts[(pts[:, 0] * side > 0) & (np.abs(pts[:, 0]) < self.arm_x)]
+        r = np.zeros(self.bins)
+        d = pts[:, :2] - centre
+        ang = np.arctan2(d[:, 0], -d[:, 1]) % (2 * math.pi)
+        idx = (ang / (2 * math.pi) * self.bins).astype(int) % self.bins
+        np.maximum.at(r, idx, np.hypot(d[:, 0], d[:, 1]))
+        return _fill_and_smooth(r)
+
+    def leg_centre(self, z, side):
+        pts = self.body[np.abs(self.body[:, 2] - z) < self.slab]
+        pts = pts[(pts[:, 0] * side > 0.02 * SCENE_SCALE) & (np.abs(pts[:, 0]) < self.arm_x)]
+        lo, hi = pts.min(0), pts.max(0)
+        return 0.5 * (lo[:2] + hi[:2])
+
+
+def _fill_and_smooth(r):
+    """Fill empty angle bins by circular interpolation, then take a running max over
+    3 bins so thin gaps between sampled vertices do not dent the garment."""
+    n = len(r)
+    full = np.nonzero(r > 0)[0]
+    if len(full) == 0:
+        return r
+    xs = np.concatenate([full - n, full, full + n])
+    ys = np.tile(r[full], 3)
+    out = np.interp(np.arange(n), xs, ys)
+    return np.maximum(np.maximum(out, np.roll(out, 1)), np.roll(out, -1))
+
+
+def _sample(radius_bins, angles):
+    """Radius at arbitrary angles (radians, 0 = front) by linear interpolation of bins."""
+    n = len(radius_bins)
+    t = (angles % (2 * math.pi)) / (2 * math.pi) * n - 0.5
+    i0 = np.floor(t).astype(int)
+    w = t - i0
+    return (1 - w) * radius_bins[i0 % n] + w * radius_bins[(i0 + 1) % n]
+
+
+def _ring_point(centre, angle, radius, z):
+    return np.stack([centre[0] + radius * np.sin(angle), centre[1] - radius * np.cos(angle),
+                     np.full_like(angle, z)], axis=-1)
+
+
+def _grid_faces(rows, cols, cyclic):
+    """Triangles of a (rows, cols) vertex grid whose rows go down the body and columns
+    around it (angle increasing towards +x, i.e. counter-clockwise seen from above), with
+    alternating diagonals. Returns (F, 3) grid indices r*cols+c and (F,) column of each face."""
+    faces, fcol = [], []
+    ncol = cols if cyclic else cols - 1
+    for r in range(rows - 1):
+        for c in range(ncol):
+            c1 = (c + 1) % cols
+            a, b = r * cols + c, r * cols + c1
+            d, e = (r + 1) * cols + c, (r + 1) * cols + c1
+            # Outward normal: ring order runs counter-clockwise seen from above and rows go
+            # down, so (a, d, e) / (a, e, b) face outwards.
+            if (r + c) % 2 == 0:
+                faces += [(a, d, e), (a, e, b)]
+            else:
+                faces += [(a, d, b), (b, d, e)]
+            fcol += [c, c]
+    return np.array(faces, np.int64), np.array(fcol, np.int64)
+
+
+def _arc(row_pos):
+    """Cumulative arc length (metres) along a cyclic row: (cols + 1,), last = perimeter."""
+    p = row_pos / SCENE_SCALE
+    seg = np.linalg.norm(np.roll(p, -1, axis=0) - p, axis=1)
+    return np.concatenate([[0.0], np.cumsum(seg)])
+
+
+class _Builder:
+    """Accumulates ring-grid blocks into one garment mesh with panel UVs."""
+
+    def __init__(self):
+        self.pos = []        # list of (3,) scene units
+        self.faces, self.face_panel, self.uv = [], [], []
+
+    def add_vertices(self, pts):
+        start = len(self.pos)
+        self.pos.extend(list(pts))
+        return np.arange(start, start + len(pts))
+
+    def add_block(self, ids, v0, panel_of_col, anchor_of_panel):
+        """ids: (rows, cols) vertex ids of a cyclic grid (rows go down, columns run
+        counter-clockwise seen from above). v0: (cols,) v (metres) of the top row.
+        panel_of_col: (cols,) panel id of the faces right of each column.
+        anchor_of_panel: dict panel -> column whose u is 0 (the panel's reference seam)."""
+        rows, cols = ids.shape
+        pos = np.array(self.pos)[ids]                              # (rows, cols, 3)
+        arcs = np.stack([_arc(pos[r]) for r in range(rows)])       # (rows, cols+1)
+        dv = np.linalg.norm(np.diff(pos, axis=0), axis=2) / SCENE_SCALE
+        v = v0[None, :] + np.concatenate([np.zeros((1, cols)), np.cumsum(dv, axis=0)], axis=0)
+        tri, fcol = _grid_faces(rows, cols, cyclic=True)
+        for t, c in zip(tri, fcol):
+            p = int(panel_of_col[c])
+            a = anchor_of_panel[p]
+            corner_uv = []
+            for vid in t:
+                r, cc = divmod(int(vid), cols)
+                # Unwrap the corner column next to the face column, then measure from the anchor.
+                cu = cc if cc >= c else cc + cols
+                d = (cu - a) % cols
+                if d > cols // 2:
+                    d -= cols
+                j = a + d
+                s = arcs[r, j % cols] + (arcs[r, cols] if j >= cols else 0.0) - \
+                    (arcs[r, cols] if j < 0 else 0.0)
+                u = s - arcs[r, a]
+                corner_uv.append((u, -v[r, cc]))
+            self.faces.append([int(ids.flat[i]) for i in t])
+            self.face_panel.append(p)
+            self.uv.append(corner_uv)
+
+    def finish(self, name, kind, pin):
+        uv = np.array(self.uv)
+        panel = np.array(self.face_panel)
+        offset = 0.0
+        for p in np.unique(panel):
+            m = panel == p
+            uv[m, :, 0] += offset - uv[m, :, 0].min()
+            offset = uv[m, :, 0].max() + 0.05
+        return Garment(name, kind, np.array(self.pos), np.array(self.faces), uv, panel, pin)
+
+
+def _rows(z_top, z_bottom, spacing):
+    n = max(2, int(round((z_top - z_bottom) / spacing)) + 1)
+    return np.linspace(z_top, z_bottom, n)
+
+
+def _max_x(z):
+    """|x| (scene units) that separates the torso/legs from the arms and hands in the rest pose."""
+    return 0.175 * SCENE_SCALE if z > 0.97 * SCENE_SCALE else 0.25 * SCENE_SCALE
+
+
+def tube_rings(profile, z_rows, offset_fn, cols, hang_below):
+    """(R, cols, 3) rings around the torso axis: radius = body hull + offset_fn(z).
+    Below `hang_below` the hull never shrinks going down (cloth hangs from the hips)."""
+    ang = np.arange(cols) / cols * 2 * math.pi
+    rings, prev = [], None
+    for z in z_rows:
+        hull = profile.hull(z, _max_x(z))
+        if prev is not None and z < hang_below:
+            hull = np.maximum(hull, prev)
+        prev = hull
+        r = _sample(hull, ang) + offset_fn(z)
+        rings.append(_ring_point(profile.centre, ang, r, z))
+    return np.array(rings)
+
+
+def tube_garment(name, kind, rings, panels):
+    """Closed tube from rings (R, M, 3); `panels` equal angular panels, anchored at their
+    first column; the top row is the pinned waistband / top edge."""
+    rows, cols, _ = rings.shape
+    assert cols % panels == 0, "ring vertex count must be divisible by the panel count"
+    b = _Builder()
+    ids = b.add_vertices(rings.reshape(-1, 3)).reshape(rows, cols)
+    per = cols // panels
+    b.add_block(ids, np.zeros(cols), np.arange(cols) // per, {p: p * per for p in range(panels)})
+    pin = np.zeros(rows * cols)
+    pin[:cols] = 1.0
+    return b.finish(name, kind, pin)
+
+
+def pants_garment(name, profile, z_waist, z_crotch, z_hem, offset, spacing, cols=40):
+    """Trousers: a hip tube from the waist to the crotch that splits into two leg tubes.
+    The crotch seam is a chain of vertices from front centre to back centre shared by
+    both legs. Panels: 0 left-front, 1 left-back, 2 right-back, 3 right-front."""
+    H = cols // 2
+    hip = tube_rings(profile, _rows(z_waist, z_crotch, spacing), lambda z: offset, cols, -1e9)
+    b = _Builder()
+    hip_ids = b.add_vertices(hip.reshape(-1, 3)).reshape(len(hip), cols)
+    q = H // 2
+    panel_hip = np.array([0] * q + [1] * q + [2] * q + [3] * q)
+    b.add_block(hip_ids, np.zeros(cols), panel_hip, {0: 0, 1: H, 2: H, 3: 0})
+    crotch = hip[-1]
+    front, back = crotch[0], crotch[H]
+    depth = np.linalg.norm(back - front) / SCENE_SCALE
+    K = max(3, int(round(depth / (spacing / SCENE_SCALE))) - 1)
+    t = np.arange(1, K + 1) / (K + 1)
+    chain = front[None, :] * (1 - t[:, None]) + back[None, :] * t[:, None]
+    chain[:, 2] -= 0.02 * SCENE_SCALE * np.sin(math.pi * t)
+    chain_ids = b.add_vertices(chain)
+    hv = lambda c: 0.0 + np.linalg.norm(np.diff(hip[:, c], axis=0), axis=1).sum() / SCENE_SCALE
+    for side in (1, -1):
+        if side == 1:   # left leg: front centre -> left side -> back centre -> chain back to front
+            top_ids = np.concatenate([hip_ids[-1, 0:H + 1], chain_ids[::-1]])
+            panels = [0] * q + [1] * q + [1] * ((K + 1) // 2) + [0] * (K + 1 - (K + 1) // 2)
+            anchors = {0: 0, 1: H}
+        else:           # right leg: back centre -> right side -> front centre -> chain to back
+            top_ids = np.concatenate([hip_ids[-1, H:], hip_ids[-1, :1], chain_ids])
+            panels = [2] * q + [3] * q + [3] * ((K + 1) // 2) + [2] * (K + 1 - (K + 1) // 2)
+            anchors = {2: 0, 3: H}
+        L = len(top_ids)
+        top = np.array(b.pos)[top_ids]
+        zc = profile.leg_centre(z_crotch - 0.05 * SCENE_SCALE, side)
+        ang = np.arctan2(top[:, 0] - zc[0], -(top[:, 1] - zc[1]))
+        ring_ids = [top_ids]
+        z_leg = _rows(z_crotch, z_hem, spacing)[1:]
+        for j, z in enumerate(z_leg):
+            c = profile.leg_centre(z, side)
+            r = _sample(profile.leg_hull(z, side, c), ang) + offset
+            leg_pt = _ring_point(c, ang, r, z)
+            w = min(1.0, (j + 1) / 3.0)   # blend the crotch D-shape into the leg tube
+            pts = (1 - w) * np.concatenate([top[:, :2], np.full((L, 1), z)], axis=1) + w * leg_pt
+            ring_ids.append(b.add_vertices(pts))
+        v0 = np.array([hv(c) for c in range(cols)])
+        hip_col = {int(vid): c for c, vid in enumerate(hip_ids[-1])}
+        # Chain vertices start at the crotch's front/back-centre v.
+        top_v0 = np.array([v0[hip_col.get(int(vid), 0)] for vid in top_ids])
+        b.add_block(np.array(ring_ids), top_v0, np.array(panels), anchors)
+    pin = np.zeros(len(b.pos))
+    pin[hip_ids[0]] = 1.0
+    return b.finish(name, "pants_tight", pin)

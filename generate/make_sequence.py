@@ -1,0 +1,355 @@
+"""Simulates one D-LAYERS-like sequence with Blender's cloth solver and writes it as
+D-LAYERS-H5 (plus a JSON sidecar with tags, quality gates and timings).
+
+Run inside Blender:
+  blender -b --factory-startup -t 2 --python generate/make_sequence.py -- \
+      --out SEQ.h5 --report SEQ.json --seed 7 --split train [--config recipe.json]
+
+Everything random is drawn from numpy's generator seeded with --seed; the wind field has
+a fixed noise seed, so the same seed gives the same file on the same machine.
+Scene: the MakeHuman body driven by a CMU clip, two garment layers merged into one
+cloth object with self-collision, piecewise-constant wind, the world scaled x10 before
+simulation, gravity (0, 0, -9.8) scene units/s^2, z up, 30 fps.
+"""
+import argparse
+import json
+import math
+import os
+import sys
+import time
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+import bpy  # noqa: E402
+import mathutils  # noqa: E402
+from mathutils.kdtree import KDTree  # noqa: E402
+import numpy as np  # noqa: E402
+
+import body_rig  # noqa: E402
+import outfits  # noqa: E402
+import quality  # noqa: E402
+from garments import SCENE_SCALE, BodyProfile  # noqa: E402
+from write_h5 import write_sequence  # noqa: E402
+
+DEFAULTS = {
+    "frames": 48,                 # stored frames, 30 fps
+    "rest_frames": 8,             # body in the rest pose while garments settle
+    "ramp_frames": 15,            # rest pose -> mocap blend
+    "decimate_ratio": 0.4,        # 13,380 -> ~5.4k body vertices
+    "cloth_quality": 30,          # solver steps per frame (25 was unstable at x10)
+    "clips": ["01_01.bvh", "01_03.bvh"],
+    "block_bvh_frames": 720,      # motion blocks (6 s) assigned to splits
+    "split_pattern": "tttttttvte",  # block k -> split pattern[k % len]: t train, v val, e test
+    "speed_range": [0.8, 1.25],
+    "yaw_range_deg": [-180.0, 180.0],
+    "mirror_probability": 0.5,
+    "arm_abduction_deg": [22.0, 28.0],
+    "inner_kinds": list(outfits.INNER_KINDS),
+    "outer_kinds": list(outfits.OUTER_KINDS),
+    "ranges": {"tension_stiffness": [15, 100], "bending_stiffness": [15, 200], "mass": [0.2, 0.8],
+               "self_friction": [40, 80], "body_friction": [40, 80]},
+    "wind_calm_probability": 0.35,    # every segment <= 50
+    "wind_windy_probability": 0.45,   # one segment in (250, 400], others 0..400
+    "wind_segments": [1, 3],
+    "field_seed": 1,
+    "distance_body": 0.1,         # cloth-body collision distance, scene units (1 cm)
+    "distance_self": 0.06,        # cloth-cloth, scene units
+}
+SPLIT_CODE = {"train": "t", "val": "v", "test": "e"}
+
+
+def parse_args():
+    argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
+    p = argparse.ArgumentParser(description=__doc__)
+    p.add_argument("--out", required=True)
+    p.add_argument("--report", required=True)
+    p.add_argument("--seed", type=int, required=True)
+    p.add_argument("--split", default="train", choices=list(SPLIT_CODE))
+    p.add_argument("--config", default=None, help="JSON file overriding DEFAULTS keys")
+    a = p.parse_args(argv)
+    cfg = json.loads(json.dumps(DEFAULTS))
+    if a.config:
+        with open(a.config) as f:
+            over = json.load(f)
+        unknown = set(over) - set(DEFAULTS)
+        if unknown:
+            raise SystemExit(f"make_sequence.py: {a.config}: unknown keys {sorted(unknown)}; "
+                             f"known: {sorted(DEFAULTS)}")
+        cfg.update(over)
+    return a, cfg
+
+
+def bvh_frame_count(clip):
+    with open(os.path.join(body_rig.BVH_DIR, clip)) as f:
+        for line in f:
+            if line.startswith("Frames:"):
+                return int(line.split()[1])
+    raise RuntimeError(f"{clip}: no 'Frames:' line")
+
+
+def sample_motion(rng, cfg, split):
+    """Clip, first BVH frame and speed, inside a motion block that belongs to `split`."""
+    step = body_rig.BVH_HZ / 30.0
+    need = (cfg["frames"] - cfg["rest_frames"]) * step * cfg["speed_range"][1] + 2
+    blocks = []
+    for clip in cfg["clips"]:
+        n = bvh_frame_count(clip)
+        size = max(cfg["block_bvh_frames"], int(need) + 10)
+        for k, start in enumerate(range(1, n - size + 1, size)):  # frame 0 is a calibration pose
+            if cfg["split_pattern"][k % len(cfg["split_pattern"])] == SPLIT_CODE[split]:
+                blocks.append((clip, start, start + size))
+    if not blocks:
+        raise SystemExit(f"make_sequence.py: no motion block of {need:.0f} BVH frames for split "
+                         f"'{split}'; lower 'frames' or 'block_bvh_frames'")
+    clip, lo, hi = blocks[int(rng.integers(len(blocks)))]
+    speed = float(rng.uniform(*cfg["speed_range"]))
+    span = (cfg["frames"] - cfg["rest_frames"]) * step * speed
+    start = float(rng.uniform(lo, max(lo, hi - span - 1)))
+    return clip, start, speed
+
+
+def sample_wind(rng, cfg, T):
+    """Piecewise-constant wind: pivots (frame, quaternion wxyz, strength); no wind before
+    the first pivot, as in D-LAYERS."""
+    n = int(rng.integers(cfg["wind_segments"][0], cfg["wind_segments"][1] + 1))
+    starts = sorted(int(x) for x in rng.integers(0, max(1, T // 3), size=1)) + \
+        sorted(int(x) for x in rng.integers(T // 3, T - 1, size=n - 1))
+    u = rng.random()
+    if u < cfg["wind_calm_probability"]:
+        strengths = rng.uniform(0, 50, size=n)
+    elif u < cfg["wind_calm_probability"] + cfg["wind_windy_probability"]:
+        strengths = rng.uniform(0, 400, size=n)
+        strengths[int(rng.integers(n))] = rng.uniform(250, 400)
+    else:
+        strengths = rng.uniform(0, 400, size=n)
+    pivots = []
+    for s, st in zip(starts, strengths):
+        q = rng.normal(size=4)
+        q /= np.linalg.norm(q)
+        if q[0] < 0:
+            q = -q
+        pivots.append({"frame": s, "rotation": [float(x) for x in q], "strength": float(st)})
+    return pivots
+
+
+def wind_arrays(pivots, T):
+    rot = np.zeros((T, 4))
+    rot[:, 0] = 1.0
+    strength = np.zeros(T)
+    for k, p in enumerate(pivots):
+        end = pivots[k + 1]["frame"] if k + 1 < len(pivots) else T
+        rot[p["frame"]:end] = p["rotation"]
+        strength[p["frame"]:end] = p["strength"]
+    return rot, strength
+
+
+def add_wind(pivots, centre, field_seed):
+    """A wind force field keyed with constant interpolation; placed 100 units upwind so
+    the whole scene is on its +Z side. Stored frame i is scene frame i + 1."""
+    bpy.ops.object.effector_add(type="WIND", location=(0, 0, 0))
+    wind = bpy.context.view_layer.objects.active
+    wind.rotation_mode = "QUATERNION"
+    wind.field.seed = field_seed
+    wind.field.noise = 0.0
+    wind.field.flow = 0.0
+    wind.field.strength = 0.0
+    wind.field.keyframe_insert("strength", frame=1)
+    for p in pivots:
+        q = mathutils.Quaternion(p["rotation"])
+        d = q.to_matrix() @ mathutils.Vector((0, 0, 1))
+        wind.rotation_quaternion = q
+        wind.location = mathutils.Vector(centre) - 100.0 * d
+        wind.field.strength = p["strength"]
+        f = p["frame"] + 1
+        wind.keyframe_insert("rotation_quaternion", frame=f)
+        wind.keyframe_insert("location", frame=f)
+        wind.field.keyframe_insert("strength", frame=f)
+    for fc in wind.animation_data.action.fcurves:
+        for kp in fc.keyframe_points:
+            kp.interpolation = "CONSTANT"
+    return wind
+
+
+def make_cloth(garments, body_w, bone_names, body_rest, layer_attrs, cfg):
+    """One mesh object holding every layer (self-collision keeps the layers apart), with
+    an Armature modifier (for the pinned edges) before the Cloth modifier."""
+    verts = np.concatenate([g.verts for g in garments])
+    offs = np.cumsum([0] + [len(g.verts) for g in garments])
+    faces = np.concatenate([g.faces + o for g, o in zip(garments, offs)])
+    me = bpy.data.meshes.new("outfit")
+    me.from_pydata(verts.tolist(), [], faces.tolist())
+    me.update()
+    obj = bpy.data.objects.new("outfit", me)
+    bpy.context.scene.collection.objects.link(obj)
+    pin = np.concatenate([g.pin for g in garments])
+    outer = np.concatenate([np.full(len(g.verts), float(i == len(garments) - 1)) for i, g in enumerate(garments)])
+    for name, w in (("pin", pin), ("outer", outer)):
+        vg = obj.vertex_groups.new(name=name)
+        for i in np.nonzero(w > 0)[0]:
+            vg.add([int(i)], float(w[i]), "REPLACE")
+    # Skin weights of the nearest torso/leg body vertex (arms would drag the waistband).
+    keep = np.array([not any(k in n for k in body_rig.ARM_BONES + ("Head", "Neck")) for n in bone_names])
+    dominant = np.argmax(body_w, axis=1)
+    torso = np.nonzero(keep[dominant] & (body_w.sum(1) > 0))[0]
+    kd = KDTree(len(torso))
+    for j, i in enumerate(torso):
+        kd.insert(body_rest[i], j)
+    kd.balance()
+    groups = {}
+    for vi, p in enumerate(verts):
+        _, j, _ = kd.find(p)
+        bw = body_w[torso[j]] * keep
+        bw = bw / bw.sum()
+        for bi in np.nonzero(bw > 1e-3)[0]:
+            name = bone_names[bi]
+            if name not in groups:
+                groups[name] = obj.vertex_groups.new(name=name)
+            groups[name].add([vi], float(bw[bi]), "REPLACE")
+    arm = obj.modifiers.new("armature", "ARMATURE")
+    arm.object = bpy.data.objects["rig"]
+    mod = obj.modifiers.new("cloth", "CLOTH")
+    s, c = mod.settings, mod.collision_settings
+    inner_a, outer_a = layer_attrs[0], layer_attrs[-1]
+    s.quality = cfg["cloth_quality"]
+    s.mass = inner_a["mass"]
+    # Per-layer stiffness: value = min + group weight * (max - min), group 'outer'.
+    s.tension_stiffness = s.compression_stiffness = inner_a["tension_stiffness"]
+    s.tension_stiffness_max = s.compression_stiffness_max = outer_a["tension_stiffness"]
+    s.bending_stiffness = inner_a["bending_stiffness"]
+    s.bending_stiffness_max = outer_a["bending_stiffness"]
+    s.vertex_group_structural_stiffness = "outer"
+    s.vertex_group_bending = "outer"
+    s.vertex_group_mass = "pin"
+    c.use_collision = True
+    c.distance_min = cfg["distance_body"]
+    c.use_self_collision = True
+    c.self_distance_min = cfg["distance_self"]
+    c.self_friction = inner_a["self_friction"]
+    mod.point_cache.frame_start = 1
+    mod.point_cache.frame_end = cfg["frames"]
+    return obj, offs
+
+
+def main():
+    args, cfg = parse_args()
+    t_start = time.time()
+    rng = np.random.default_rng(args.seed)
+    T = cfg["frames"]
+    clip, bvh_start, speed = sample_motion(rng, cfg, args.split)
+    yaw = float(rng.uniform(*cfg["yaw_range_deg"]))
+    mirror = bool(rng.random() < cfg["mirror_probability"])
+    abduction = float(rng.uniform(*cfg["arm_abduction_deg"]))
+    inner_kind = str(rng.choice(cfg["inner_kinds"]))
+    outer_kind = str(rng.choice(cfg["outer_kinds"]))
+    layer_attrs, body_friction = outfits.sample_attributes(rng, cfg["ranges"])
+    pivots = sample_wind(rng, cfg, T)
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    scene.render.fps = 30
+    scene.gravity = (0.0, 0.0, -9.8)
+    scene.frame_start, scene.frame_end = 1, T
+    body = body_rig.import_body(cfg["decimate_ratio"])
+    body_rest = body_rig._mesh_world(body)
+    mocap = body_rig.import_bvh(clip)
+    rig = body_rig.build_rig(mocap, body)
+    body_w, bone_names = body_rig.bind_body(body, rig)
+    unweighted = int((body_w.sum(1) <= 0).sum())
+    ramp_start = 1 + cfg["rest_frames"]
+    body_rig.retime_mocap(mocap, rig, bvh_start, speed, ramp_start, yaw, abduction)
+    body_rig.drive_rig(rig, mocap, ramp_start, cfg["ramp_frames"])
+    coll = body.modifiers.new("collision", "COLLISION")
+    del coll
+    body.collision.cloth_friction = body_friction
+
+    profile = BodyProfile(body_rest, centre=(0.0, -0.03 * SCENE_SCALE), arm_x=0.25 * SCENE_SCALE)
+    garments = outfits.build_outfit(profile, inner_kind, outer_kind, rng)
+    cloth, offs = make_cloth(garments, body_w, bone_names, body_rest, layer_attrs, cfg)
+    add_wind(pivots, (0.0, 0.0, 1.0 * SCENE_SCALE), cfg["field_seed"])
+
+    body_faces = body_rig.triangles(body)
+    # Faces must wind counter-clockwise seen from outside: check the signed volume.
+    a, b, c = (body_rest[body_faces[:, k]] for k in range(3))
+    if np.einsum("ij,ij->i", a, np.cross(b, c)).sum() < 0:
+        body_faces = body_faces[:, [0, 2, 1]]
+
+    t_setup = time.time() - t_start
+    B, N = len(body.data.vertices), offs[-1]
+    body_v = np.zeros((T, B, 3))
+    cloth_v = np.zeros((T, N, 3))
+    trans = np.zeros((T, 3))
+    t0 = time.time()
+    for f in range(T):
+        scene.frame_set(f + 1)
+        dg = bpy.context.evaluated_depsgraph_get()
+        body_v[f] = body_rig.body_mesh_frame(body, dg)
+        cloth_v[f] = body_rig._mesh_world_eval(cloth.evaluated_get(dg))
+        trans[f] = np.array(rig.matrix_world @ rig.pose.bones["Hips"].head)
+    t_sim = time.time() - t0
+
+    wind_rot, wind_strength = wind_arrays(pivots, T)
+    gar = []
+    for i, g in enumerate(garments):
+        gar.append({"name": g.name, "type": g.kind, "vertices": cloth_v[:, offs[i]:offs[i + 1]],
+                    "faces": g.faces, "uv": g.uv, "panel": g.panel, "rest": g.verts,
+                    "attrs": layer_attrs[i]})
+    if mirror:
+        # Mirror x: a mirrored motion with mirrored garments is as physical as the original.
+        flip = np.array([-1.0, 1.0, 1.0])
+        body_v, trans = body_v * flip, trans * flip
+        body_faces = body_faces[:, [0, 2, 1]]
+        for g in gar:
+            g["vertices"], g["rest"] = g["vertices"] * flip, g["rest"] * flip
+            g["faces"] = g["faces"][:, [0, 2, 1]]
+            g["uv"] = g["uv"][:, [0, 2, 1]]
+        wind_rot = wind_rot * np.array([1.0, 1.0, -1.0, -1.0])
+
+    t1 = time.time()
+    q = quality.gates(body_v, body_faces, gar, ramp_start - 1)
+    t_gates = time.time() - t1
+    finite = bool(np.isfinite(cloth_v).all() and np.isfinite(body_v).all())
+    max_wind = float(wind_strength.max())
+    tags = {"inner": "tight" if inner_kind in outfits.TIGHT_INNER else "loose",
+            "wind": "windy" if max_wind > 250 else ("calm" if max_wind <= 50 else "moderate")}
+    report = {
+        "seed": args.seed, "split": args.split, "clip": clip, "bvh_start": bvh_start, "speed": speed,
+        "yaw_deg": yaw, "mirrored": mirror, "arm_abduction_deg": abduction,
+        "inner_kind": inner_kind, "outer_kind": outer_kind, "garments": [g["name"] for g in gar],
+        "garment_types": [g["type"] for g in gar], "attributes": layer_attrs,
+        "body_friction": body_friction, "wind_pivots": pivots, "max_wind_strength": max_wind,
+        "tags": tags, "frames": T, "rest_frames": cfg["rest_frames"], "ramp_frames": cfg["ramp_frames"],
+        "body_vertices": B, "cloth_vertices": int(N), "unweighted_body_vertices": unweighted,
+        "finite": finite, "quality": q,
+        "timing": {"setup_s": t_setup, "simulate_s": t_sim, "blender_s_per_frame": t_sim / T,
+                   "gates_s": t_gates},
+    }
+    extra = {"generator": "layersnet generate (Blender cloth, generate/make_sequence.py)",
+             "seed": args.seed, "split": args.split, "tag_inner": tags["inner"], "tag_wind": tags["wind"],
+             "clip": clip, "bvh_start": bvh_start, "speed": speed, "yaw_deg": yaw,
+             "mirrored": int(mirror), "rest_frames": cfg["rest_frames"], "ramp_frames": cfg["ramp_frames"],
+             "max_wind_strength": max_wind, "q_blender_s_per_frame": t_sim / T}
+    for k, v in q.items():
+        extra["q_" + k] = v
+    seq = {"fps": 30.0, "gravity": (0.0, 0.0, -9.8), "scale": SCENE_SCALE,
+           "body": {"vertices": body_v, "faces": body_faces, "translation": trans, "friction": body_friction},
+           "garments": gar, "wind": {"rotation": wind_rot, "strength": wind_strength}, "extra_attrs": extra}
+    if finite:
+        write_sequence(args.out, seq)
+    report["timing"]["total_s"] = time.time() - t_start
+    tmp = args.report + ".tmp"
+    with open(tmp, "w") as f:
+        json.dump(report, f, indent=1)
+    os.replace(tmp, args.report)
+    print(f"make_sequence: seed {args.seed} {inner_kind}+{outer_kind} {clip}@{bvh_start:.0f} "
+          f"B={B} N={N} sim {t_sim / T:.3f} s/frame gates {q}", flush=True)
+
+
+if __name__ == "__main__":
+    try:
+        main()
+    except SystemExit:
+        raise
+    except Exception:
+        import traceback
+        traceback.print_exc()
+        sys.exit(1)

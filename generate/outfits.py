@@ -1,0 +1,84 @@
+"""Outfits (inner + outer garment) and their sampled shape parameters (numpy only).
+
+Heights are metres on the MakeHuman rest body (1.66 m, z up, feet at 0); everything
+returned is in scene units (x10). The outer layer is always built at least `GAP`
+outside the inner layer's radius at the same height and angle, so the two layers
+start without interpenetration.
+"""
+import numpy as np
+
+from garments import SCENE_SCALE, pants_garment, tube_garment, tube_rings, _rows
+
+S = SCENE_SCALE
+INNER_KINDS = ("pants_tight", "skirt", "dress_strapless")
+OUTER_KINDS = ("coat_sleeveless", "jacket_sleeveless")
+TIGHT_INNER = ("pants_tight",)
+GAP = 0.02          # metres between the inner layer and the outer one at rest
+SPACING = 0.045     # metres between garment rows (about the ring edge length)
+COLS = 40           # vertices per ring; divisible by 2, 4, 8 panels
+Z_WAIST, Z_CROTCH, Z_HIP, Z_CHEST = 1.00, 0.84, 0.93, 1.22
+
+
+def _inner(profile, kind, rng):
+    """Returns (garment, offset_fn metres->scene units, z_top) of the inner layer."""
+    if kind == "pants_tight":
+        off = rng.uniform(0.025, 0.035)
+        hem = rng.uniform(0.10, 0.30)
+        g = pants_garment("pants", profile, Z_WAIST * S, Z_CROTCH * S, hem * S, off * S, SPACING * S, COLS)
+        return g, (lambda z: off * S), Z_WAIST
+    if kind == "skirt":
+        panels = int(rng.choice([2, 4, 8]))
+        hem = rng.uniform(0.42, 0.62)
+        base, flare = rng.uniform(0.012, 0.02), rng.uniform(0.05, 0.35)
+        fn = lambda z: (base + flare * max(0.0, Z_HIP - z / S)) * S
+        rings = tube_rings(profile, _rows(Z_WAIST * S, hem * S, SPACING * S), fn, COLS, Z_HIP * S)
+        return tube_garment("skirt", f"skirt_{panels}_panels", rings, panels), fn, Z_WAIST
+    if kind == "dress_strapless":
+        hem = rng.uniform(0.42, 0.62)
+        base, flare = rng.uniform(0.012, 0.02), rng.uniform(0.05, 0.3)
+        fn = lambda z: (base + flare * max(0.0, Z_HIP - z / S)) * S
+        rings = tube_rings(profile, _rows(Z_CHEST * S, hem * S, SPACING * S), fn, COLS, Z_HIP * S)
+        return tube_garment("dress", "dress_strapless", rings, 2), fn, Z_CHEST
+    raise ValueError(f"outfits.py: unknown inner garment kind '{kind}' (use one of {INNER_KINDS})")
+
+
+def _outer(profile, kind, rng, inner_fn, inner_top):
+    """Outer layer: looser than the inner one by GAP plus a sampled ease, longer for coats."""
+    ease, flare = rng.uniform(0.0, 0.02), rng.uniform(0.05, 0.3)
+    top = Z_CHEST + 0.02
+
+    def fn(z):
+        zm = z / S
+        inner = inner_fn(z) if zm <= inner_top + 1e-6 else 0.012 * S
+        return inner + (GAP + ease + flare * max(0.0, Z_HIP - zm)) * S
+
+    if kind == "coat_sleeveless":
+        hem, panels = rng.uniform(0.40, 0.60), 4
+    elif kind == "jacket_sleeveless":
+        hem, panels = rng.uniform(0.76, 0.88), int(rng.choice([2, 4]))
+    else:
+        raise ValueError(f"outfits.py: unknown outer garment kind '{kind}' (use one of {OUTER_KINDS})")
+    rings = tube_rings(profile, _rows(top * S, hem * S, SPACING * S), fn, COLS, Z_HIP * S)
+    name = "coat" if kind == "coat_sleeveless" else "jacket"
+    return tube_garment(name, kind, rings, panels)
+
+
+def build_outfit(profile, inner_kind, outer_kind, rng):
+    """[inner, outer] Garments around the rest body described by `profile`."""
+    inner, inner_fn, inner_top = _inner(profile, inner_kind, rng)
+    outer = _outer(profile, outer_kind, rng, inner_fn, inner_top)
+    if outer.name == inner.name:
+        outer.name += "_outer"
+    return [inner, outer]
+
+
+def sample_attributes(rng, ranges):
+    """D-LAYERS cloth attributes per layer. Blender has one mass and one self-friction per
+    cloth object, and the two layers are one object (so that self-collision keeps them
+    apart), so mass and self-friction are shared by both layers; tension and bending
+    differ per layer (vertex-group scaled stiffness)."""
+    u = lambda key: float(rng.uniform(*ranges[key]))
+    shared = {"mass": u("mass"), "self_friction": u("self_friction")}
+    layers = [{"tension_stiffness": u("tension_stiffness"), "bending_stiffness": u("bending_stiffness"),
+               **shared} for _ in range(2)]
+    return layers, u("body_friction")
