@@ -47,6 +47,8 @@ class ParamStore {
   std::span<T> moment2() { return m2_; }
   std::span<const T> values() const { return values_; }
   std::span<const T> grads() const { return grads_; }
+  std::span<const T> moment1() const { return m1_; }
+  std::span<const T> moment2() const { return m2_; }
 
   void zero_grads();
 

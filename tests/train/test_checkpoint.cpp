@@ -1,0 +1,145 @@
+// Checkpoints: bit-exact round trip, atomic replacement, and refusal of what does not fit.
+#include "train/checkpoint.h"
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <random>
+
+namespace layersnet {
+namespace {
+
+namespace fs = std::filesystem;
+
+void make_params(ad::ParamStore<float>& p, int width) {
+  p.add("encoder.layers.0.attn.q_proj.weight", width, width);
+  p.add("encoder.layers.0.attn.q_proj.bias", 1, width);
+  p.add("decoder.proj.layers.2.weight", 3, width);
+  p.finalize();
+}
+
+void fill_random(ad::ParamStore<float>& p, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<float> n;
+  for (const auto& e : p.entries()) {
+    for (int64_t k = 0; k < e.size(); ++k) {
+      p.values()[e.offset + k] = n(rng);
+      p.moment1()[e.offset + k] = n(rng);
+      p.moment2()[e.offset + k] = std::abs(n(rng));
+    }
+  }
+}
+
+// Every tensor (values and both moments) equal bit for bit; padding between tensors ignored.
+bool same_tensors(const ad::ParamStore<float>& a, const ad::ParamStore<float>& b) {
+  for (const auto& e : a.entries()) {
+    for (int64_t k = 0; k < e.size(); ++k) {
+      const std::size_t i = e.offset + static_cast<std::size_t>(k);
+      if (a.values()[i] != b.values()[i] || a.moment1()[i] != b.moment1()[i] || a.moment2()[i] != b.moment2()[i])
+        return false;
+    }
+  }
+  return true;
+}
+
+class CheckpointTest : public ::testing::Test {
+ protected:
+  fs::path dir_ = fs::temp_directory_path() / ("layersnet_ckpt_" + std::to_string(::getpid()));
+  void SetUp() override { fs::create_directories(dir_); }
+  void TearDown() override { fs::remove_all(dir_); }
+  Checkpoint sample_checkpoint() {
+    Checkpoint cp;
+    cp.config_toml = "[model]\nwidth = 8\n";
+    cp.state.epoch = 3;
+    cp.state.position = 17;
+    cp.state.global_step = 1234;
+    cp.state.best_val_error = 0.0123456789012345;
+    cp.state.nonfinite_in_row = 2;
+    cp.state.rng["shuffle"] = {1, 2, 3, 255, 0};
+    cp.state.rng["noise"] = {};
+    cp.stats["position_mean"] = {0.1, -0.2, 1.0 / 3.0};
+    return cp;
+  }
+};
+
+TEST_F(CheckpointTest, RoundTripIsBitExact) {
+  ad::ParamStore<float> a, b;
+  make_params(a, 8);
+  make_params(b, 8);
+  fill_random(a, 1);
+  const std::string path = (dir_ / "c.h5").string();
+  const Checkpoint cp = sample_checkpoint();
+  write_checkpoint(path, a, cp);
+  EXPECT_FALSE(fs::exists(path + ".tmp"));
+  const Checkpoint back = read_checkpoint(path, b);
+  EXPECT_TRUE(same_tensors(a, b));
+  EXPECT_EQ(back.config_toml, cp.config_toml);
+  EXPECT_EQ(back.state.epoch, 3);
+  EXPECT_EQ(back.state.position, 17);
+  EXPECT_EQ(back.state.global_step, 1234);
+  EXPECT_EQ(back.state.best_val_error, cp.state.best_val_error);
+  EXPECT_EQ(back.state.nonfinite_in_row, 2);
+  EXPECT_EQ(back.state.rng, cp.state.rng);
+  EXPECT_EQ(back.stats, cp.stats);
+  EXPECT_EQ(read_checkpoint_config(path), cp.config_toml);
+}
+
+TEST_F(CheckpointTest, RewriteReplacesAtomically) {
+  ad::ParamStore<float> a, b;
+  make_params(a, 4);
+  make_params(b, 4);
+  const std::string path = (dir_ / "c.h5").string();
+  fill_random(a, 1);
+  write_checkpoint(path, a, sample_checkpoint());
+  // A stale temporary from a crashed writer must not disturb the next write.
+  std::ofstream(path + ".tmp") << "garbage";
+  fill_random(a, 2);
+  write_checkpoint(path, a, sample_checkpoint());
+  read_checkpoint(path, b);
+  EXPECT_TRUE(same_tensors(a, b));
+}
+
+TEST_F(CheckpointTest, OtherModelSizeIsRefusedWithTheDifferences) {
+  ad::ParamStore<float> small, big;
+  make_params(small, 4);
+  make_params(big, 8);
+  const std::string path = (dir_ / "c.h5").string();
+  write_checkpoint(path, small, sample_checkpoint());
+  try {
+    read_checkpoint(path, big);
+    FAIL() << "a checkpoint of another size was accepted";
+  } catch (const CheckpointError& e) {
+    const std::string msg = e.what();
+    EXPECT_NE(msg.find("encoder.layers.0.attn.q_proj.weight: checkpoint (4, 4), model (8, 8)"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("another model size"), std::string::npos) << msg;
+  }
+}
+
+TEST_F(CheckpointTest, TruncatedCorruptedAndForeignFilesAreRefused) {
+  ad::ParamStore<float> a;
+  make_params(a, 8);
+  fill_random(a, 3);
+  const std::string path = (dir_ / "c.h5").string();
+  write_checkpoint(path, a, sample_checkpoint());
+  const auto size = fs::file_size(path);
+
+  const std::string truncated = (dir_ / "truncated.h5").string();
+  fs::copy_file(path, truncated);
+  fs::resize_file(truncated, size / 2);
+  EXPECT_THROW(read_checkpoint(truncated, a), CheckpointError);
+
+  const std::string corrupted = (dir_ / "corrupted.h5").string();
+  fs::copy_file(path, corrupted);
+  {
+    std::fstream f(corrupted, std::ios::in | std::ios::out | std::ios::binary);
+    f.seekp(0);
+    f.write("NOTHDF5!", 8);  // destroys the superblock signature
+  }
+  EXPECT_THROW(read_checkpoint(corrupted, a), CheckpointError);
+
+  EXPECT_THROW(read_checkpoint((dir_ / "missing.h5").string(), a), CheckpointError);
+}
+
+}  // namespace
+}  // namespace layersnet

@@ -1,0 +1,228 @@
+#include "train/checkpoint.h"
+
+#include "dataset/h5.h"
+#include "layersnet_version.h"
+
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <filesystem>
+#include <sstream>
+
+namespace layersnet {
+
+namespace {
+
+namespace h5 = dataset::h5;
+
+[[noreturn]] void fail(const std::string& path, const std::string& what) {
+  throw CheckpointError(path + ": " + what);
+}
+
+void write_bytes(hid_t loc, const std::string& name, const std::vector<uint8_t>& bytes) {
+  const hsize_t dims[1] = {bytes.size()};
+  h5::Handle space(H5Screate_simple(1, dims, nullptr), H5Sclose);
+  h5::Handle ds(H5Dcreate2(loc, name.c_str(), H5T_STD_U8LE, space.get(), H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT),
+                H5Dclose);
+  if (!ds.valid() || (!bytes.empty() && H5Dwrite(ds.get(), H5T_NATIVE_UINT8, H5S_ALL, H5S_ALL, H5P_DEFAULT,
+                                                  bytes.data()) < 0))
+    throw CheckpointError("cannot write byte array " + name);
+}
+
+std::vector<uint8_t> read_bytes(hid_t loc, const std::string& name, const h5::Where& where) {
+  h5::Handle ds(H5Dopen2(loc, name.c_str(), H5P_DEFAULT), H5Dclose);
+  if (!ds.valid()) where.fail("cannot be opened");
+  h5::Handle space(H5Dget_space(ds.get()), H5Sclose);
+  const hssize_t n = H5Sget_simple_extent_npoints(space.get());
+  if (n < 0 || n > (hssize_t{1} << 30)) where.fail("has an unreadable size");
+  std::vector<uint8_t> bytes(static_cast<std::size_t>(n));
+  if (n > 0 && H5Dread(ds.get(), H5T_NATIVE_UINT8, H5S_ALL, H5S_ALL, H5P_DEFAULT, bytes.data()) < 0)
+    where.fail("cannot be read (truncated or corrupted file?)");
+  return bytes;
+}
+
+std::vector<double> read_doubles(hid_t ds, const h5::Where& where) {
+  h5::Handle space(H5Dget_space(ds), H5Sclose);
+  const hssize_t n = H5Sget_simple_extent_npoints(space.get());
+  if (n < 0 || n > (hssize_t{1} << 30)) where.fail("has an unreadable size");
+  std::vector<double> values(static_cast<std::size_t>(n));
+  if (n > 0 && H5Dread(ds, H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, values.data()) < 0)
+    where.fail("cannot be read (truncated or corrupted file?)");
+  return values;
+}
+
+void write_tensor_group(hid_t file, const std::string& group, const ad::ParamStore<float>& params,
+                        std::span<const float> flat) {
+  h5::Handle g = h5::create_group(file, group, {"", group});
+  for (const auto& e : params.entries()) {
+    h5::write_floats(g.get(), e.name, flat.data() + e.offset,
+                     {static_cast<uint64_t>(e.rows), static_cast<uint64_t>(e.cols)}, {});
+  }
+}
+
+// Reads every tensor of `group` into `flat`, checking names and shapes against `params`.
+void read_tensor_group(hid_t file, const std::string& path, const std::string& group,
+                       const ad::ParamStore<float>& params, std::span<float> flat) {
+  const h5::Where gw{path, "/" + group};
+  h5::Handle g = h5::open_group(file, group, gw);
+  const auto names = h5::member_names(g.get(), gw);
+  std::ostringstream diff;
+  int n_diff = 0;
+  for (const auto& e : params.entries()) {
+    if (std::find(names.begin(), names.end(), e.name) == names.end()) {
+      if (n_diff++ < 10) diff << "\n  missing in the checkpoint: " << e.name << " (" << e.rows << ", " << e.cols << ")";
+      continue;
+    }
+    const h5::Where w{path, "/" + group + "/" + e.name};
+    h5::Handle ds = h5::open_dataset(g.get(), e.name, w);
+    const h5::ArrayInfo info = h5::dataset_info(ds.get(), w);
+    if (info.dims.size() != 2 || info.dims[0] != static_cast<uint64_t>(e.rows) ||
+        info.dims[1] != static_cast<uint64_t>(e.cols)) {
+      if (n_diff++ < 10)
+        diff << "\n  " << e.name << ": checkpoint " << h5::shape_string(info.dims) << ", model (" << e.rows << ", "
+             << e.cols << ")";
+      continue;
+    }
+    const std::vector<float> values = h5::read_floats(ds.get(), info, w);
+    std::copy(values.begin(), values.end(), flat.begin() + static_cast<std::ptrdiff_t>(e.offset));
+  }
+  for (const auto& name : names) {
+    bool known = false;
+    for (const auto& e : params.entries()) known |= e.name == name;
+    if (!known && n_diff++ < 10) diff << "\n  not in this model: " << name;
+  }
+  if (n_diff > 0)
+    fail(path, "/" + group + " does not match the model (" + std::to_string(n_diff) +
+                   " difference(s); was it trained with another model size?):" + diff.str());
+}
+
+void fsync_path(const std::string& path) {
+  const int fd = ::open(path.c_str(), O_RDONLY);
+  if (fd >= 0) {
+    ::fsync(fd);
+    ::close(fd);
+  }
+}
+
+}  // namespace
+
+void write_checkpoint(const std::string& path, const ad::ParamStore<float>& params, const Checkpoint& cp) {
+  const std::string tmp = path + ".tmp";
+  {
+    h5::Handle file = h5::create_file(tmp);
+    const hid_t f = file.get();
+    h5::write_string_attr(f, "format", kCheckpointFormat);
+    h5::write_int_attr(f, "version", kCheckpointVersion);
+    h5::write_string_attr(f, "program", std::string("layersnet ") + LAYERSNET_VERSION);
+    {
+      h5::Handle g = h5::create_group(f, "config", {tmp, "/config"});
+      h5::write_string_attr(g.get(), "toml", cp.config_toml);
+    }
+    write_tensor_group(f, "weights", params, params.values());
+    {
+      h5::Handle adam = h5::create_group(f, "adam", {tmp, "/adam"});
+      h5::write_int_attr(adam.get(), "step", cp.state.global_step);
+      write_tensor_group(adam.get(), "m", params, params.moment1());
+      write_tensor_group(adam.get(), "v", params, params.moment2());
+    }
+    {
+      h5::Handle st = h5::create_group(f, "state", {tmp, "/state"});
+      h5::write_int_attr(st.get(), "epoch", cp.state.epoch);
+      h5::write_int_attr(st.get(), "position", cp.state.position);
+      h5::write_int_attr(st.get(), "global_step", cp.state.global_step);
+      h5::write_float_attr(st.get(), "best_val_error", cp.state.best_val_error);
+      h5::write_int_attr(st.get(), "nonfinite_in_row", cp.state.nonfinite_in_row);
+      h5::Handle rng = h5::create_group(st.get(), "rng", {tmp, "/state/rng"});
+      for (const auto& [name, bytes] : cp.state.rng) write_bytes(rng.get(), name, bytes);
+    }
+    {
+      h5::Handle stats = h5::create_group(f, "stats", {tmp, "/stats"});
+      for (const auto& [name, values] : cp.stats)
+        h5::write_doubles(stats.get(), name, values.data(), {static_cast<uint64_t>(values.size())});
+    }
+    if (H5Fflush(f, H5F_SCOPE_GLOBAL) < 0) fail(tmp, "cannot flush");
+  }
+  fsync_path(tmp);
+  std::error_code ec;
+  std::filesystem::rename(tmp, path, ec);
+  if (ec) fail(path, "cannot rename " + tmp + " into place: " + ec.message());
+  fsync_path(std::filesystem::path(path).parent_path().empty() ? "." : std::filesystem::path(path).parent_path().string());
+}
+
+namespace {
+
+h5::Handle open_checked(const std::string& path) {
+  if (!std::filesystem::exists(path)) fail(path, "checkpoint not found");
+  h5::Handle file;
+  try {
+    file = h5::open_file(path);
+  } catch (const std::exception& e) {
+    fail(path, std::string("not a readable HDF5 checkpoint (truncated or corrupted?): ") + e.what());
+  }
+  const h5::Where root{path, "/"};
+  if (!h5::has_attr(file.get(), "format")) fail(path, "not a LayersNet checkpoint (no 'format' attribute)");
+  const std::string format = h5::read_string_attr(file.get(), "format", root);
+  if (format != kCheckpointFormat)
+    fail(path, "format is '" + format + "', expected '" + std::string(kCheckpointFormat) + "'");
+  const int64_t version = h5::read_int_attr(file.get(), "version", root);
+  if (version != kCheckpointVersion)
+    fail(path, "checkpoint format version " + std::to_string(version) + ", this program reads version " +
+                   std::to_string(kCheckpointVersion));
+  return file;
+}
+
+}  // namespace
+
+std::string read_checkpoint_config(const std::string& path) {
+  h5::Handle file = open_checked(path);
+  h5::Handle g = h5::open_group(file.get(), "config", {path, "/config"});
+  return h5::read_string_attr(g.get(), "toml", {path, "/config"});
+}
+
+Checkpoint read_checkpoint(const std::string& path, ad::ParamStore<float>& params) {
+  try {
+    h5::Handle file = open_checked(path);
+    const hid_t f = file.get();
+    Checkpoint cp;
+    {
+      h5::Handle g = h5::open_group(f, "config", {path, "/config"});
+      cp.config_toml = h5::read_string_attr(g.get(), "toml", {path, "/config"});
+    }
+    read_tensor_group(f, path, "weights", params, params.values());
+    {
+      const h5::Where aw{path, "/adam"};
+      h5::Handle adam = h5::open_group(f, "adam", aw);
+      cp.state.global_step = h5::read_int_attr(adam.get(), "step", aw);
+      read_tensor_group(adam.get(), path, "m", params, params.moment1());
+      read_tensor_group(adam.get(), path, "v", params, params.moment2());
+    }
+    {
+      const h5::Where sw{path, "/state"};
+      h5::Handle st = h5::open_group(f, "state", sw);
+      cp.state.epoch = h5::read_int_attr(st.get(), "epoch", sw);
+      cp.state.position = h5::read_int_attr(st.get(), "position", sw);
+      cp.state.best_val_error = h5::read_float_attr(st.get(), "best_val_error", sw);
+      cp.state.nonfinite_in_row = h5::read_int_attr(st.get(), "nonfinite_in_row", sw);
+      const h5::Where rw{path, "/state/rng"};
+      h5::Handle rng = h5::open_group(st.get(), "rng", rw);
+      for (const auto& name : h5::member_names(rng.get(), rw))
+        cp.state.rng[name] = read_bytes(rng.get(), name, {path, "/state/rng/" + name});
+    }
+    {
+      const h5::Where tw{path, "/stats"};
+      h5::Handle stats = h5::open_group(f, "stats", tw);
+      for (const auto& name : h5::member_names(stats.get(), tw)) {
+        const h5::Where w{path, "/stats/" + name};
+        h5::Handle ds = h5::open_dataset(stats.get(), name, w);
+        cp.stats[name] = read_doubles(ds.get(), w);
+      }
+    }
+    return cp;
+  } catch (const dataset::DatasetError& e) {
+    throw CheckpointError(std::string("checkpoint is incomplete or corrupted: ") + e.what());
+  }
+}
+
+}  // namespace layersnet

@@ -1,0 +1,60 @@
+#pragma once
+// Training checkpoints in HDF5, readable by h5py:
+//
+//   /                 attrs format = "layersnet-checkpoint", version = 1, program = "layersnet X.Y.Z"
+//   /config           attr  toml: the fully resolved configuration (text)
+//   /weights/<name>   float32 (rows, cols), one per parameter, dotted names
+//                     ("encoder.layers.0.attn.q_proj.weight")
+//   /adam/m/<name>, /adam/v/<name>   float32 (rows, cols): Adam's moments; attr step
+//   /state            attrs epoch, position (next sample index in the epoch's order),
+//                     global_step, best_val_error, nonfinite_in_row
+//   /state/rng/<name> uint8 (bytes,): the raw state of each named GSL generator
+//   /stats/<name>     float64 arrays: the normalisation statistics the run used
+//
+// Writes go to "<path>.tmp", are flushed and fsync'ed, then renamed over <path>: a crash at
+// any moment leaves either the old or the new checkpoint, never a torn one.
+#include "autodiff/params.h"
+
+#include <cstdint>
+#include <map>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace layersnet {
+
+inline constexpr const char* kCheckpointFormat = "layersnet-checkpoint";
+inline constexpr int kCheckpointVersion = 1;
+
+class CheckpointError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+struct TrainingState {
+  int64_t epoch = 0;        // 0-based epoch in progress
+  int64_t position = 0;     // samples of this epoch already consumed
+  int64_t global_step = 0;  // updates applied (Adam's t)
+  double best_val_error = -1;  // < 0: none yet
+  int64_t nonfinite_in_row = 0;
+  std::map<std::string, std::vector<uint8_t>> rng;  // GSL generator states by name
+};
+
+struct Checkpoint {
+  std::string config_toml;
+  TrainingState state;
+  std::map<std::string, std::vector<double>> stats;
+};
+
+// Writes params (values and Adam moments) and `checkpoint` atomically to `path`.
+void write_checkpoint(const std::string& path, const ad::ParamStore<float>& params, const Checkpoint& checkpoint);
+
+// Reads `path` into `params` (whose layout must match: same names and shapes; every
+// difference is listed in the error) and returns the rest. Refuses other formats and
+// versions, and truncated or corrupted files, with a message naming the file.
+Checkpoint read_checkpoint(const std::string& path, ad::ParamStore<float>& params);
+
+// Only the config text of a checkpoint (to rebuild the model before reading weights).
+std::string read_checkpoint_config(const std::string& path);
+
+}  // namespace layersnet
