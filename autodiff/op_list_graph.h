@@ -6,4 +6,9 @@
   X(ScatterAddRows, scatter_add_rows) \
   X(SegmentSum, segment_sum)        \
   X(SegmentSoftmax, segment_softmax) \
-  X(ConcatRows, concat_rows)
+  X(ConcatRows, concat_rows)         \
+  X(RowNorm, row_norm)              \
+  X(RowNormalize, row_normalize)    \
+  X(Cross3, cross3)                 \
+  X(Rotate3, rotate3)               \
+  X(RotMapApply, rot_map_apply)

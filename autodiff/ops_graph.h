@@ -52,3 +52,5 @@ void check_csr(const char* what, std::span<const int32_t> offsets, int64_t n_row
 void check_indices(const char* what, std::span<const int32_t> idx, int64_t bound);
 
 }  // namespace layersnet::ad
+
+#include "autodiff/ops_geometry.h"

@@ -1,0 +1,304 @@
+#include "autodiff/ops_geometry.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace layersnet::ad {
+
+namespace {
+
+constexpr int64_t kParallelMin = int64_t{1} << 15;
+
+// ---- kernels (no tape, no allocation) ---------------------------------------------------
+
+// y[n] = ||x[n]||                           x: (N, C), y: (N)
+template <class T>
+void row_norm_forward(const T* x, int64_t rows, int64_t cols, T* y) {
+#pragma omp parallel for schedule(static) if (rows * cols > kParallelMin)
+  for (int64_t n = 0; n < rows; ++n) {
+    T sq = 0;
+    for (int64_t c = 0; c < cols; ++c) sq += x[n * cols + c] * x[n * cols + c];
+    y[n] = std::sqrt(sq);
+  }
+}
+
+// gx[n] += g[n] x[n] / y[n]  (0 where y[n] == 0)
+template <class T>
+void row_norm_backward(const T* x, const T* y, const T* g, int64_t rows, int64_t cols, T* gx) {
+#pragma omp parallel for schedule(static) if (rows * cols > kParallelMin)
+  for (int64_t n = 0; n < rows; ++n) {
+    if (y[n] == T(0)) continue;
+    const T k = g[n] / y[n];
+    for (int64_t c = 0; c < cols; ++c) gx[n * cols + c] += k * x[n * cols + c];
+  }
+}
+
+// y[n] = x[n] / m[n], m[n] = max(||x[n]||, eps); m is saved for backward.
+template <class T>
+void row_normalize_forward(const T* x, int64_t rows, int64_t cols, T eps, T* y, T* m) {
+#pragma omp parallel for schedule(static) if (rows * cols > kParallelMin)
+  for (int64_t n = 0; n < rows; ++n) {
+    T sq = 0;
+    for (int64_t c = 0; c < cols; ++c) sq += x[n * cols + c] * x[n * cols + c];
+    m[n] = std::max(std::sqrt(sq), eps);
+    const T inv = T(1) / m[n];
+    for (int64_t c = 0; c < cols; ++c) y[n * cols + c] = x[n * cols + c] * inv;
+  }
+}
+
+// Where ||x|| > eps: gx += (g - y (y.g)) / ||x||; else (constant divisor): gx += g / eps.
+template <class T>
+void row_normalize_backward(const T* y, const T* m, const T* g, int64_t rows, int64_t cols, T eps, T* gx) {
+#pragma omp parallel for schedule(static) if (rows * cols > kParallelMin)
+  for (int64_t n = 0; n < rows; ++n) {
+    const T* yn = y + n * cols;
+    const T* gn = g + n * cols;
+    T dot = 0;
+    if (m[n] > eps)
+      for (int64_t c = 0; c < cols; ++c) dot += yn[c] * gn[c];
+    const T inv = T(1) / m[n];
+    for (int64_t c = 0; c < cols; ++c) gx[n * cols + c] += (gn[c] - yn[c] * dot) * inv;
+  }
+}
+
+template <class T>
+inline void cross(const T* a, const T* b, T* out) {
+  out[0] = a[1] * b[2] - a[2] * b[1];
+  out[1] = a[2] * b[0] - a[0] * b[2];
+  out[2] = a[0] * b[1] - a[1] * b[0];
+}
+
+// out = R v (or R^T v) for one row; R row-major 3x3.
+template <class T>
+inline void mat3_apply(const T* R, const T* v, bool transpose, T* out) {
+  for (int i = 0; i < 3; ++i)
+    out[i] = transpose ? R[i] * v[0] + R[3 + i] * v[1] + R[6 + i] * v[2]
+                       : R[3 * i] * v[0] + R[3 * i + 1] * v[1] + R[3 * i + 2] * v[2];
+}
+
+// For out = R v:   gR[i][j] += g_i v_j, gv += R^T g.
+// For out = R^T v: gR[i][j] += v_i g_j, gv += R g.
+template <class T>
+inline void mat3_apply_backward(const T* R, const T* v, const T* g, bool transpose, T* gR, T* gv) {
+  if (gR)
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) gR[3 * i + j] += transpose ? v[i] * g[j] : g[i] * v[j];
+  if (gv) {
+    T tmp[3];
+    mat3_apply(R, g, !transpose, tmp);
+    for (int i = 0; i < 3; ++i) gv[i] += tmp[i];
+  }
+}
+
+template <class T>
+void check_shape(const char* what, const Var<T>& v, int64_t rows, int64_t cols) {
+  LAYERSNET_CHECK(v.rows == rows && v.cols == cols, what << ": expected (" << rows << ", " << cols << "), got ("
+                                                         << v.rows << ", " << v.cols << ")");
+}
+
+}  // namespace
+
+// ---- row_norm ---------------------------------------------------------------------------
+// Node: in[0] = x; the output holds the norms.
+template <class T>
+Var<T> row_norm(Tape<T>& tape, const Var<T>& x) {
+  const bool grad = tape.wants_grad({x});
+  Var<T> out = tape.new_var(x.rows, 1, grad);
+  row_norm_forward(x.value, x.rows, x.cols, out.value);
+  if (grad) tape.record(OpKind::RowNorm, out, {x});
+  return out;
+}
+
+template <class T>
+void backward_row_norm(const Node<T>& node) {
+  const Var<T>& x = node.in[0];
+  if (x.grad) row_norm_backward(x.value, node.out.value, node.out.grad, x.rows, x.cols, x.grad);
+}
+
+// ---- row_normalize ----------------------------------------------------------------------
+// Node: in[0] = x, s[0] = eps, saved = max(||x[n]||, eps) (N).
+template <class T>
+Var<T> row_normalize(Tape<T>& tape, const Var<T>& x, T eps) {
+  LAYERSNET_CHECK(eps > T(0), "row_normalize: eps must be positive, got " << eps);
+  const bool grad = tape.wants_grad({x});
+  Var<T> out = tape.new_var(x.rows, x.cols, grad);
+  T* m = tape.scratch(static_cast<std::size_t>(x.rows));
+  row_normalize_forward(x.value, x.rows, x.cols, eps, out.value, m);
+  if (grad) {
+    Node<T>& node = tape.record(OpKind::RowNormalize, out, {x});
+    node.s[0] = eps;
+    node.saved = m;
+  }
+  return out;
+}
+
+template <class T>
+void backward_row_normalize(const Node<T>& node) {
+  const Var<T>& x = node.in[0];
+  if (x.grad)
+    row_normalize_backward(node.out.value, node.saved, node.out.grad, x.rows, x.cols, node.s[0], x.grad);
+}
+
+// ---- cross3 -----------------------------------------------------------------------------
+// Node: in[0] = a, in[1] = b.
+template <class T>
+Var<T> cross3(Tape<T>& tape, const Var<T>& a, const Var<T>& b) {
+  check_shape("cross3 a", a, a.rows, 3);
+  check_shape("cross3 b", b, a.rows, 3);
+  const bool grad = tape.wants_grad({a, b});
+  Var<T> out = tape.new_var(a.rows, 3, grad);
+#pragma omp parallel for schedule(static) if (a.rows * 9 > kParallelMin)
+  for (int64_t n = 0; n < a.rows; ++n) cross(a.value + 3 * n, b.value + 3 * n, out.value + 3 * n);
+  if (grad) tape.record(OpKind::Cross3, out, {a, b});
+  return out;
+}
+
+template <class T>
+void backward_cross3(const Node<T>& node) {
+  const Var<T>& a = node.in[0];
+  const Var<T>& b = node.in[1];
+  // d<g, a x b> = <da, b x g> + <db, g x a>
+#pragma omp parallel for schedule(static) if (a.rows * 18 > kParallelMin)
+  for (int64_t n = 0; n < a.rows; ++n) {
+    const T* g = node.out.grad + 3 * n;
+    T tmp[3];
+    if (a.grad) {
+      cross(b.value + 3 * n, g, tmp);
+      for (int c = 0; c < 3; ++c) a.grad[3 * n + c] += tmp[c];
+    }
+    if (b.grad) {
+      cross(g, a.value + 3 * n, tmp);
+      for (int c = 0; c < 3; ++c) b.grad[3 * n + c] += tmp[c];
+    }
+  }
+}
+
+// ---- rotate3 ----------------------------------------------------------------------------
+// Node: in[0] = R, in[1] = v, i[0] = transpose.
+template <class T>
+Var<T> rotate3(Tape<T>& tape, const Var<T>& R, const Var<T>& v, bool transpose) {
+  check_shape("rotate3 v", v, v.rows, 3);
+  check_shape("rotate3 R (one row-major 3x3 per row of v)", R, v.rows, 9);
+  const bool grad = tape.wants_grad({R, v});
+  Var<T> out = tape.new_var(v.rows, 3, grad);
+#pragma omp parallel for schedule(static) if (v.rows * 15 > kParallelMin)
+  for (int64_t n = 0; n < v.rows; ++n) mat3_apply(R.value + 9 * n, v.value + 3 * n, transpose, out.value + 3 * n);
+  if (grad) tape.record(OpKind::Rotate3, out, {R, v}).i[0] = transpose;
+  return out;
+}
+
+template <class T>
+void backward_rotate3(const Node<T>& node) {
+  const Var<T>& R = node.in[0];
+  const Var<T>& v = node.in[1];
+  const bool transpose = node.i[0] != 0;
+#pragma omp parallel for schedule(static) if (v.rows * 36 > kParallelMin)
+  for (int64_t n = 0; n < v.rows; ++n)
+    mat3_apply_backward(R.value + 9 * n, v.value + 3 * n, node.out.grad + 3 * n, transpose,
+                        R.grad ? R.grad + 9 * n : nullptr, v.grad ? v.grad + 3 * n : nullptr);
+}
+
+// ---- rot_map_apply ----------------------------------------------------------------------
+// Node: in[0] = W, in[1] = R, in[2] = v, i[0] = transpose,
+// saved = [t = v W (N, 3) | u = rows R t (N, 3) | scratch dU (N, 3) | scratch dT (N, 3)].
+template <class T>
+Var<T> rot_map_apply(Tape<T>& tape, const Var<T>& W, const Var<T>& R, const Var<T>& v, bool transpose) {
+  check_shape("rot_map_apply W (d, 3)", W, W.rows, 3);
+  check_shape("rot_map_apply v (N, d) with d = rows of W", v, v.rows, W.rows);
+  check_shape("rot_map_apply R (one row-major 3x3 per row of v)", R, v.rows, 9);
+  const int64_t n_rows = v.rows;
+  const bool grad = tape.wants_grad({W, R, v});
+  Var<T> out = tape.new_var(n_rows, W.rows, grad);
+  T* saved = tape.scratch(static_cast<std::size_t>(grad ? 12 * n_rows : 6 * n_rows));
+  MatMap<T> t(saved, n_rows, 3), u(saved + 3 * n_rows, n_rows, 3);
+  t.noalias() = v.val() * W.val();  // rows t[n] = W^T v[n]
+#pragma omp parallel for schedule(static) if (n_rows * 15 > kParallelMin)
+  for (int64_t n = 0; n < n_rows; ++n) mat3_apply(R.value + 9 * n, saved + 3 * n, transpose, saved + 3 * (n_rows + n));
+  out.val().noalias() = u * W.val().transpose();  // rows out[n] = W u[n]
+  if (grad) {
+    Node<T>& node = tape.record(OpKind::RotMapApply, out, {W, R, v});
+    node.i[0] = transpose;
+    node.saved = saved;
+  }
+  return out;
+}
+
+template <class T>
+void backward_rot_map_apply(const Node<T>& node) {
+  const Var<T>& W = node.in[0];
+  const Var<T>& R = node.in[1];
+  const Var<T>& v = node.in[2];
+  const bool transpose = node.i[0] != 0;
+  const int64_t n_rows = v.rows;
+  T* saved = node.saved;
+  ConstMatMap<T> t(saved, n_rows, 3), u(saved + 3 * n_rows, n_rows, 3);
+  MatMap<T> du(saved + 6 * n_rows, n_rows, 3), dt(saved + 9 * n_rows, n_rows, 3);
+  const auto g = node.out.grd();
+  du.noalias() = g * W.val();  // out = u W^T
+  if (W.grad) W.grd().noalias() += g.transpose() * u;
+  dt.setZero();
+#pragma omp parallel for schedule(static) if (n_rows * 36 > kParallelMin)
+  for (int64_t n = 0; n < n_rows; ++n)
+    mat3_apply_backward(R.value + 9 * n, saved + 3 * n, saved + 3 * (2 * n_rows + n), transpose,
+                        R.grad ? R.grad + 9 * n : nullptr, saved + 3 * (3 * n_rows + n));
+  if (v.grad) v.grd().noalias() += dt * W.val().transpose();  // t = v W
+  if (W.grad) W.grd().noalias() += v.val().transpose() * dt;
+}
+
+// ---- rotation_from_normals (data, no tape) -----------------------------------------------
+template <class T>
+void rotation_from_normals(std::span<const T> normals, std::span<T> rotations) {
+  LAYERSNET_CHECK(normals.size() % 3 == 0 && rotations.size() / 9 == normals.size() / 3 && rotations.size() % 9 == 0,
+                  "rotation_from_normals: normals (N, 3) has " << normals.size() << " numbers and rotations (N, 9) "
+                                                               << rotations.size() << "; sizes must match");
+  const auto n_rows = static_cast<int64_t>(normals.size() / 3);
+#pragma omp parallel for schedule(static) if (n_rows * 40 > kParallelMin)
+  for (int64_t k = 0; k < n_rows; ++k) {
+    const double n[3] = {double(normals[3 * k]), double(normals[3 * k + 1]), double(normals[3 * k + 2])};
+    T* R = rotations.data() + 9 * k;
+    const double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    if (len < 1e-12) {
+      for (int c = 0; c < 9; ++c) R[c] = T(c % 4 == 0);
+      continue;
+    }
+    double x[3] = {1, 0, 0};
+    for (int c = 0; c < 3; ++c)
+      if (std::abs(n[c]) < 1e-7) x[c] = 1;
+    // Gram-Schmidt twice for unit n: near an axis the first pass cancels (1 - n_x^2 ~ 1e-14)
+    // and leaves x off-orthogonal by ~1e-10; the second pass brings it to rounding level.
+    // A non-unit n (the gravity quirk) gets the official single pass only.
+    const double nn = n[0] * n[0] + n[1] * n[1] + n[2] * n[2];
+    const int passes = std::abs(nn - 1.0) < 1e-6 ? 2 : 1;
+    for (int pass = 0; pass < passes; ++pass) {
+      const double nx = (n[0] * x[0] + n[1] * x[1] + n[2] * x[2]) / (pass == 0 ? 1.0 : nn);
+      for (int c = 0; c < 3; ++c) x[c] -= nx * n[c];
+      const double xl = std::sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]);
+      for (int c = 0; c < 3; ++c) x[c] /= xl;
+    }
+    double y[3];
+    cross(n, x, y);
+    for (int c = 0; c < 3; ++c) {
+      R[c] = T(x[c]);
+      R[3 + c] = T(y[c]);
+      R[6 + c] = T(n[c]);
+    }
+  }
+}
+
+#define LAYERSNET_INSTANTIATE(T)                                                                     \
+  template Var<T> row_norm<T>(Tape<T>&, const Var<T>&);                                             \
+  template Var<T> row_normalize<T>(Tape<T>&, const Var<T>&, T);                                     \
+  template Var<T> cross3<T>(Tape<T>&, const Var<T>&, const Var<T>&);                                \
+  template Var<T> rotate3<T>(Tape<T>&, const Var<T>&, const Var<T>&, bool);                         \
+  template Var<T> rot_map_apply<T>(Tape<T>&, const Var<T>&, const Var<T>&, const Var<T>&, bool);    \
+  template void rotation_from_normals<T>(std::span<const T>, std::span<T>);                         \
+  template void backward_row_norm<T>(const Node<T>&);                                               \
+  template void backward_row_normalize<T>(const Node<T>&);                                          \
+  template void backward_cross3<T>(const Node<T>&);                                                 \
+  template void backward_rotate3<T>(const Node<T>&);                                                \
+  template void backward_rot_map_apply<T>(const Node<T>&);
+LAYERSNET_INSTANTIATE(float)
+LAYERSNET_INSTANTIATE(double)
+#undef LAYERSNET_INSTANTIATE
+
+}  // namespace layersnet::ad
