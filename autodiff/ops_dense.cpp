@@ -1,57 +1,597 @@
 #include "autodiff/ops_dense.h"
 
+#include "autodiff/row_blocks.h"
+
+#include <algorithm>
+#include <cmath>
+
 namespace layersnet::ad {
 
 namespace {
+
+template <class T>
+using RowVecMap = Eigen::Map<Eigen::Matrix<T, 1, Eigen::Dynamic>>;
+template <class T>
+using ConstRowVecMap = Eigen::Map<const Eigen::Matrix<T, 1, Eigen::Dynamic>>;
+
+template <class T>
+bool absent(const Var<T>& v) {
+  return v.value == nullptr;
+}
 
 // b broadcast to a's (N, C): b is (N, C), (1, C), (N, 1) or (1, 1).
 template <class T>
 void check_broadcast(const char* op, const Var<T>& a, const Var<T>& b) {
   LAYERSNET_CHECK((b.rows == a.rows || b.rows == 1) && (b.cols == a.cols || b.cols == 1),
                   op << ": cannot broadcast (" << b.rows << ", " << b.cols << ") to (" << a.rows << ", "
-                     << a.cols << ")");
-}
-
-// Reduces a (N, C) gradient onto b's broadcast shape and adds it to gb.
-template <class T>
-void accumulate_broadcast(const Eigen::Ref<const RowMat<T>>& g, Var<T> b) {
-  auto gb = b.grd();
-  if (b.rows == g.rows() && b.cols == g.cols()) gb += g;
-  else if (b.rows == 1 && b.cols == g.cols()) gb += g.colwise().sum();
-  else if (b.cols == 1 && b.rows == g.rows()) gb += g.rowwise().sum();
-  else gb(0, 0) += g.sum();
+                     << a.cols << "); b must be (N, C), (1, C), (N, 1) or (1, 1)");
 }
 
 template <class T>
-auto broadcast_view(const Var<T>& b, int64_t rows, int64_t cols) {
-  return b.val().replicate(rows / b.rows, cols / b.cols);
+void check_same_shape(const char* op, const Var<T>& a, const Var<T>& b) {
+  LAYERSNET_CHECK(a.rows == b.rows && a.cols == b.cols,
+                  op << ": shapes (" << a.rows << ", " << a.cols << ") and (" << b.rows << ", " << b.cols
+                     << ") differ");
+}
+
+// Calls f with rows [r0, r0 + n) of b broadcast to (n, cols), as an Eigen matrix expression.
+template <class T, class F>
+void with_b_block(const Var<T>& b, int64_t rows, int64_t cols, int64_t r0, int64_t n, F&& f) {
+  const ConstMatMap<T> bv(b.value, b.rows, b.cols);
+  if (b.rows == rows && b.cols == cols) f(bv.middleRows(r0, n));
+  else if (b.rows == 1 && b.cols == 1) f(RowMat<T>::Constant(n, cols, b.value[0]));
+  else if (b.rows == 1) f(bv.replicate(n, 1));
+  else f(bv.middleRows(r0, n).replicate(1, cols));
+}
+
+// Adds the (rows, cols) gradient e(r0, n, bb), reduced onto b's broadcast shape, into b's
+// gradient. e returns an Eigen matrix expression for rows [r0, r0 + n); bb is b broadcast
+// to those rows (for ops whose gradient depends on b).
+template <class T, class E>
+void accumulate_broadcast(const Var<T>& b, int64_t rows, int64_t cols, E&& e) {
+  MatMap<T> gb(b.grad, b.rows, b.cols);
+  const ConstMatMap<T> bv(b.value, b.rows, b.cols);
+  if (b.rows == rows && b.cols == cols) {
+    for_row_blocks(rows, cols,
+                   [&](int64_t r0, int64_t n) { gb.middleRows(r0, n) += e(r0, n, bv.middleRows(r0, n)); });
+  } else if (b.cols == 1 && b.rows == rows) {
+    for_row_blocks(rows, cols, [&](int64_t r0, int64_t n) {
+      gb.middleRows(r0, n) += e(r0, n, bv.middleRows(r0, n).replicate(1, cols)).rowwise().sum();
+    });
+  } else if (b.rows == 1 && b.cols == cols) {
+    const T* s = reduce_row_blocks<T>(rows, cols, cols, [&](int64_t r0, int64_t n, T* p) {
+      RowVecMap<T>(p, cols) += e(r0, n, bv.replicate(n, 1)).colwise().sum();
+    });
+    for (int64_t c = 0; c < cols; ++c) b.grad[c] += s[c];
+  } else {
+    const T* s = reduce_row_blocks<T>(rows, cols, 1, [&](int64_t r0, int64_t n, T* p) {
+      *p += e(r0, n, RowMat<T>::Constant(n, cols, b.value[0])).sum();
+    });
+    b.grad[0] += s[0];
+  }
+}
+
+// out = f(a, b broadcast) elementwise; f takes and returns Eigen array expressions.
+template <class T, class F>
+Var<T> binary_op(Tape<T>& tape, OpKind kind, const char* name, const Var<T>& a, const Var<T>& b, F&& f) {
+  check_broadcast(name, a, b);
+  const bool grad = tape.wants_grad({a, b});
+  Var<T> out = tape.new_var(a.rows, a.cols, grad);
+  const ConstMatMap<T> av(a.value, a.rows, a.cols);
+  MatMap<T> ov(out.value, out.rows, out.cols);
+  for_row_blocks(a.rows, a.cols, [&](int64_t r0, int64_t n) {
+    with_b_block(b, a.rows, a.cols, r0, n, [&](const auto& bb) {
+      ov.middleRows(r0, n).array() = f(av.middleRows(r0, n).array(), bb.array());
+    });
+  });
+  if (grad) tape.record(kind, out, {a, b});
+  return out;
+}
+
+// out = f(x) elementwise.
+template <class T, class F>
+void unary_forward(const Var<T>& x, Var<T>& out, F&& f) {
+  const ConstMatMap<T> xv(x.value, x.rows, x.cols);
+  MatMap<T> ov(out.value, out.rows, out.cols);
+  for_row_blocks(x.rows, x.cols,
+                 [&](int64_t r0, int64_t n) { ov.middleRows(r0, n).array() = f(xv.middleRows(r0, n).array()); });
+}
+
+// dx += f(x, dout) elementwise.
+template <class T, class F>
+void unary_backward(const Var<T>& x, const Var<T>& out, F&& f) {
+  if (!x.grad) return;
+  const ConstMatMap<T> xv(x.value, x.rows, x.cols), g(out.grad, out.rows, out.cols);
+  MatMap<T> gx(x.grad, x.rows, x.cols);
+  for_row_blocks(x.rows, x.cols, [&](int64_t r0, int64_t n) {
+    gx.middleRows(r0, n).array() += f(xv.middleRows(r0, n).array(), g.middleRows(r0, n).array());
+  });
 }
 
 }  // namespace
 
-// ---- add --------------------------------------------------------------------------------
+// ---- linear -----------------------------------------------------------------------------
+// The kernels: out = x Wᵀ + b as ONE GEMM accumulating into out pre-filled with the bias
+// (Eigen's `=` product would zero-fill first anyway, so the bias is free), and backward as
+// two GEMMs that accumulate straight into the gradients (no temporaries).
+
+// x: (N, Cin); W: (Cout, Cin); b: (Cout) or null; out: (N, Cout).
 template <class T>
-Var<T> add(Tape<T>& tape, const Var<T>& a, const Var<T>& b) {
-  check_broadcast("add", a, b);
-  const bool grad = tape.wants_grad({a, b});
-  Var<T> out = tape.new_var(a.rows, a.cols, grad);
-  out.val() = a.val() + broadcast_view(b, a.rows, a.cols);
-  if (grad) tape.record(OpKind::Add, out, {a, b});
+void linear_forward(const ConstMatMap<T>& x, const ConstMatMap<T>& W, const T* b, MatMap<T> out) {
+  for_row_blocks(out.rows(), out.cols(), [&](int64_t r0, int64_t n) {
+    if (b) out.middleRows(r0, n).rowwise() = ConstRowVecMap<T>(b, out.cols());
+    else out.middleRows(r0, n).setZero();
+  });
+  out.noalias() += x * W.transpose();
+}
+
+// dy: (N, Cout); dx: (N, Cin) or null; dW: (Cout, Cin) or null; db: (Cout) or null.
+template <class T>
+void linear_backward(const ConstMatMap<T>& x, const ConstMatMap<T>& W, const ConstMatMap<T>& dy, T* dx, T* dW,
+                     T* db) {
+  const int64_t n = x.rows(), cin = x.cols(), cout = W.rows();
+  if (dx) MatMap<T>(dx, n, cin).noalias() += dy * W;
+  if (dW) MatMap<T>(dW, cout, cin).noalias() += dy.transpose() * x;
+  if (db) {
+    const T* s = reduce_row_blocks<T>(n, cout, cout, [&](int64_t r0, int64_t rows, T* p) {
+      for (int64_t r = r0; r < r0 + rows; ++r) {
+        const T* row = dy.data() + r * cout;
+        for (int64_t c = 0; c < cout; ++c) p[c] += row[c];
+      }
+    });
+    for (int64_t c = 0; c < cout; ++c) db[c] += s[c];
+  }
+}
+
+template <class T>
+Var<T> linear(Tape<T>& tape, const Var<T>& x, const Var<T>& W, const Var<T>& b) {
+  LAYERSNET_CHECK(x.cols == W.cols, "linear: x is (" << x.rows << ", " << x.cols << ") but W is (" << W.rows << ", "
+                                                     << W.cols << "); W must be (Cout, Cin) in torch layout");
+  LAYERSNET_CHECK(absent(b) || (b.rows == 1 && b.cols == W.rows),
+                  "linear: bias is (" << b.rows << ", " << b.cols << "), expected (1, " << W.rows << ") or empty");
+  const bool grad = tape.wants_grad({x, W, b});
+  Var<T> out = tape.new_var(x.rows, W.rows, grad);
+  linear_forward<T>({x.value, x.rows, x.cols}, {W.value, W.rows, W.cols}, b.value, out.val());
+  if (grad) tape.record(OpKind::Linear, out, {x, W, b});
   return out;
 }
 
 template <class T>
-void backward_add(const Node<T>& node) {
-  const auto& [a, b, unused2, unused3] = node.in;
-  if (a.grad) a.grd() += node.out.grd();
-  if (b.grad) accumulate_broadcast<T>(node.out.grd(), b);
+void backward_linear(const Node<T>& node) {
+  const auto& [x, W, b, unused] = node.in;
+  linear_backward<T>({x.value, x.rows, x.cols}, {W.value, W.rows, W.cols},
+                     {node.out.grad, node.out.rows, node.out.cols}, x.grad, W.grad, b.grad);
 }
 
-#define LAYERSNET_INSTANTIATE(T)                                       \
-  template Var<T> add<T>(Tape<T>&, const Var<T>&, const Var<T>&);     \
-  template void backward_add<T>(const Node<T>&);
+// ---- add, sub, mul, div ---------------------------------------------------------------------
+
+template <class T>
+Var<T> add(Tape<T>& tape, const Var<T>& a, const Var<T>& b) {
+  return binary_op(tape, OpKind::Add, "add", a, b, [](const auto& x, const auto& y) { return x + y; });
+}
+
+template <class T>
+void backward_add(const Node<T>& node) {
+  const auto& [a, b, u2, u3] = node.in;
+  const ConstMatMap<T> g(node.out.grad, node.out.rows, node.out.cols);
+  if (a.grad) accumulate_broadcast(a, a.rows, a.cols, [&](int64_t r0, int64_t n, const auto&) { return g.middleRows(r0, n); });
+  if (b.grad) accumulate_broadcast(b, a.rows, a.cols, [&](int64_t r0, int64_t n, const auto&) { return g.middleRows(r0, n); });
+}
+
+template <class T>
+Var<T> sub(Tape<T>& tape, const Var<T>& a, const Var<T>& b) {
+  return binary_op(tape, OpKind::Sub, "sub", a, b, [](const auto& x, const auto& y) { return x - y; });
+}
+
+template <class T>
+void backward_sub(const Node<T>& node) {
+  const auto& [a, b, u2, u3] = node.in;
+  const ConstMatMap<T> g(node.out.grad, node.out.rows, node.out.cols);
+  if (a.grad) accumulate_broadcast(a, a.rows, a.cols, [&](int64_t r0, int64_t n, const auto&) { return g.middleRows(r0, n); });
+  if (b.grad) accumulate_broadcast(b, a.rows, a.cols, [&](int64_t r0, int64_t n, const auto&) { return -g.middleRows(r0, n); });
+}
+
+template <class T>
+Var<T> mul(Tape<T>& tape, const Var<T>& a, const Var<T>& b) {
+  return binary_op(tape, OpKind::Mul, "mul", a, b, [](const auto& x, const auto& y) { return x * y; });
+}
+
+template <class T>
+void backward_mul(const Node<T>& node) {
+  const auto& [a, b, u2, u3] = node.in;
+  const ConstMatMap<T> g(node.out.grad, a.rows, a.cols), av(a.value, a.rows, a.cols);
+  if (a.grad) {
+    MatMap<T> ga(a.grad, a.rows, a.cols);
+    for_row_blocks(a.rows, a.cols, [&](int64_t r0, int64_t n) {
+      with_b_block(b, a.rows, a.cols, r0, n, [&](const auto& bb) {
+        ga.middleRows(r0, n).array() += g.middleRows(r0, n).array() * bb.array();
+      });
+    });
+  }
+  if (b.grad)
+    accumulate_broadcast(b, a.rows, a.cols, [&](int64_t r0, int64_t n, const auto&) {
+      return (g.middleRows(r0, n).array() * av.middleRows(r0, n).array()).matrix();
+    });
+}
+
+template <class T>
+Var<T> div(Tape<T>& tape, const Var<T>& a, const Var<T>& b) {
+  return binary_op(tape, OpKind::Div, "div", a, b, [](const auto& x, const auto& y) { return x / y; });
+}
+
+// d(a/b)/da = 1/b; d(a/b)/db = -(a/b)/b = -out/b.
+template <class T>
+void backward_div(const Node<T>& node) {
+  const auto& [a, b, u2, u3] = node.in;
+  const ConstMatMap<T> g(node.out.grad, a.rows, a.cols), ov(node.out.value, a.rows, a.cols);
+  if (a.grad) {
+    MatMap<T> ga(a.grad, a.rows, a.cols);
+    for_row_blocks(a.rows, a.cols, [&](int64_t r0, int64_t n) {
+      with_b_block(b, a.rows, a.cols, r0, n, [&](const auto& bb) {
+        ga.middleRows(r0, n).array() += g.middleRows(r0, n).array() / bb.array();
+      });
+    });
+  }
+  if (b.grad)
+    accumulate_broadcast(b, a.rows, a.cols, [&](int64_t r0, int64_t n, const auto& bb) {
+      return (-(g.middleRows(r0, n).array() * ov.middleRows(r0, n).array()) / bb.array()).matrix();
+    });
+}
+
+// ---- scale, relu, hinge_sq ------------------------------------------------------------------
+
+template <class T>
+Var<T> scale(Tape<T>& tape, const Var<T>& x, T c) {
+  const bool grad = tape.wants_grad({x});
+  Var<T> out = tape.new_var(x.rows, x.cols, grad);
+  unary_forward(x, out, [c](const auto& v) { return v * c; });
+  if (grad) tape.record(OpKind::Scale, out, {x}).s[0] = c;
+  return out;
+}
+
+template <class T>
+void backward_scale(const Node<T>& node) {
+  const T c = node.s[0];
+  unary_backward(node.in[0], node.out, [c](const auto&, const auto& g) { return g * c; });
+}
+
+template <class T>
+Var<T> relu(Tape<T>& tape, const Var<T>& x) {
+  const bool grad = tape.wants_grad({x});
+  Var<T> out = tape.new_var(x.rows, x.cols, grad);
+  unary_forward(x, out, [](const auto& v) { return v.max(T(0)); });
+  if (grad) tape.record(OpKind::Relu, out, {x});
+  return out;
+}
+
+template <class T>
+void backward_relu(const Node<T>& node) {
+  unary_backward(node.in[0], node.out, [](const auto& v, const auto& g) { return (v > T(0)).select(g, T(0)); });
+}
+
+template <class T>
+Var<T> hinge_sq(Tape<T>& tape, const Var<T>& x, T thr) {
+  const bool grad = tape.wants_grad({x});
+  Var<T> out = tape.new_var(x.rows, x.cols, grad);
+  unary_forward(x, out, [thr](const auto& v) { return (v - thr).min(T(0)).square(); });
+  if (grad) tape.record(OpKind::HingeSq, out, {x}).s[0] = thr;
+  return out;
+}
+
+template <class T>
+void backward_hinge_sq(const Node<T>& node) {
+  const T thr = node.s[0];
+  unary_backward(node.in[0], node.out,
+                 [thr](const auto& v, const auto& g) { return T(2) * (v - thr).min(T(0)) * g; });
+}
+
+// ---- layer_norm -----------------------------------------------------------------------------
+
+// x, out: (N, C); gamma, beta: (C) or null; mean, rstd: (N) saved for backward.
+template <class T>
+void layer_norm_forward(const T* x, const T* gamma, const T* beta, T eps, int64_t N, int64_t C, T* out, T* mean,
+                        T* rstd) {
+  for_row_blocks(N, C, [&](int64_t r0, int64_t n) {
+    for (int64_t r = r0; r < r0 + n; ++r) {
+      const T* xr = x + r * C;
+      T* yr = out + r * C;
+      T m = 0;
+      for (int64_t c = 0; c < C; ++c) m += xr[c];
+      m /= T(C);
+      T v = 0;  // two passes: no cancellation for rows with a large mean
+      for (int64_t c = 0; c < C; ++c) v += (xr[c] - m) * (xr[c] - m);
+      const T rs = T(1) / std::sqrt(v / T(C) + eps);
+      for (int64_t c = 0; c < C; ++c) {
+        const T xh = (xr[c] - m) * rs;
+        yr[c] = (gamma ? xh * gamma[c] : xh) + (beta ? beta[c] : T(0));
+      }
+      mean[r] = m;
+      rstd[r] = rs;
+    }
+  });
+}
+
+// dy: (N, C); dx: (N, C) or null; dgamma, dbeta: (C) or null. All accumulate.
+//   dx = rstd * (dxh - mean(dxh) - xh * mean(dxh * xh)),  dxh = dy * gamma.
+template <class T>
+void layer_norm_backward(const T* x, const T* gamma, const T* mean, const T* rstd, const T* dy, int64_t N, int64_t C,
+                         T* dx, T* dgamma, T* dbeta) {
+  if (dx) {
+    for_row_blocks(N, C, [&](int64_t r0, int64_t n) {
+      for (int64_t r = r0; r < r0 + n; ++r) {
+        const T *xr = x + r * C, *gr = dy + r * C;
+        const T m = mean[r], rs = rstd[r];
+        T s1 = 0, s2 = 0;
+        for (int64_t c = 0; c < C; ++c) {
+          const T dxh = gamma ? gr[c] * gamma[c] : gr[c];
+          s1 += dxh;
+          s2 += dxh * (xr[c] - m) * rs;
+        }
+        s1 /= T(C);
+        s2 /= T(C);
+        T* dr = dx + r * C;
+        for (int64_t c = 0; c < C; ++c) {
+          const T dxh = gamma ? gr[c] * gamma[c] : gr[c];
+          dr[c] += rs * (dxh - s1 - (xr[c] - m) * rs * s2);
+        }
+      }
+    });
+  }
+  if (dgamma || dbeta) {
+    // Partial of width 2C per block: [Σ dy * xh | Σ dy].
+    const T* s = reduce_row_blocks<T>(N, C, 2 * C, [&](int64_t r0, int64_t n, T* p) {
+      for (int64_t r = r0; r < r0 + n; ++r) {
+        const T *xr = x + r * C, *gr = dy + r * C;
+        const T m = mean[r], rs = rstd[r];
+        for (int64_t c = 0; c < C; ++c) {
+          p[c] += gr[c] * (xr[c] - m) * rs;
+          p[C + c] += gr[c];
+        }
+      }
+    });
+    for (int64_t c = 0; c < C; ++c) {
+      if (dgamma) dgamma[c] += s[c];
+      if (dbeta) dbeta[c] += s[C + c];
+    }
+  }
+}
+
+template <class T>
+Var<T> layer_norm(Tape<T>& tape, const Var<T>& x, const Var<T>& gamma, const Var<T>& beta, T eps) {
+  for (const Var<T>* p : {&gamma, &beta})
+    LAYERSNET_CHECK(absent(*p) || (p->rows == 1 && p->cols == x.cols),
+                    "layer_norm: gamma/beta is (" << p->rows << ", " << p->cols << "), expected (1, " << x.cols
+                                                  << ") or empty");
+  LAYERSNET_CHECK(eps > T(0), "layer_norm: eps must be > 0 (a constant row divides by sqrt(eps))");
+  const bool grad = tape.wants_grad({x, gamma, beta});
+  Var<T> out = tape.new_var(x.rows, x.cols, grad);
+  T* saved = tape.scratch(static_cast<std::size_t>(2 * x.rows));  // [mean (N) | rstd (N)]
+  layer_norm_forward(x.value, gamma.value, beta.value, eps, x.rows, x.cols, out.value, saved, saved + x.rows);
+  if (grad) {
+    Node<T>& node = tape.record(OpKind::LayerNorm, out, {x, gamma, beta});
+    node.saved = saved;
+    node.s[0] = eps;
+  }
+  return out;
+}
+
+template <class T>
+void backward_layer_norm(const Node<T>& node) {
+  const auto& [x, gamma, beta, unused] = node.in;
+  layer_norm_backward(x.value, gamma.value, node.saved, node.saved + x.rows, node.out.grad, x.rows, x.cols, x.grad,
+                      gamma.grad, beta.grad);
+}
+
+// ---- concat_cols, slice_cols -------------------------------------------------------------
+
+template <class T>
+Var<T> concat_cols(Tape<T>& tape, std::span<const Var<T>> inputs) {
+  LAYERSNET_CHECK(!inputs.empty(), "concat_cols: no inputs");
+  const int64_t N = inputs[0].rows;
+  int64_t C = 0;
+  bool grad = false;
+  for (const auto& v : inputs) {
+    LAYERSNET_CHECK(v.rows == N, "concat_cols: inputs have " << N << " and " << v.rows << " rows; all need the same");
+    C += v.cols;
+    grad |= v.grad != nullptr;
+  }
+  grad &= tape.recording();
+  Var<T> out = tape.new_var(N, C, grad);
+  for_row_blocks(N, C, [&](int64_t r0, int64_t n) {
+    for (int64_t r = r0; r < r0 + n; ++r) {
+      T* dst = out.value + r * C;
+      for (const auto& v : inputs) dst = std::copy_n(v.value + r * v.cols, v.cols, dst);
+    }
+  });
+  if (grad) {
+    auto* more = tape.arena().template allocate_array<Var<T>>(inputs.size());
+    std::copy(inputs.begin(), inputs.end(), more);
+    Node<T>& node = tape.record(OpKind::ConcatCols, out, {});
+    node.more_in = more;
+    node.n_more = static_cast<int32_t>(inputs.size());
+  }
+  return out;
+}
+
+template <class T>
+void backward_concat_cols(const Node<T>& node) {
+  const ConstMatMap<T> g(node.out.grad, node.out.rows, node.out.cols);
+  int64_t c0 = 0;
+  for (int32_t k = 0; k < node.n_more; ++k) {
+    const Var<T>& v = node.more_in[k];
+    if (v.grad) {
+      MatMap<T> gv(v.grad, v.rows, v.cols);
+      for_row_blocks(v.rows, v.cols,
+                     [&](int64_t r0, int64_t n) { gv.middleRows(r0, n) += g.block(r0, c0, n, v.cols); });
+    }
+    c0 += v.cols;
+  }
+}
+
+template <class T>
+Var<T> slice_cols(Tape<T>& tape, const Var<T>& x, int64_t c0, int64_t c1) {
+  LAYERSNET_CHECK(0 <= c0 && c0 <= c1 && c1 <= x.cols,
+                  "slice_cols: [" << c0 << ", " << c1 << ") is not inside the " << x.cols << " columns");
+  const bool grad = tape.wants_grad({x});
+  Var<T> out = tape.new_var(x.rows, c1 - c0, grad);
+  const ConstMatMap<T> xv(x.value, x.rows, x.cols);
+  MatMap<T> ov(out.value, out.rows, out.cols);
+  for_row_blocks(x.rows, out.cols, [&](int64_t r0, int64_t n) { ov.middleRows(r0, n) = xv.block(r0, c0, n, c1 - c0); });
+  if (grad) tape.record(OpKind::SliceCols, out, {x}).i[0] = c0;
+  return out;
+}
+
+template <class T>
+void backward_slice_cols(const Node<T>& node) {
+  const Var<T>& x = node.in[0];
+  if (!x.grad) return;
+  const ConstMatMap<T> g(node.out.grad, node.out.rows, node.out.cols);
+  MatMap<T> gx(x.grad, x.rows, x.cols);
+  const int64_t c0 = node.i[0];
+  for_row_blocks(x.rows, g.cols(),
+                 [&](int64_t r0, int64_t n) { gx.block(r0, c0, n, g.cols()) += g.middleRows(r0, n); });
+}
+
+// ---- reductions (node.s[0] = factor: 1 for sums, 1/count for means) ------------------------
+
+namespace {
+
+template <class T>
+Var<T> reduce_op(Tape<T>& tape, OpKind kind, const Var<T>& x, int64_t rows, int64_t cols, T factor) {
+  const bool grad = tape.wants_grad({x});
+  Var<T> out = tape.new_var(rows, cols, grad);
+  const ConstMatMap<T> xv(x.value, x.rows, x.cols);
+  if (kind == OpKind::RowSum) {
+    MatMap<T> ov(out.value, out.rows, out.cols);
+    for_row_blocks(x.rows, x.cols,
+                   [&](int64_t r0, int64_t n) { ov.middleRows(r0, n) = xv.middleRows(r0, n).rowwise().sum() * factor; });
+  } else {
+    const int64_t width = out.size();  // 1 (SumAll) or C (ColSum)
+    const T* s = reduce_row_blocks<T>(x.rows, x.cols, width, [&](int64_t r0, int64_t n, T* p) {
+      if (width == 1) *p += xv.middleRows(r0, n).sum();
+      else RowVecMap<T>(p, width) += xv.middleRows(r0, n).colwise().sum();
+    });
+    for (int64_t c = 0; c < width; ++c) out.value[c] = s[c] * factor;
+  }
+  if (grad) tape.record(kind, out, {x}).s[0] = factor;
+  return out;
+}
+
+// dx += factor * dout, dout broadcast back to x's shape like a (1, 1), (1, C) or (N, 1) operand.
+template <class T>
+void reduce_backward(const Node<T>& node) {
+  const Var<T>& x = node.in[0];
+  if (!x.grad) return;
+  const T factor = node.s[0];
+  Var<T> g = node.out;
+  g.value = node.out.grad;
+  MatMap<T> gx(x.grad, x.rows, x.cols);
+  for_row_blocks(x.rows, x.cols, [&](int64_t r0, int64_t n) {
+    with_b_block(g, x.rows, x.cols, r0, n, [&](const auto& gb) { gx.middleRows(r0, n) += gb * factor; });
+  });
+}
+
+}  // namespace
+
+template <class T>
+Var<T> sum_all(Tape<T>& tape, const Var<T>& x) {
+  return reduce_op(tape, OpKind::SumAll, x, 1, 1, T(1));
+}
+template <class T>
+Var<T> mean_all(Tape<T>& tape, const Var<T>& x) {
+  return reduce_op(tape, OpKind::SumAll, x, 1, 1, T(1) / T(std::max<int64_t>(x.size(), 1)));
+}
+template <class T>
+Var<T> col_sum(Tape<T>& tape, const Var<T>& x) {
+  return reduce_op(tape, OpKind::ColSum, x, 1, x.cols, T(1));
+}
+template <class T>
+Var<T> col_mean(Tape<T>& tape, const Var<T>& x) {
+  return reduce_op(tape, OpKind::ColSum, x, 1, x.cols, T(1) / T(std::max<int64_t>(x.rows, 1)));
+}
+template <class T>
+Var<T> row_sum(Tape<T>& tape, const Var<T>& x) {
+  return reduce_op(tape, OpKind::RowSum, x, x.rows, 1, T(1));
+}
+template <class T>
+Var<T> row_mean(Tape<T>& tape, const Var<T>& x) {
+  return reduce_op(tape, OpKind::RowSum, x, x.rows, 1, T(1) / T(std::max<int64_t>(x.cols, 1)));
+}
+
+template <class T>
+void backward_sum_all(const Node<T>& node) {
+  reduce_backward(node);
+}
+template <class T>
+void backward_col_sum(const Node<T>& node) {
+  reduce_backward(node);
+}
+template <class T>
+void backward_row_sum(const Node<T>& node) {
+  reduce_backward(node);
+}
+
+// ---- squared_error --------------------------------------------------------------------------
+
+template <class T>
+Var<T> squared_error(Tape<T>& tape, const Var<T>& a, const Var<T>& b) {
+  check_same_shape("squared_error", a, b);
+  const bool grad = tape.wants_grad({a, b});
+  Var<T> out = tape.new_var(a.rows, 1, grad);
+  const ConstMatMap<T> av(a.value, a.rows, a.cols), bv(b.value, b.rows, b.cols);
+  MatMap<T> ov(out.value, out.rows, 1);
+  for_row_blocks(a.rows, a.cols, [&](int64_t r0, int64_t n) {
+    ov.middleRows(r0, n) = (av.middleRows(r0, n) - bv.middleRows(r0, n)).rowwise().squaredNorm();
+  });
+  if (grad) tape.record(OpKind::SquaredError, out, {a, b});
+  return out;
+}
+
+// d/da = 2 (a - b) dout_i; d/db = -d/da.
+template <class T>
+void backward_squared_error(const Node<T>& node) {
+  const auto& [a, b, u2, u3] = node.in;
+  for_row_blocks(a.rows, a.cols, [&](int64_t r0, int64_t n) {
+    for (int64_t r = r0; r < r0 + n; ++r) {
+      const T w = T(2) * node.out.grad[r];
+      for (int64_t c = 0; c < a.cols; ++c) {
+        const T d = w * (a.value[r * a.cols + c] - b.value[r * a.cols + c]);
+        if (a.grad) a.grad[r * a.cols + c] += d;
+        if (b.grad) b.grad[r * a.cols + c] -= d;
+      }
+    }
+  });
+}
+
+// ---- instantiation ------------------------------------------------------------------------
+
+#define LAYERSNET_INSTANTIATE(T)                                                                   \
+  template Var<T> linear<T>(Tape<T>&, const Var<T>&, const Var<T>&, const Var<T>&);                \
+  template Var<T> add<T>(Tape<T>&, const Var<T>&, const Var<T>&);                                  \
+  template Var<T> sub<T>(Tape<T>&, const Var<T>&, const Var<T>&);                                  \
+  template Var<T> mul<T>(Tape<T>&, const Var<T>&, const Var<T>&);                                  \
+  template Var<T> div<T>(Tape<T>&, const Var<T>&, const Var<T>&);                                  \
+  template Var<T> scale<T>(Tape<T>&, const Var<T>&, T);                                            \
+  template Var<T> relu<T>(Tape<T>&, const Var<T>&);                                                \
+  template Var<T> hinge_sq<T>(Tape<T>&, const Var<T>&, T);                                         \
+  template Var<T> layer_norm<T>(Tape<T>&, const Var<T>&, const Var<T>&, const Var<T>&, T);         \
+  template Var<T> concat_cols<T>(Tape<T>&, std::span<const Var<T>>);                               \
+  template Var<T> slice_cols<T>(Tape<T>&, const Var<T>&, int64_t, int64_t);                        \
+  template Var<T> sum_all<T>(Tape<T>&, const Var<T>&);                                             \
+  template Var<T> mean_all<T>(Tape<T>&, const Var<T>&);                                            \
+  template Var<T> col_sum<T>(Tape<T>&, const Var<T>&);                                             \
+  template Var<T> col_mean<T>(Tape<T>&, const Var<T>&);                                            \
+  template Var<T> row_sum<T>(Tape<T>&, const Var<T>&);                                             \
+  template Var<T> row_mean<T>(Tape<T>&, const Var<T>&);                                            \
+  template Var<T> squared_error<T>(Tape<T>&, const Var<T>&, const Var<T>&);
 LAYERSNET_INSTANTIATE(float)
 LAYERSNET_INSTANTIATE(double)
 #undef LAYERSNET_INSTANTIATE
+
+#define LAYERSNET_INSTANTIATE_BACKWARD(Enum, stem) \
+  template void backward_##stem<float>(const Node<float>&); \
+  template void backward_##stem<double>(const Node<double>&);
+LAYERSNET_DENSE_OPS(LAYERSNET_INSTANTIATE_BACKWARD)
+#undef LAYERSNET_INSTANTIATE_BACKWARD
 
 }  // namespace layersnet::ad
