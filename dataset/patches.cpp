@@ -85,4 +85,29 @@ PatchStructure build_patches(const GarmentMesh& g, float patch_size) {
   return s;
 }
 
+PatchStructure concat_patches(const std::vector<const PatchStructure*>& garments, std::vector<int32_t>* vertex_offsets,
+                              std::vector<int32_t>* patch_offsets) {
+  PatchStructure out;
+  std::vector<int32_t> vo{0}, po{0};
+  auto append = [](Csr& dst, const Csr& src, int32_t item_offset) {
+    const int32_t base = dst.offsets.back();
+    for (size_t r = 1; r < src.offsets.size(); ++r) dst.offsets.push_back(base + src.offsets[r]);
+    for (int32_t x : src.items) dst.items.push_back(x + item_offset);
+  };
+  for (const PatchStructure* g : garments) {
+    append(out.vertex_patches, g->vertex_patches, out.num_patches);
+    append(out.patch_vertices, g->patch_vertices, out.num_vertices);
+    append(out.adjacency, g->adjacency, out.num_patches);
+    for (int32_t p : g->own_patch) out.own_patch.push_back(p < 0 ? -1 : p + out.num_patches);
+    out.patch_panel.insert(out.patch_panel.end(), g->patch_panel.begin(), g->patch_panel.end());
+    out.num_vertices += g->num_vertices;
+    out.num_patches += g->num_patches;
+    vo.push_back(out.num_vertices);
+    po.push_back(out.num_patches);
+  }
+  if (vertex_offsets) *vertex_offsets = vo;
+  if (patch_offsets) *patch_offsets = po;
+  return out;
+}
+
 }  // namespace layersnet::dataset

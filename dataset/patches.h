@@ -64,6 +64,13 @@ patch_means(const PatchStructure& s, const Eigen::MatrixBase<Derived>& x) {
   return out;
 }
 
+// Several garments as one patch set: garment g's vertices are offset by the vertices of
+// garments 0..g-1 and its patches by their patches (the official cross-garment order).
+// Adjacency stays within a garment. vertex_offsets/patch_offsets get G+1 entries.
+PatchStructure concat_patches(const std::vector<const PatchStructure*>& garments,
+                              std::vector<int32_t>* vertex_offsets = nullptr,
+                              std::vector<int32_t>* patch_offsets = nullptr);
+
 // Unique undirected mesh edges (u < v) of a triangle mesh: (E, 2).
 std::vector<std::pair<int32_t, int32_t>> mesh_edges(const Faces& faces);
 

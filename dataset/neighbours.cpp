@@ -1,0 +1,149 @@
+// Spatial hash grid, k-d tree nearest queries, world edges, body ball queries, normals.
+#include "dataset/neighbours.h"
+
+#include <nanoflann.hpp>
+
+#include <algorithm>
+#include <cmath>
+
+namespace layersnet::dataset {
+
+Points vertex_normals(const Eigen::Ref<const Points>& x, const Faces& faces, const Eigen::Vector3f& fallback) {
+  Points n = Points::Zero(x.rows(), 3);
+  for (Eigen::Index f = 0; f < faces.rows(); ++f) {
+    const Eigen::Vector3f a = x.row(faces(f, 0)), b = x.row(faces(f, 1)), c = x.row(faces(f, 2));
+    const Eigen::Vector3f fn = (b - a).cross(c - a);
+    const float len = fn.norm();
+    if (!(len > 1e-20f) || !std::isfinite(len)) continue;  // zero-area face: no direction
+    const Eigen::RowVector3f unit = (fn / len).transpose();
+    for (int k = 0; k < 3; ++k) n.row(faces(f, k)) += unit;
+  }
+  for (Eigen::Index v = 0; v < n.rows(); ++v) {
+    const float len = n.row(v).norm();
+    if (len > 1e-12f && std::isfinite(len))
+      n.row(v) /= len;
+    else
+      n.row(v) = fallback.transpose();
+  }
+  return n;
+}
+
+int64_t PointGrid::key_of(int64_t i, int64_t j, int64_t k) const {
+  // 21 bits per axis; wrapped cells only add candidates (distances are always checked).
+  constexpr int64_t mask = (int64_t{1} << 21) - 1;
+  return ((i & mask) << 42) | ((j & mask) << 21) | (k & mask);
+}
+
+PointGrid::PointGrid(const Eigen::Ref<const Points>& points, float cell) : points_(points), cell_(cell) {
+  const int32_t n = static_cast<int32_t>(points_.rows());
+  std::vector<std::pair<int64_t, int32_t>> keyed(n);
+  for (int32_t i = 0; i < n; ++i) {
+    const auto p = points_.row(i);
+    keyed[i] = {key_of(static_cast<int64_t>(std::floor(p.x() / cell_)), static_cast<int64_t>(std::floor(p.y() / cell_)),
+                       static_cast<int64_t>(std::floor(p.z() / cell_))),
+                i};
+  }
+  std::sort(keyed.begin(), keyed.end());  // by key, then index
+  order_.resize(n);
+  for (int32_t i = 0; i < n; ++i) {
+    order_[i] = keyed[i].second;
+    if (i == 0 || keyed[i].first != keyed[i - 1].first) buckets_.push_back({keyed[i].first, i, i + 1});
+    else buckets_.back().end = i + 1;
+  }
+}
+
+const PointGrid::Bucket* PointGrid::find(int64_t key) const {
+  auto it = std::lower_bound(buckets_.begin(), buckets_.end(), key,
+                             [](const Bucket& b, int64_t k) { return b.key < k; });
+  return it != buckets_.end() && it->key == key ? &*it : nullptr;
+}
+
+Csr world_edges(const Eigen::Ref<const Points>& centres, const Csr& mesh_adjacency, float radius) {
+  const int P = static_cast<int>(centres.rows());
+  const PointGrid grid(centres, radius);
+  std::vector<std::vector<int32_t>> rows(P);
+#pragma omp parallel for schedule(dynamic, 64)
+  for (int i = 0; i < P; ++i) {
+    grid.for_each_within(centres.row(i).transpose(), radius, [&](int32_t j, float) {
+      if (j != i && !std::binary_search(mesh_adjacency.begin(i), mesh_adjacency.end(i), j)) rows[i].push_back(j);
+    });
+    std::sort(rows[i].begin(), rows[i].end());
+  }
+  Csr out;
+  out.offsets.resize(static_cast<size_t>(P) + 1);
+  for (int i = 0; i < P; ++i) out.offsets[i + 1] = out.offsets[i] + static_cast<int32_t>(rows[i].size());
+  out.items.reserve(out.offsets.back());
+  for (auto& r : rows) out.items.insert(out.items.end(), r.begin(), r.end());
+  return out;
+}
+
+BodyNeighbours body_neighbours(const Eigen::Ref<const Points>& queries, const Eigen::Ref<const Points>& body,
+                               const NeighbourOptions& o) {
+  const int Q = static_cast<int>(queries.rows()), K = o.body_k;
+  BodyNeighbours out;
+  out.k = K;
+  out.index.setZero(Q, K);
+  out.valid.setZero(Q, K);
+  out.hits.assign(Q, 0);
+  if (Q == 0 || K <= 0) return out;
+  const PointGrid grid(body, o.body_radius);
+#pragma omp parallel
+  {
+    std::vector<std::pair<float, int32_t>> found;  // (key, id): key = index or distance
+#pragma omp for schedule(dynamic, 64)
+    for (int q = 0; q < Q; ++q) {
+      found.clear();
+      grid.for_each_within(queries.row(q).transpose(), o.body_radius, [&](int32_t id, float d2) {
+        found.emplace_back(o.body_query == BodyQuery::kNearest ? d2 : 0.f, id);
+      });
+      const size_t n = std::min<size_t>(found.size(), static_cast<size_t>(K));
+      // Official: lowest indices first; nearest: smallest distance (ties by index).
+      std::partial_sort(found.begin(), found.begin() + static_cast<std::ptrdiff_t>(n), found.end());
+      out.hits[q] = static_cast<int32_t>(n);
+      for (size_t s = 0; s < n; ++s) {
+        out.index(q, static_cast<Eigen::Index>(s)) = found[s].second;
+        out.valid(q, static_cast<Eigen::Index>(s)) = 1;
+      }
+      for (int s = static_cast<int>(n); s < K; ++s) {
+        out.index(q, s) = n ? found[0].second : 0;
+        out.valid(q, s) = o.official_padding && n ? 1 : 0;
+      }
+    }
+  }
+  return out;
+}
+
+namespace {
+struct PointsAdaptor {
+  const Eigen::Ref<const Points>& p;
+  size_t kdtree_get_point_count() const { return static_cast<size_t>(p.rows()); }
+  float kdtree_get_pt(size_t i, size_t d) const { return p(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(d)); }
+  template <class Box>
+  bool kdtree_get_bbox(Box&) const { return false; }
+};
+using KdTree = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<float, PointsAdaptor>, PointsAdaptor, 3,
+                                                   uint32_t>;
+}  // namespace
+
+NearestBody nearest_body(const Eigen::Ref<const Points>& queries, const Eigen::Ref<const Points>& body) {
+  NearestBody out;
+  const Eigen::Index Q = queries.rows();
+  out.index.assign(Q, 0);
+  out.distance.assign(Q, std::numeric_limits<float>::infinity());
+  if (body.rows() == 0) return out;
+  PointsAdaptor adaptor{body};
+  KdTree tree(3, adaptor, nanoflann::KDTreeSingleIndexAdaptorParams(16));
+  tree.buildIndex();
+#pragma omp parallel for schedule(static)
+  for (Eigen::Index q = 0; q < Q; ++q) {
+    const float pt[3] = {queries(q, 0), queries(q, 1), queries(q, 2)};
+    uint32_t idx = 0;
+    float d2 = 0;
+    tree.knnSearch(pt, 1, &idx, &d2);
+    out.index[q] = static_cast<int32_t>(idx);
+    out.distance[q] = std::sqrt(d2);
+  }
+  return out;
+}
+
+}  // namespace layersnet::dataset

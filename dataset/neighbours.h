@@ -1,0 +1,110 @@
+#pragma once
+// Neighbourhoods without all-pairs work (official §2.4), and body vertex normals (§2.5).
+//
+// All queries go through a uniform spatial hash grid whose cell equals the query radius
+// (each query visits 27 cells), or a k-d tree (nanoflann) for unbounded nearest-vertex
+// queries; cost is O((queries + points) * local density), linear in the vertex count for
+// meshes of fixed density (`layersnet bench neighbours` shows it).
+//
+// Distances are in scene units; comparisons are strict (< radius), as the official code.
+#include "dataset/patches.h"
+#include "dataset/sequence.h"
+
+#include <Eigen/Core>
+
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+namespace layersnet::dataset {
+
+// Per-vertex normals: normalised sum of the incident faces' unit normals, face normal
+// (v1 - v0) x (v2 - v0) (counter-clockwise = outward). Zero-area faces add nothing; a vertex
+// with no usable face gets `fallback`. Always finite. x: (B, 3), faces (Fb, 3) -> (B, 3).
+Points vertex_normals(const Eigen::Ref<const Points>& x, const Faces& faces,
+                      const Eigen::Vector3f& fallback = Eigen::Vector3f::UnitZ());
+
+// Uniform hash grid over a point set; radius queries visit the 27 cells around a point.
+class PointGrid {
+ public:
+  PointGrid(const Eigen::Ref<const Points>& points, float cell);
+  // Calls fn(index, squared distance) for every point strictly within `radius` (<= cell) of q,
+  // in ascending cell order (not index order).
+  template <typename Fn>
+  void for_each_within(const Eigen::Vector3f& q, float radius, Fn&& fn) const;
+  float cell() const { return cell_; }
+
+ private:
+  struct Bucket {
+    int64_t key;
+    int32_t begin, end;
+  };
+  int64_t key_of(int64_t i, int64_t j, int64_t k) const;
+  const Bucket* find(int64_t key) const;
+  Points points_;                  // copy: the grid owns its points
+  float cell_;
+  std::vector<int32_t> order_;     // point ids sorted by cell key (stable)
+  std::vector<Bucket> buckets_;    // sorted by key
+};
+
+// How body neighbours of a patch are chosen among the body vertices within R_b.
+enum class BodyQuery {
+  kFirstInIndexOrder,  // official mmcv ball_query: the K lowest vertex indices inside R_b
+  kNearest,            // the K nearest vertices inside R_b
+};
+
+struct NeighbourOptions {
+  float world_radius = 0.4f;  // R: patch-centre distance for world edges
+  float body_radius = 0.6f;   // R_b
+  int body_k = 16;            // K
+  BodyQuery body_query = BodyQuery::kFirstInIndexOrder;
+  // Official padding: unfilled slots repeat the first hit (vertex 0 when none) and count as
+  // valid when within R_b, so duplicates weigh several times. false: padding is invalid.
+  bool official_padding = true;
+};
+
+// World edges: for every patch i, the patches j != i with |c_i - c_j| < radius that are not
+// in mesh_adjacency row i. centres (P, 3); mesh_adjacency has P rows. Rows ascending.
+Csr world_edges(const Eigen::Ref<const Points>& centres, const Csr& mesh_adjacency, float radius);
+
+struct BodyNeighbours {
+  int k = 0;
+  // index (P, K): body vertex ids; valid (P, K): 1 where the slot is a neighbour (< R_b).
+  Eigen::Matrix<int32_t, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> index;
+  Eigen::Matrix<uint8_t, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> valid;
+  std::vector<int32_t> hits;  // (P,) distinct body vertices found (<= K)
+};
+
+// Up to K body vertices within R_b of each query point (patch centres at t, body at t+1 in
+// the official code). queries (P, 3), body (B, 3).
+BodyNeighbours body_neighbours(const Eigen::Ref<const Points>& queries, const Eigen::Ref<const Points>& body,
+                               const NeighbourOptions& options = {});
+
+// Nearest body vertex of each query point (k-d tree; unbounded distance).
+struct NearestBody {
+  std::vector<int32_t> index;  // (Q,)
+  std::vector<float> distance; // (Q,) Euclidean, scene units
+};
+NearestBody nearest_body(const Eigen::Ref<const Points>& queries, const Eigen::Ref<const Points>& body);
+
+// ---- template implementation
+template <typename Fn>
+void PointGrid::for_each_within(const Eigen::Vector3f& q, float radius, Fn&& fn) const {
+  const float r2 = radius * radius;
+  const int64_t ci = static_cast<int64_t>(std::floor(q.x() / cell_));
+  const int64_t cj = static_cast<int64_t>(std::floor(q.y() / cell_));
+  const int64_t ck = static_cast<int64_t>(std::floor(q.z() / cell_));
+  for (int64_t di = -1; di <= 1; ++di)
+    for (int64_t dj = -1; dj <= 1; ++dj)
+      for (int64_t dk = -1; dk <= 1; ++dk) {
+        const Bucket* b = find(key_of(ci + di, cj + dj, ck + dk));
+        if (!b) continue;
+        for (int32_t n = b->begin; n < b->end; ++n) {
+          const int32_t id = order_[n];
+          const float d2 = (points_.row(id).transpose() - q).squaredNorm();
+          if (d2 < r2) fn(id, d2);
+        }
+      }
+}
+
+}  // namespace layersnet::dataset

@@ -1,0 +1,141 @@
+// Neighbourhoods against brute force, hand-made ball-query cases, and normals.
+#include "dataset/neighbours.h"
+
+#include <gtest/gtest.h>
+
+#include <random>
+
+namespace layersnet::dataset {
+namespace {
+
+Points random_points(int n, float extent, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(-extent, extent);
+  Points p(n, 3);
+  for (int i = 0; i < n; ++i) p.row(i) << u(rng), u(rng), u(rng);
+  return p;
+}
+
+TEST(Normals, TetrahedronNormalsPointOutward) {
+  Points x(4, 3);
+  x << 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1;
+  Faces f(4, 3);
+  f << 0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3;  // outward
+  const Points n = vertex_normals(x, f);
+  const Eigen::RowVector3f centre = x.colwise().mean();
+  for (int v = 0; v < 4; ++v) {
+    EXPECT_NEAR(n.row(v).norm(), 1.f, 1e-6f);
+    EXPECT_GT(n.row(v).dot(x.row(v) - centre), 0.f) << v;
+  }
+  // Vertex 0 touches three axis-aligned faces: normal (-1, -1, -1)/sqrt(3).
+  EXPECT_NEAR(n(0, 0), -1.f / std::sqrt(3.f), 1e-6f);
+}
+
+TEST(Normals, ZeroAreaFacesStayFinite) {
+  Points x(5, 3);
+  x << 0, 0, 0, 1, 0, 0, 0, 1, 0, 2, 0, 0, 3, 0, 0;  // face (1,3,4) is collinear
+  Faces f(3, 3);
+  f << 0, 1, 2, 1, 3, 4, 2, 2, 2;
+  const Points n = vertex_normals(x, f);
+  EXPECT_TRUE(n.allFinite());
+  EXPECT_NEAR(n(0, 2), 1.f, 1e-6f);
+  EXPECT_EQ(n.row(4), Eigen::RowVector3f(0, 0, 1));  // only a degenerate face: fallback
+  EXPECT_EQ(n.row(3), Eigen::RowVector3f(0, 0, 1));
+  EXPECT_NEAR(n(1, 2), 1.f, 1e-6f);  // the degenerate face adds nothing
+}
+
+TEST(WorldEdges, MatchesBruteForceAndExcludesMeshAdjacentPairs) {
+  const Points c = random_points(400, 2.f, 3);
+  const float R = 0.4f;
+  // Mesh adjacency: i ~ i+1 (and self).
+  Csr adj;
+  for (int i = 0; i < 400; ++i) {
+    for (int j : {i - 1, i, i + 1})
+      if (j >= 0 && j < 400) adj.items.push_back(j);
+    adj.offsets.push_back(static_cast<int32_t>(adj.items.size()));
+  }
+  const Csr w = world_edges(c, adj, R);
+  int total = 0;
+  for (int i = 0; i < 400; ++i) {
+    std::vector<int32_t> want;
+    for (int j = 0; j < 400; ++j)
+      if (j != i && std::abs(j - i) != 1 && (c.row(i) - c.row(j)).norm() < R) want.push_back(j);
+    EXPECT_EQ(std::vector<int32_t>(w.begin(i), w.end(i)), want) << i;
+    total += static_cast<int>(want.size());
+  }
+  EXPECT_GT(total, 100);  // the test exercises real neighbourhoods
+}
+
+TEST(WorldEdges, DistanceExactlyRIsNotAnEdge) {
+  Points c(3, 3);
+  c << 0, 0, 0, 0.5f, 0, 0, 0.25f, 0, 0;
+  Csr adj;
+  for (int i = 0; i < 3; ++i) {
+    adj.items.push_back(i);
+    adj.offsets.push_back(i + 1);
+  }
+  const Csr w = world_edges(c, adj, 0.5f);
+  EXPECT_EQ(std::vector<int32_t>(w.begin(0), w.end(0)), std::vector<int32_t>{2});
+  EXPECT_EQ(std::vector<int32_t>(w.begin(1), w.end(1)), std::vector<int32_t>{2});
+}
+
+TEST(BodyNeighbours, OfficialFirstInIndexOrderVersusNearest) {
+  // Body vertices on the x axis; vertex i at x = 0.1 * (9 - i): index 9 is the nearest.
+  Points body(10, 3);
+  for (int i = 0; i < 10; ++i) body.row(i) << 0.1f * (9 - i), 0, 0;
+  Points q(3, 3);
+  q << 0, 0, 0,  // hits: x < 0.55 -> i = 4..9
+      5, 5, 5,   // nothing
+      1.4f, 0, 0;  // only vertex 0 (distance 0.5)
+  NeighbourOptions o;
+  o.body_radius = 0.55f;
+  o.body_k = 3;
+  const BodyNeighbours first = body_neighbours(q, body, o);
+  EXPECT_EQ(first.index.row(0), (Eigen::RowVector3i(4, 5, 6)).cast<int32_t>());
+  EXPECT_EQ(first.hits[0], 3);
+  // No hit: index 0, invalid. One hit: repeated, valid (official duplicates).
+  EXPECT_EQ(first.index.row(1), (Eigen::RowVector3i(0, 0, 0)).cast<int32_t>());
+  EXPECT_EQ(first.valid.row(1).cast<int>().sum(), 0);
+  EXPECT_EQ(first.index.row(2), (Eigen::RowVector3i(0, 0, 0)).cast<int32_t>());
+  EXPECT_EQ(first.valid.row(2).cast<int>().sum(), 3);
+  EXPECT_EQ(first.hits[2], 1);
+  o.body_query = BodyQuery::kNearest;
+  o.official_padding = false;
+  const BodyNeighbours near = body_neighbours(q, body, o);
+  EXPECT_EQ(near.index.row(0), (Eigen::RowVector3i(9, 8, 7)).cast<int32_t>());
+  EXPECT_EQ(near.valid.row(2).cast<int>().sum(), 1);
+}
+
+TEST(BodyNeighbours, MatchesBruteForceOnRandomClouds) {
+  const Points body = random_points(3000, 1.5f, 5), q = random_points(200, 1.5f, 6);
+  for (BodyQuery mode : {BodyQuery::kFirstInIndexOrder, BodyQuery::kNearest}) {
+    NeighbourOptions o;
+    o.body_query = mode;
+    const BodyNeighbours nb = body_neighbours(q, body, o);
+    for (int i = 0; i < 200; ++i) {
+      std::vector<std::pair<float, int32_t>> all;
+      for (int b = 0; b < 3000; ++b) {
+        const float d2 = (q.row(i) - body.row(b)).squaredNorm();
+        if (d2 < 0.36f) all.emplace_back(mode == BodyQuery::kNearest ? d2 : 0.f, b);
+      }
+      std::sort(all.begin(), all.end());
+      const int n = std::min<int>(16, static_cast<int>(all.size()));
+      ASSERT_EQ(nb.hits[i], n);
+      for (int s = 0; s < n; ++s) EXPECT_EQ(nb.index(i, s), all[s].second);
+    }
+  }
+}
+
+TEST(NearestBody, MatchesBruteForce) {
+  const Points body = random_points(2000, 1.f, 7), q = random_points(300, 1.5f, 8);
+  const NearestBody nb = nearest_body(q, body);
+  for (int i = 0; i < 300; ++i) {
+    Eigen::Index best;
+    const float d = std::sqrt((body.rowwise() - q.row(i)).rowwise().squaredNorm().minCoeff(&best));
+    EXPECT_NEAR(nb.distance[i], d, 1e-5f);
+    EXPECT_NEAR((body.row(nb.index[i]) - q.row(i)).norm(), d, 1e-5f);
+  }
+}
+
+}  // namespace
+}  // namespace layersnet::dataset
