@@ -35,11 +35,11 @@ DEFAULTS = {
     "frames": 48,                 # stored frames, 30 fps
     "rest_frames": 8,             # body in the rest pose while garments settle
     "ramp_frames": 15,            # rest pose -> mocap blend
-    "decimate_ratio": 0.4,        # 13,380 -> ~5.4k body vertices
+    "decimate_ratio": 0.3,        # 13,380 -> ~4k body vertices
     "cloth_quality": 30,          # solver steps per frame (25 was unstable at x10)
     "clips": ["01_01.bvh", "01_03.bvh"],
-    "block_bvh_frames": 720,      # motion blocks (6 s) assigned to splits
-    "split_pattern": "tttttttvte",  # block k -> split pattern[k % len]: t train, v val, e test
+    "block_bvh_frames": 480,      # motion blocks (4 s at 120 Hz) assigned to splits
+    "split_pattern": "ttvttte",   # block k (over all clips) -> split: t train, v val, e test
     "speed_range": [0.8, 1.25],
     "yaw_range_deg": [-180.0, 180.0],
     "mirror_probability": 0.5,
@@ -91,13 +91,14 @@ def sample_motion(rng, cfg, split):
     """Clip, first BVH frame and speed, inside a motion block that belongs to `split`."""
     step = body_rig.BVH_HZ / 30.0
     need = (cfg["frames"] - cfg["rest_frames"]) * step * cfg["speed_range"][1] + 2
-    blocks = []
+    blocks, k = [], 0
     for clip in cfg["clips"]:
         n = bvh_frame_count(clip)
         size = max(cfg["block_bvh_frames"], int(need) + 10)
-        for k, start in enumerate(range(1, n - size + 1, size)):  # frame 0 is a calibration pose
+        for start in range(1, n - size + 1, size):  # frame 0 is a calibration pose
             if cfg["split_pattern"][k % len(cfg["split_pattern"])] == SPLIT_CODE[split]:
                 blocks.append((clip, start, start + size))
+            k += 1
     if not blocks:
         raise SystemExit(f"make_sequence.py: no motion block of {need:.0f} BVH frames for split "
                          f"'{split}'; lower 'frames' or 'block_bvh_frames'")

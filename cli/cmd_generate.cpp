@@ -1,0 +1,364 @@
+// `layersnet generate`: makes a D-LAYERS-like data set with Blender's cloth solver.
+//
+// For each sequence id it runs ONE headless Blender process at a time on
+// generate/make_sequence.py (which writes <id>.h5 and a JSON report), applies the quality
+// gates to the report, regenerates a failing sequence with another seed (up to
+// max_attempts) or drops it, validates accepted files with the D-LAYERS-H5 checker when
+// it is available, and writes dataset.json (train/val/test + T/T+W/L/L+W subsets) and
+// generate_report.{json,md}. Existing accepted sequences are kept (resume).
+//
+// Recipe (JSON; command-line flags override it): see generate/recipes/default.json.
+#include "cli/command_registry.h"
+
+#include <nlohmann/json.hpp>
+
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <memory>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <unistd.h>
+#include <vector>
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace {
+
+class GenerateError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+struct GenerateOptions {
+  std::string out;
+  std::string recipe;
+  int count = -1;    // -1: from the recipe
+  int frames = -1;
+  long long seed = -1;
+  int max_attempts = -1;
+  int threads = 2;
+  std::string blender = "blender";
+  std::string script;   // generate/make_sequence.py; found next to the program if empty
+  std::string checker;  // check_dlayers_h5.py; the shared one if it exists
+};
+
+// Quality thresholds; why these values: generate/README.md ("Quality gates").
+struct Gates {
+  double max_inside_body_share = 0.02;
+  double max_outer_inside_inner_share = 0.05;
+  double max_edge_stretch = 4.0;
+  double max_p99_edge_stretch = 0.6;
+};
+
+json read_json(const fs::path& path) {
+  std::ifstream in(path);
+  if (!in) throw GenerateError(path.string() + ": cannot open (check the path)");
+  try {
+    return json::parse(in);
+  } catch (const json::exception& e) {
+    throw GenerateError(path.string() + ": invalid JSON: " + e.what());
+  }
+}
+
+void write_text(const fs::path& path, const std::string& text) {
+  const fs::path tmp = path.string() + ".tmp";
+  {
+    std::ofstream out(tmp);
+    if (!out) throw GenerateError(tmp.string() + ": cannot write (check permissions / disk space)");
+    out << text;
+  }
+  fs::rename(tmp, path);
+}
+
+std::string quote(const std::string& s) {
+  std::string q = "'";
+  for (char c : s) q += (c == '\'') ? std::string("'\\''") : std::string(1, c);
+  return q + "'";
+}
+
+// splitmix64: well-spread per-sequence seeds from (data set seed, index, attempt).
+std::uint64_t mix(std::uint64_t x) {
+  x += 0x9E3779B97F4A7C15ull;
+  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ull;
+  x = (x ^ (x >> 27)) * 0x94D049BB133111EBull;
+  return x ^ (x >> 31);
+}
+
+long long sequence_seed(long long seed, int index, int attempt) {
+  const std::uint64_t h = mix(mix(static_cast<std::uint64_t>(seed)) ^ mix(static_cast<std::uint64_t>(index) + 1000003ull * static_cast<std::uint64_t>(attempt)));
+  return static_cast<long long>(h & 0x7FFFFFFFull);
+}
+
+fs::path exe_dir() {
+  std::error_code ec;
+  const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
+  return ec ? fs::current_path() : exe.parent_path();
+}
+
+fs::path find_script(const std::string& given) {
+  if (!given.empty()) return given;
+  for (const fs::path& c : {exe_dir() / "../../generate/make_sequence.py", exe_dir() / "../generate/make_sequence.py",
+                            fs::current_path() / "generate/make_sequence.py"}) {
+    if (fs::exists(c)) return fs::weakly_canonical(c);
+  }
+  throw GenerateError("generate/make_sequence.py not found next to the program; pass --script PATH");
+}
+
+fs::path find_recipe(const std::string& given) {
+  if (!given.empty()) return given;
+  return find_script("").parent_path() / "recipes/default.json";
+}
+
+std::vector<std::string> split_names(int count, double val_fraction, double test_fraction) {
+  // Contiguous blocks (train, then val, then test); at least one val and one test from 3 on.
+  int n_test = static_cast<int>(std::lround(count * test_fraction));
+  int n_val = static_cast<int>(std::lround(count * val_fraction));
+  if (count >= 3) n_test = std::max(n_test, 1), n_val = std::max(n_val, 1);
+  if (count < 3) n_test = n_val = 0;
+  std::vector<std::string> out(count, "train");
+  for (int i = 0; i < n_test; ++i) out[count - 1 - i] = "test";
+  for (int i = 0; i < n_val; ++i) out[count - 1 - n_test - i] = "val";
+  return out;
+}
+
+// Returns the list of failed gates (empty: accepted).
+std::vector<std::string> failed_gates(const json& report, const Gates& g) {
+  std::vector<std::string> failed;
+  if (!report.value("finite", false)) failed.push_back("non-finite positions");
+  const json& q = report.at("quality");
+  auto check = [&](const char* key, double limit) {
+    const double v = q.at(key).get<double>();
+    if (!(v <= limit)) {
+      std::ostringstream s;
+      s << key << " " << v << " > " << limit;
+      failed.push_back(s.str());
+    }
+  };
+  check("inside_body_share", g.max_inside_body_share);
+  check("outer_inside_inner_share", g.max_outer_inside_inner_share);
+  check("max_edge_stretch", g.max_edge_stretch);
+  check("p99_edge_stretch", g.max_p99_edge_stretch);
+  return failed;
+}
+
+std::string fmt_duration(double s) {
+  char buf[32];
+  const int m = static_cast<int>(s) / 60;
+  std::snprintf(buf, sizeof(buf), "%d:%02d", m, static_cast<int>(s) - 60 * m);
+  return buf;
+}
+
+std::string markdown_report(const json& rep) {
+  std::ostringstream md;
+  const json& s = rep.at("summary");
+  md << "# Generation report\n\n" << rep.at("source").get<std::string>() << "\n\n";
+  md << "accepted " << s.at("accepted") << ", dropped " << s.at("dropped") << ", regenerated "
+     << s.at("regenerated") << "; Blender s/frame mean " << s.at("mean_blender_s_per_frame")
+     << "; wall time of this run " << s.at("run_seconds") << " s\n\n";
+  md << "| id | split | tags | attempts | inside body | outer in inner | max stretch | p99 stretch | "
+        "s/frame | body V | cloth V | status |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+  for (const json& e : rep.at("sequences")) {
+    md << "| " << e.at("id").get<std::string>() << " | " << e.at("split").get<std::string>() << " | ";
+    if (e.contains("report")) {
+      const json& r = e.at("report");
+      const json& q = r.at("quality");
+      char buf[256];
+      std::snprintf(buf, sizeof(buf), "%s/%s | %d | %.4f | %.4f | %.2f | %.2f | %.3f | %d | %d | ",
+                    r.at("tags").at("inner").get<std::string>().c_str(), r.at("tags").at("wind").get<std::string>().c_str(),
+                    e.at("attempts").get<int>(), q.at("inside_body_share").get<double>(),
+                    q.at("outer_inside_inner_share").get<double>(), q.at("max_edge_stretch").get<double>(),
+                    q.at("p99_edge_stretch").get<double>(), r.at("timing").at("blender_s_per_frame").get<double>(),
+                    r.at("body_vertices").get<int>(), r.at("cloth_vertices").get<int>());
+      md << buf;
+    } else {
+      md << " | " << e.at("attempts") << " | | | | | | | | ";
+    }
+    md << e.at("status").get<std::string>() << " |\n";
+  }
+  return md.str();
+}
+
+int run_generate(const GenerateOptions& opt) {
+  const auto t_run = std::chrono::steady_clock::now();
+  const fs::path script = find_script(opt.script);
+  const fs::path recipe_path = find_recipe(opt.recipe);
+  json recipe = read_json(recipe_path);
+  const int count = opt.count >= 0 ? opt.count : recipe.value("count", 8);
+  const long long seed = opt.seed >= 0 ? opt.seed : recipe.value("seed", 1LL);
+  const int max_attempts = opt.max_attempts > 0 ? opt.max_attempts : recipe.value("max_attempts", 3);
+  json scene = recipe.value("scene", json::object());
+  if (opt.frames > 0) scene["frames"] = opt.frames;
+  Gates gates;
+  if (recipe.contains("gates")) {
+    const json& g = recipe["gates"];
+    gates.max_inside_body_share = g.value("max_inside_body_share", gates.max_inside_body_share);
+    gates.max_outer_inside_inner_share = g.value("max_outer_inside_inner_share", gates.max_outer_inside_inner_share);
+    gates.max_edge_stretch = g.value("max_edge_stretch", gates.max_edge_stretch);
+    gates.max_p99_edge_stretch = g.value("max_p99_edge_stretch", gates.max_p99_edge_stretch);
+  }
+  std::string checker = opt.checker;
+  if (checker.empty() && fs::exists("/work/shared/tools/check_dlayers_h5.py")) checker = "/work/shared/tools/check_dlayers_h5.py";
+
+  const fs::path out = opt.out;
+  fs::create_directories(out / "reports");
+  fs::create_directories(out / "logs");
+  const fs::path scene_json = out / "scene.json";
+  write_text(scene_json, scene.dump(1));
+  const auto splits = split_names(count, recipe.value("val_fraction", 0.125), recipe.value("test_fraction", 0.125));
+
+  json sequences = json::array();
+  int accepted = 0, dropped = 0, regenerated = 0, generated_now = 0;
+  double spent = 0.0, s_per_frame_sum = 0.0;
+  for (int i = 0; i < count; ++i) {
+    char idbuf[16];
+    std::snprintf(idbuf, sizeof(idbuf), "%05d", i);
+    const std::string id = idbuf;
+    const fs::path h5 = out / (id + ".h5");
+    const fs::path final_report = out / "reports" / (id + ".json");
+    json entry = {{"id", id}, {"split", splits[i]}};
+    if (fs::exists(h5) && fs::exists(final_report)) {
+      json kept = read_json(final_report);
+      if (kept.value("accepted", false) && kept.value("dataset_seed", -1LL) == seed) {
+        entry.update({{"attempts", kept.value("attempts", 1)}, {"status", "kept"}, {"report", kept}});
+        s_per_frame_sum += kept.at("timing").at("blender_s_per_frame").get<double>();
+        ++accepted;
+        sequences.push_back(entry);
+        std::printf("[%d/%d] %s kept (resume)\n", i + 1, count, id.c_str());
+        continue;
+      }
+    }
+    std::vector<std::string> reasons;
+    bool ok = false;
+    int attempt = 0;
+    for (; attempt < max_attempts && !ok; ++attempt) {
+      const long long sseed = sequence_seed(seed, i, attempt);
+      const fs::path rep_path = out / "reports" / (id + ".attempt" + std::to_string(attempt) + ".json");
+      const fs::path log = out / "logs" / (id + ".log");
+      fs::remove(h5);
+      fs::remove(rep_path);
+      const std::string cmd = quote(opt.blender) + " -b --factory-startup -t " + std::to_string(opt.threads) +
+                              " --python " + quote(script.string()) + " -- --out " + quote(h5.string()) + " --report " +
+                              quote(rep_path.string()) + " --seed " + std::to_string(sseed) + " --split " + splits[i] +
+                              " --config " + quote(scene_json.string()) + " > " + quote(log.string()) + " 2>&1";
+      const auto t0 = std::chrono::steady_clock::now();
+      const int rc = std::system(cmd.c_str());
+      const double dt = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      spent += dt;
+      ++generated_now;
+      if (rc != 0 || !fs::exists(rep_path)) {
+        reasons.push_back("attempt " + std::to_string(attempt) + ": Blender failed (exit " + std::to_string(rc) +
+                          "), see " + log.string());
+        if (rc != 0 && attempt == 0 && !fs::exists(rep_path) && i == 0 && std::system((quote(opt.blender) + " --version > /dev/null 2>&1").c_str()) != 0)
+          throw GenerateError("cannot run '" + opt.blender + "': install Blender (scripts/setup.sh) or pass --blender PATH");
+        continue;
+      }
+      json rep = read_json(rep_path);
+      std::vector<std::string> failed = failed_gates(rep, gates);
+      if (failed.empty() && !checker.empty()) {
+        const std::string ccmd = "/usr/bin/python3 " + quote(checker) + " " + quote(h5.string()) + " >> " + quote(log.string()) + " 2>&1";
+        if (std::system(ccmd.c_str()) != 0) failed.push_back("check_dlayers_h5.py rejected the file (see " + log.string() + ")");
+      }
+      rep["attempts"] = attempt + 1;
+      rep["dataset_seed"] = seed;
+      rep["accepted"] = failed.empty();
+      rep["failed_gates"] = failed;
+      write_text(rep_path, rep.dump(1));
+      if (failed.empty()) {
+        ok = true;
+        write_text(final_report, rep.dump(1));
+        entry.update({{"attempts", attempt + 1}, {"status", attempt ? "regenerated" : "generated"}, {"report", rep}});
+        s_per_frame_sum += rep.at("timing").at("blender_s_per_frame").get<double>();
+        regenerated += attempt > 0;
+      } else {
+        std::string why;
+        for (const auto& f : failed) why += (why.empty() ? "" : "; ") + f;
+        reasons.push_back("attempt " + std::to_string(attempt) + " (seed " + std::to_string(sseed) + "): " + why);
+        fs::remove(h5);
+      }
+    }
+    if (!ok) {
+      entry.update({{"attempts", attempt}, {"status", "dropped"}});
+      ++dropped;
+    } else {
+      ++accepted;
+    }
+    entry["reasons"] = reasons;
+    sequences.push_back(entry);
+    const double mean = spent / std::max(1, generated_now);
+    const double eta = mean * (count - i - 1);
+    std::printf("[%d/%d] %s %s %s (%d attempt%s, %.1f s); ETA %s\n", i + 1, count, id.c_str(), splits[i].c_str(),
+                entry["status"].get<std::string>().c_str(), attempt, attempt == 1 ? "" : "s", spent, fmt_duration(eta).c_str());
+    std::fflush(stdout);
+  }
+
+  // dataset.json: splits of the accepted ids, tags and Table-1 subsets (T, T+W, L, L+W).
+  json split_lists = {{"train", json::array()}, {"val", json::array()}, {"test", json::array()}};
+  json tags = json::object();
+  json subsets = {{"T", json::array()}, {"T+W", json::array()}, {"L", json::array()}, {"L+W", json::array()}};
+  for (const json& e : sequences) {
+    if (!e.contains("report")) continue;
+    const std::string id = e.at("id");
+    split_lists[e.at("split").get<std::string>()].push_back(id);
+    const json& t = e.at("report").at("tags");
+    tags[id] = t;
+    const std::string base = t.at("inner") == "tight" ? "T" : "L";
+    if (t.at("wind") == "calm") subsets[base].push_back(id);
+    if (t.at("wind") == "windy") subsets[base + "+W"].push_back(id);
+  }
+  std::ostringstream source;
+  source << "layersnet generate: Blender cloth (generate/make_sequence.py), recipe " << recipe_path.string()
+         << ", seed " << seed << ", count " << count << ", scene " << scene.dump();
+  json manifest = {{"format", "dlayers-h5"}, {"version", 1}, {"splits", split_lists}, {"source", source.str()},
+                   {"tags", tags}, {"subsets", subsets},
+                   {"subset_rule", "T/L: tight (pants) / loose (skirt, dress) inner layer; +W: max wind strength > 250; "
+                                   "without +W: max wind strength <= 50"}};
+  write_text(out / "dataset.json", manifest.dump(1));
+  const double run_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_run).count();
+  json report = {{"source", source.str()},
+                 {"gates", {{"max_inside_body_share", gates.max_inside_body_share},
+                            {"max_outer_inside_inner_share", gates.max_outer_inside_inner_share},
+                            {"max_edge_stretch", gates.max_edge_stretch},
+                            {"max_p99_edge_stretch", gates.max_p99_edge_stretch}}},
+                 {"summary", {{"accepted", accepted}, {"dropped", dropped}, {"regenerated", regenerated},
+                              {"blender_runs_this_run", generated_now}, {"blender_seconds_this_run", spent},
+                              {"run_seconds", run_s},
+                              {"mean_blender_s_per_frame", accepted ? s_per_frame_sum / accepted : 0.0}}},
+                 {"sequences", sequences}};
+  write_text(out / "generate_report.json", report.dump(1));
+  write_text(out / "generate_report.md", markdown_report(report));
+  std::printf("generate: %d accepted, %d dropped, %d regenerated in %s; report %s\n", accepted, dropped, regenerated,
+              fmt_duration(run_s).c_str(), (out / "generate_report.md").string().c_str());
+  return accepted > 0 ? 0 : 1;
+}
+
+}  // namespace
+
+LAYERSNET_COMMAND(generate, "Simulate D-LAYERS-like sequences with Blender's cloth solver", [](CLI::App& sub) {
+  auto opt = std::make_shared<GenerateOptions>();
+  sub.add_option("--out", opt->out, "data set folder to write (created; existing accepted sequences are kept)")->required();
+  sub.add_option("--recipe", opt->recipe, "recipe JSON (default: generate/recipes/default.json)");
+  sub.add_option("--count", opt->count, "number of sequences (overrides the recipe)");
+  sub.add_option("--frames", opt->frames, "frames per sequence at 30 fps (overrides the recipe)");
+  sub.add_option("--seed", opt->seed, "data set seed (overrides the recipe)");
+  sub.add_option("--max-attempts", opt->max_attempts, "simulations per sequence before it is dropped");
+  sub.add_option("--threads", opt->threads, "Blender threads (one Blender process runs at a time)");
+  sub.add_option("--blender", opt->blender, "Blender executable");
+  sub.add_option("--script", opt->script, "path of generate/make_sequence.py");
+  sub.add_option("--checker", opt->checker, "check_dlayers_h5.py to validate each file (default: the shared one if present)");
+  return [opt] {
+    try {
+      return run_generate(*opt);
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "layersnet generate: %s\n", e.what());
+      return 2;
+    }
+  };
+});
