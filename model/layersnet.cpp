@@ -1,0 +1,338 @@
+#include "model/layersnet.h"
+
+#include "model/params_layout.h"
+#include "model/tape_helpers.h"
+
+#include <cmath>
+
+namespace layersnet::model {
+namespace {
+
+constexpr double kEps = 1e-7;  // official eps of the attention denominators
+
+// Index lists of one forward (built from ModelInput, no tape). Token table rows:
+//   [0, P) patches, [P, P+A) attribute tokens, [P+A, P+A+T) body/wind/gravity tokens.
+template <class T>
+struct Graph {
+  int64_t P = 0, A = 0, T_rows = 0;
+  // World heads: world edges and inter edges of each receiver, one joint CSR (world first).
+  std::vector<int32_t> joint_offsets, joint_recv, joint_send;
+  std::vector<T> joint_is_world;  // (Ej, 1): 1 for a world edge, 0 for an inter edge
+  std::vector<int32_t> inter_pos, inter_offsets;  // positions of inter edges in the joint list; their CSR over P
+  std::vector<T> inter_rot;                       // (Ei, 9) frame of each inter edge's token
+  // Mesh heads: mesh adjacency + own attribute token.
+  std::vector<int32_t> mesh_offsets, mesh_recv, mesh_send;
+};
+
+template <class T>
+Graph<T> build_graph(const ModelInput<T>& in) {
+  Graph<T> g;
+  const int64_t P = in.P;
+  g.P = P, g.A = in.A;
+  const int64_t U = in.U, wind_tok = in.has_wind ? U : -1, grav_tok = U + (in.has_wind ? 1 : 0);
+  g.T_rows = grav_tok + 1;
+  const int32_t tok0 = static_cast<int32_t>(P + in.A);
+  static const T kIdentity[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+  g.joint_offsets.push_back(0);
+  g.inter_offsets.push_back(0);
+  g.mesh_offsets.push_back(0);
+  for (int64_t i = 0; i < P; ++i) {
+    const int32_t ri = static_cast<int32_t>(i);
+    for (int32_t k = in.world_offsets[i]; k < in.world_offsets[i + 1]; ++k) {
+      g.joint_recv.push_back(ri), g.joint_send.push_back(in.world_senders[k]), g.joint_is_world.push_back(T(1));
+    }
+    auto add_inter = [&](int64_t token, const T* rot) {
+      g.inter_pos.push_back(static_cast<int32_t>(g.joint_recv.size()));
+      g.joint_recv.push_back(ri), g.joint_send.push_back(tok0 + static_cast<int32_t>(token));
+      g.joint_is_world.push_back(T(0));
+      g.inter_rot.insert(g.inter_rot.end(), rot, rot + 9);
+    };
+    for (int32_t k = in.body_offsets[i]; k < in.body_offsets[i + 1]; ++k)
+      add_inter(in.body_tokens[k], in.body_rot.empty() ? kIdentity : &in.body_rot[9 * in.body_tokens[k]]);
+    if (wind_tok >= 0) add_inter(wind_tok, in.wind_rot.data());
+    add_inter(grav_tok, in.gravity_rot.data());
+    g.joint_offsets.push_back(static_cast<int32_t>(g.joint_recv.size()));
+    g.inter_offsets.push_back(static_cast<int32_t>(g.inter_pos.size()));
+    for (int32_t k = in.mesh_offsets[i]; k < in.mesh_offsets[i + 1]; ++k)
+      g.mesh_recv.push_back(ri), g.mesh_send.push_back(in.mesh_senders[k]);
+    g.mesh_recv.push_back(ri), g.mesh_send.push_back(static_cast<int32_t>(P + in.patch_attr[i]));
+    g.mesh_offsets.push_back(static_cast<int32_t>(g.mesh_recv.size()));
+  }
+  return g;
+}
+
+template <class T>
+struct Streams {
+  Var<T> X;  // (P + A + T, d) token states: patches, then attribute and body/wind/gravity tokens
+  Var<T> R;  // (P, d) receiver memory
+  Var<T> S;  // (P + A + T, d) sender memory
+};
+
+// Attention logits and normalised edge vectors of one head family.
+//   RIA (eq. 7, official form): logit = scale (q·s + q·r) / (‖r−s‖/2 + eps), weight a/(‖r−s‖ + eps),
+//                               edge vector f = r + s.
+//   TIE (reference §8): f = LayerNorm_per_head(r + s) (no affine), logit = scale q·f, weight a.
+template <class T>
+struct EdgeTerms {
+  Var<T> logits, inv_norm, f;  // (E, G), (E, G) or empty (TIE), (E, G*hd)
+};
+
+template <class T>
+EdgeTerms<T> edge_terms(ad::Tape<T>& tape, const ModelConfig& cfg, const ModelDims& m, const Var<T>& q,
+                        const Var<T>& r, const Var<T>& s, std::span<const int32_t> recv, std::span<const int32_t> send) {
+  const int64_t G = m.groups, E = static_cast<int64_t>(recv.size());
+  const T scale = static_cast<T>(1.0 / std::sqrt(static_cast<double>(m.head_dim)));
+  const Var<T> re = ad::gather_rows(tape, r, recv), se = ad::gather_rows(tape, s, send);
+  const Var<T> qe = ad::gather_rows(tape, q, recv);
+  const T eps_v = static_cast<T>(kEps);
+  const Var<T> eps = tape.constant(&eps_v, 1, 1);
+  EdgeTerms<T> out;
+  if (cfg.attention == "tie") {
+    const Var<T> e = ad::add(tape, re, se);
+    out.f = view(ad::layer_norm(tape, view(e, E * G, m.head_dim), Var<T>{}, Var<T>{}), E, G * m.head_dim);
+    out.logits = ad::scale(tape, head_dot(tape, qe, out.f, G), scale);
+    return out;
+  }
+  const Var<T> dist = head_norm(tape, ad::sub(tape, re, se), G);                          // ‖r − s‖ per head
+  const Var<T> qsr = head_dot(tape, qe, ad::add(tape, se, re), G);                         // q·s + q·r
+  const Var<T> den = ad::add(tape, ad::scale(tape, dist, T(0.5)), eps);
+  out.logits = ad::scale(tape, ad::div(tape, qsr, den), scale);
+  out.inv_norm = ad::add(tape, dist, eps);
+  out.f = ad::add(tape, re, se);
+  return out;
+}
+
+// Message weights a (softmax) -> per-edge weights (a / (‖r−s‖ + eps) for RIA, a for TIE).
+template <class T>
+Var<T> edge_weights(ad::Tape<T>& tape, const EdgeTerms<T>& t, std::span<const int32_t> offsets) {
+  const Var<T> a = ad::segment_softmax(tape, t.logits, offsets);
+  return t.inv_norm.value ? ad::div(tape, a, t.inv_norm) : a;
+}
+
+// ψ with RET for the inter edges of group g: φ(R)ᵀ ReLU(A_g φ(R) v + c_g), φ(R) = W_g R W_gᵀ (eq. 10–11).
+template <class T>
+Var<T> inter_messages(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfig& cfg, const ModelDims& m,
+                      const std::string& prefix, const Var<T>& v, const Var<T>& rot) {
+  std::vector<Var<T>> parts;
+  for (int g = 0; g < m.groups; ++g) {
+    const std::string gs = std::to_string(g);
+    Var<T> y = ad::slice_cols(tape, v, g * m.head_dim, (g + 1) * m.head_dim);
+    Var<T> W;
+    if (cfg.rotation_equivalent) {
+      W = p(prefix + "rot_mapping." + gs + ".weight");
+      y = ad::rot_map_apply(tape, W, rot, y);
+    }
+    y = ad::relu(tape, ad::linear(tape, y, p(prefix + "rs_mlp." + gs + ".weight"), p(prefix + "rs_mlp." + gs + ".bias")));
+    if (cfg.rotation_equivalent) y = ad::rot_map_apply(tape, W, rot, y, /*transpose=*/true);
+    parts.push_back(y);
+  }
+  return ad::concat_cols(tape, std::span<const Var<T>>(parts));
+}
+
+// One simulator layer (reference §2.6 with the decisions of model/README.md).
+template <class T>
+Streams<T> encoder_layer(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfig& cfg, const ModelDims& m,
+                         const Graph<T>& gr, const Var<T>& inter_rot, const Var<T>& is_world, int layer,
+                         const Streams<T>& st) {
+  const std::string pre = "encoder.layers." + std::to_string(layer) + ".";
+  const std::string at = pre + "attn.";
+  const bool last = layer == m.layers - 1;
+  const int64_t P = gr.P, d = m.d, half = d / 2, G = m.groups;
+  const Var<T> Xp = rows_of(st.X, 0, P);
+  // r = W_r x + W_m R + R;  s = W_s x + W_m S + S (every token);  q = W_q x.
+  const Var<T> Wm = p(at + "memory_weight.weight");
+  const Var<T> r = ad::add(tape, ad::add(tape, ad::linear(tape, Xp, p(at + "receiver_weight.weight")),
+                                         ad::linear(tape, st.R, Wm)), st.R);
+  const Var<T> s = ad::add(tape, ad::add(tape, ad::linear(tape, st.X, p(at + "sender_weight.weight")),
+                                         ad::linear(tape, st.S, Wm)), st.S);
+  const Var<T> q = ad::linear(tape, Xp, p(at + "q_proj.weight"));
+  // Channels [0, d/2): world heads, [d/2, d): mesh heads.
+  const Var<T> qw = ad::slice_cols(tape, q, 0, half), qm = ad::slice_cols(tape, q, half, d);
+  const Var<T> rw = ad::slice_cols(tape, r, 0, half), rm = ad::slice_cols(tape, r, half, d);
+  const Var<T> sw = ad::slice_cols(tape, s, 0, half), sm = ad::slice_cols(tape, s, half, d);
+
+  // World heads: world patches and inter tokens, one softmax per receiver.
+  const EdgeTerms<T> tw = edge_terms(tape, cfg, m, qw, rw, sw, gr.joint_recv, gr.joint_send);
+  const Var<T> aw = edge_weights(tape, tw, gr.joint_offsets);
+  const Var<T> msg_world = ad::segment_sum(tape, head_scale(tape, ad::mul(tape, aw, is_world), tw.f, G), gr.joint_offsets);
+  Var<T> msg_inter;
+  if (!gr.inter_pos.empty()) {
+    const Var<T> fi = ad::gather_rows(tape, tw.f, gr.inter_pos);
+    const Var<T> ai = ad::gather_rows(tape, aw, gr.inter_pos);
+    const Var<T> u = inter_messages(tape, p, cfg, m, at, fi, inter_rot);
+    msg_inter = ad::segment_sum(tape, head_scale(tape, ai, u, G), gr.inter_offsets);
+  }
+  // Mesh heads: mesh-adjacent patches and the garment's attribute token.
+  const EdgeTerms<T> tm = edge_terms(tape, cfg, m, qm, rm, sm, gr.mesh_recv, gr.mesh_send);
+  const Var<T> am = edge_weights(tape, tm, gr.mesh_offsets);
+  const Var<T> msg_mesh = ad::segment_sum(tape, head_scale(tape, am, tm.f, G), gr.mesh_offsets);
+
+  Var<T> out = ad::concat_cols(tape, {msg_inter.value ? ad::add(tape, msg_world, msg_inter) : msg_world, msg_mesh});
+  out = ad::add(tape, ad::mul(tape, out, p(at + "n_weight")), p(at + "n_bias"));
+  const Var<T> x_attn = ad::linear(tape, out, p(at + "proj.weight"), p(at + "proj.bias"));
+
+  // Post-LN: patches LN0(x + attn); other tokens get no attention: LN0(2x). Then LN1(y + FFN(y)).
+  // The other tokens' update is dead after the last layer (only patch tokens are decoded).
+  Var<T> y0 = ad::add(tape, Xp, x_attn);
+  if (!last) y0 = ad::concat_rows(tape, y0, ad::scale(tape, rows_of(st.X, P, st.X.rows), T(2)));
+  const Var<T> y = norm(tape, p, pre + "norms.0", y0);
+  Streams<T> next;
+  next.X = norm(tape, p, pre + "norms.1", ad::add(tape, y, mlp(tape, p, pre + "ffn", 2, true, y)));
+  if (!last) {
+    next.R = norm(tape, p, pre + "res_norms.0", ad::linear(tape, r, p(at + "r_proj.weight"), p(at + "r_proj.bias")));
+    next.S = norm(tape, p, pre + "res_norms.1", ad::linear(tape, s, p(at + "s_proj.weight"), p(at + "s_proj.bias")));
+  }
+  return next;
+}
+
+// Rotation rows R[idx] (identity for idx = -1), as a host array (n, 9).
+template <class T>
+std::vector<T> frames_of(const ModelInput<T>& in, const std::vector<int32_t>& idx) {
+  std::vector<T> R(idx.size() * 9, T(0));
+  for (std::size_t k = 0; k < idx.size(); ++k) {
+    if (idx[k] < 0) {
+      R[9 * k] = R[9 * k + 4] = R[9 * k + 8] = T(1);
+    } else {
+      std::copy_n(&in.body_rot[9 * idx[k]], 9, &R[9 * k]);
+    }
+  }
+  return R;
+}
+
+// Acceleration in the local frame (rows of a_local) -> world (Rᵀ a), de-normalised with the
+// velocity statistics (official), then v = v_base + a, x = x_base + v. base: (n, 6) [x, v].
+template <class T>
+Var<T> integrate(ad::Tape<T>& tape, const ModelInput<T>& in, const Var<T>& a_local, const Var<T>& R, bool rotate,
+                 const std::vector<T>& base) {
+  const int64_t n = a_local.rows;
+  Var<T> a = rotate ? ad::rotate3(tape, R, a_local, /*transpose=*/true) : a_local;
+  const std::vector<T> sd(in.std12.begin() + 3, in.std12.begin() + 6), mu(in.mean12.begin() + 3, in.mean12.begin() + 6);
+  a = ad::add(tape, ad::mul(tape, a, constant(tape, sd, 1, 3)), constant(tape, mu, 1, 3));
+  std::vector<T> bx(n * 3), bv(n * 3);
+  for (int64_t i = 0; i < n; ++i)
+    for (int c = 0; c < 3; ++c) bx[3 * i + c] = base[6 * i + c], bv[3 * i + c] = base[6 * i + 3 + c];
+  const Var<T> v = ad::add(tape, a, constant(tape, bv, n, 3));
+  const Var<T> x = ad::add(tape, v, constant(tape, bx, n, 3));
+  return ad::concat_cols(tape, {x, v, a});
+}
+
+template <class T>
+Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfig& cfg, const ModelDims& m,
+                      const ModelInput<T>& in, const Var<T>& emb, const Var<T>& body_x) {
+  const int64_t N = in.N, P = in.P, d = m.d, U = in.U;
+  const bool ret = cfg.rotation_equivalent;
+  // Body features with a zero row for "no body vertex within R_b" (index U).
+  const Var<T> zero_row = tape.zeros(1, d);
+  const Var<T> body_tab = U > 0 ? ad::concat_rows(tape, body_x, zero_row) : zero_row;
+  auto body_index = [&](const std::vector<int32_t>& idx) {
+    std::vector<int32_t> out(idx);
+    for (auto& k : out)
+      if (k < 0) k = static_cast<int32_t>(U);
+    return out;
+  };
+  Var<T> W, Wt;
+  if (ret) {
+    W = p("decoder.rot_mapping.weight");  // (d, 3)
+    const std::vector<T> eye3{1, 0, 0, 0, 1, 0, 0, 0, 1};
+    Wt = ad::linear(tape, constant(tape, eye3, 3, 3), W);  // (3, d) = Wᵀ
+  }
+
+  // ---- patch branch: [0 (12), φ(R_p) e_p, φ(R_p) h_p] -> MLP -> R_pᵀ a ------------------------------
+  const Var<T> Rp = constant(tape, frames_of(in, in.patch_body), P, 9);
+  const Var<T> phi_p = ad::gather_rows(tape, body_tab, body_index(in.patch_body));
+  const Var<T> He_p = ret ? ad::rot_map_apply(tape, W, Rp, emb) : emb;
+  const Var<T> Hh_p = ret ? ad::rot_map_apply(tape, W, Rp, phi_p) : phi_p;
+  const Var<T> feat_p = ad::concat_cols(tape, {tape.zeros(P, 12), He_p, Hh_p});
+  const Var<T> a_p = mlp(tape, p, "decoder.proj", 3, false, feat_p);
+  std::vector<T> base_p(P * 6);
+  for (int64_t i = 0; i < P; ++i) std::copy_n(&in.patch_state[12 * i], 6, &base_p[6 * i]);
+  const Var<T> pred_patch = integrate(tape, in, a_p, Rp, ret, base_p);
+
+  // ---- vertex branch over the candidate patches (eq. 12–15) ------------------------------------------------
+  const int64_t Ec = static_cast<int64_t>(in.cand_patches.size());
+  std::vector<T> Rv_host = frames_of(in, in.vertex_body);
+  const Var<T> Rv = constant(tape, Rv_host, N, 9);
+  std::vector<int32_t> cand_vertex(Ec);
+  std::vector<T> rel(Ec * 12), Re(Ec * 9);
+  for (int64_t v = 0; v < N; ++v)
+    for (int32_t k = in.cand_offsets[v]; k < in.cand_offsets[v + 1]; ++k) {
+      cand_vertex[k] = static_cast<int32_t>(v);
+      const T* R = &Rv_host[9 * v];
+      std::copy_n(R, 9, &Re[9 * k]);
+      for (int blk = 0; blk < 4; ++blk) {  // R_v (s_v − s_p), four 3-vectors, raw units
+        T dlt[3];
+        for (int c = 0; c < 3; ++c)
+          dlt[c] = in.state[12 * v + 3 * blk + c] - in.patch_state[12 * in.cand_patches[k] + 3 * blk + c];
+        for (int c = 0; c < 3; ++c)
+          rel[12 * k + 3 * blk + c] = ret ? R[3 * c] * dlt[0] + R[3 * c + 1] * dlt[1] + R[3 * c + 2] * dlt[2] : dlt[c];
+      }
+    }
+  Var<T> He_v, Hh_v;
+  const Var<T> phi_v = ad::gather_rows(tape, body_tab, body_index(in.vertex_body));
+  if (ret) {
+    // φ(R_v) e_p = W R_v (Wᵀ e_p): Wᵀ e_p once per patch, then 3-vectors per candidate.
+    const Var<T> z_p = ad::linear(tape, emb, Wt);  // (P, 3)
+    const Var<T> z_e = ad::rotate3(tape, constant(tape, Re, Ec, 9), ad::gather_rows(tape, z_p, in.cand_patches));
+    He_v = ad::linear(tape, z_e, W);  // (Ec, d)
+    Hh_v = ad::gather_rows(tape, ad::rot_map_apply(tape, W, Rv, phi_v), cand_vertex);
+  } else {
+    He_v = ad::gather_rows(tape, emb, in.cand_patches);
+    Hh_v = ad::gather_rows(tape, phi_v, cand_vertex);
+  }
+  const Var<T> feat_v = ad::concat_cols(tape, {constant(tape, rel, Ec, 12), He_v, Hh_v});
+  const Var<T> a_e = mlp(tape, p, "decoder.proj", 3, false, feat_v);
+  std::vector<T> inv_count(N);
+  for (int64_t v = 0; v < N; ++v)
+    inv_count[v] = T(1) / static_cast<T>(std::max(1, in.cand_offsets[v + 1] - in.cand_offsets[v]));
+  const Var<T> a_v = ad::mul(tape, ad::segment_sum(tape, a_e, in.cand_offsets), constant(tape, inv_count, N, 1));
+  std::vector<T> base_v(N * 6);  // s_v − s_own: the vertex relative to its own patch
+  for (int64_t v = 0; v < N; ++v)
+    for (int c = 0; c < 6; ++c) base_v[6 * v + c] = in.state[12 * v + c] - in.patch_state[12 * in.own_patch[v] + c];
+  const Var<T> pred_rel = integrate(tape, in, a_v, Rv, ret, base_v);
+  Predictions<T> out;
+  out.vertex = ad::add(tape, pred_rel, ad::gather_rows(tape, pred_patch, in.own_patch));
+  out.patch = pred_patch;
+  return out;
+}
+
+}  // namespace
+
+template <class T>
+Predictions<T> forward(ad::Tape<T>& tape, ad::ParamStore<T>& params, const ModelConfig& cfg, const ModelInput<T>& in) {
+  const ModelDims m = model_dims(cfg);
+  const ParamView<T> p{params};
+  const Graph<T> gr = build_graph(in);
+  const int64_t P = in.P, A = in.A, U = in.U;
+
+  // ---- token encoders ---------------------------------------------------------------------------------
+  const Var<T> patch_x = mlp(tape, p, "embed.input", 2, true, constant(tape, in.patch_norm, P, 12));
+  const Var<T> attr_x = mlp(tape, p, "embed.attr", 2, true, constant(tape, in.attr, A, 5));
+  const Var<T> body_x = U > 0 ? mlp(tape, p, "embed.input", 2, true, constant(tape, in.body_norm, U, 12)) : Var<T>{};
+  Var<T> ext = mlp(tape, p, "embed.gravity", 2, true, constant(tape, in.gravity, 1, ModelDims::kGravityDim));
+  if (in.has_wind)
+    ext = ad::concat_rows(tape, mlp(tape, p, "embed.wind", 2, true, constant(tape, in.wind, 1, ModelDims::kWindDim)), ext);
+  const Var<T> h_x = U > 0 ? ad::concat_rows(tape, body_x, ext) : ext;  // (T, d): body, [wind], gravity
+  const Var<T> pa_x = ad::concat_rows(tape, patch_x, attr_x);            // (P + A, d)
+  const Var<T> all_x = ad::concat_rows(tape, pa_x, h_x);                 // (P + A + T, d)
+
+  Streams<T> st;
+  st.R = norm(tape, p, "embed.receiver_norm", mlp(tape, p, "embed.receiver", 2, true, patch_x));
+  st.S = norm(tape, p, "embed.sender_norm", mlp(tape, p, "embed.sender", 2, true, all_x));
+  // Patch and attribute tokens are normalised, body/wind/gravity tokens are not (official).
+  st.X = ad::concat_rows(tape, norm(tape, p, "embed.particle_norm", pa_x), h_x);
+
+  // ---- simulator -----------------------------------------------------------------------------------------
+  const Var<T> inter_rot = constant(tape, gr.inter_rot, static_cast<int64_t>(gr.inter_pos.size()), 9);
+  const Var<T> is_world = constant(tape, gr.joint_is_world, static_cast<int64_t>(gr.joint_recv.size()), 1);
+  for (int l = 0; l < m.layers; ++l) st = encoder_layer(tape, p, cfg, m, gr, inter_rot, is_world, l, st);
+
+  // ---- decoder ---------------------------------------------------------------------------------------------
+  return decode(tape, p, cfg, m, in, rows_of(st.X, 0, P), body_x);
+}
+
+template Predictions<float> forward(ad::Tape<float>&, ad::ParamStore<float>&, const ModelConfig&,
+                                    const ModelInput<float>&);
+template Predictions<double> forward(ad::Tape<double>&, ad::ParamStore<double>&, const ModelConfig&,
+                                     const ModelInput<double>&);
+
+}  // namespace layersnet::model

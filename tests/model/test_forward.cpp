@@ -1,0 +1,57 @@
+// Forward pass: shapes, finiteness, parameter layout and counts.
+#include "model/layersnet.h"
+#include "model/params_layout.h"
+#include "model_test_util.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <iostream>
+
+namespace layersnet::model {
+namespace {
+
+TEST(ModelParams, OfficialSizesMatchTheReferenceCount) {
+  ModelConfig c;  // official sizes
+  ad::ParamStore<float> ps;
+  register_params(ps, c);
+  int64_t total = 0;
+  for (const auto& e : ps.entries()) total += e.size();
+  std::cout << "official-size parameters: registered " << total << ", official layout "
+            << official_parameter_count(c) << "\n";
+  EXPECT_EQ(official_parameter_count(c), 1018719);  // reference §2.9: 873,728 + 144,991
+  // We do not register the last layer's dead r_proj, s_proj and res_norms.
+  EXPECT_EQ(total, 1018719 - 2 * (128 * 128 + 128) - 4 * 128);
+  EXPECT_EQ(ps.index_of("encoder.layers.0.attn.q_proj.weight") >= 0, true);
+  EXPECT_THROW(ps.index_of("encoder.layers.3.attn.r_proj.weight"), std::exception);
+}
+
+TEST(ModelParams, RotationMapsStartOrthonormal) {
+  ModelConfig c;
+  ad::ParamStore<double> ps;
+  register_params(ps, c);
+  init_params(ps, c, 7);
+  for (const auto& name : rotation_map_names(c)) {
+    auto v = ps.var(name);
+    Eigen::MatrixXd WtW = v.val().transpose() * v.val();
+    EXPECT_LT((WtW - Eigen::MatrixXd::Identity(3, 3)).norm(), 1e-12) << name;
+  }
+}
+
+TEST(ModelForward, ShapesAndFiniteOutputs) {
+  const ModelConfig c = testing::tiny_config();
+  const auto scene = make_synthetic_scene(testing::tiny_scene());
+  const auto in = cast_input<float>(build_model_input(scene, c));
+  ad::ParamStore<float> ps;
+  register_params(ps, c);
+  init_params(ps, c, 1);
+  ad::Tape<float> tape;
+  const auto pred = forward(tape, ps, c, in);
+  ASSERT_EQ(pred.vertex.rows, in.N);
+  ASSERT_EQ(pred.vertex.cols, 9);
+  ASSERT_EQ(pred.patch.rows, in.P);
+  for (int64_t i = 0; i < pred.vertex.size(); ++i) ASSERT_TRUE(std::isfinite(pred.vertex.value[i]));
+}
+
+}  // namespace
+}  // namespace layersnet::model
