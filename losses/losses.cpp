@@ -1,0 +1,166 @@
+#include "losses/losses.h"
+
+#include "model/input_builder.h"
+#include "model/params_layout.h"
+#include "model/tape_helpers.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace layersnet::losses {
+namespace {
+
+using ad::Var;
+
+std::vector<double> relative(const std::vector<double>& x, const double root[3]) {
+  std::vector<double> r(x.size());
+  for (std::size_t i = 0; i < x.size(); ++i) r[i] = x[i] - root[i % 3];
+  return r;
+}
+
+template <class T>
+std::vector<T> column_block(const Var<T>& x, int64_t c0, int64_t c1) {
+  std::vector<T> out(x.rows * (c1 - c0));
+  for (int64_t i = 0; i < x.rows; ++i)
+    for (int64_t c = c0; c < c1; ++c) out[i * (c1 - c0) + (c - c0)] = x.value[i * x.cols + c];
+  return out;
+}
+
+template <class T>
+std::vector<double> to_double(const std::vector<T>& v) {
+  return std::vector<double>(v.begin(), v.end());
+}
+
+// Eq. 18 for the query points `x` (Q, 3) against anchors: anchor position and normal per
+// query (constants or tape tensors of (Q, 3)). Returns Σ min(d − eps, 0)² / max(N_c, 1).
+template <class T>
+Var<T> collision_term(ad::Tape<T>& tape, const Var<T>& x, const Var<T>& anchor, const Var<T>& normal, T eps,
+                      int64_t& count) {
+  const Var<T> d = ad::row_sum(tape, ad::mul(tape, ad::sub(tape, x, anchor), normal));  // (Q, 1)
+  const Var<T> pen = ad::hinge_sq(tape, d, eps);
+  count = 0;
+  for (int64_t i = 0; i < pen.rows; ++i) count += pen.value[i] > T(0);
+  return ad::scale(tape, ad::sum_all(tape, pen), T(1) / static_cast<T>(std::max<int64_t>(count, 1)));
+}
+
+}  // namespace
+
+LossInput<double> build_loss_input(const model::SceneWindow& s, const model::ModelInput<double>& in) {
+  LAYERSNET_CHECK(static_cast<int64_t>(s.x_tp1.size()) == 3 * s.N,
+                  "build_loss_input: SceneWindow.x_tp1 (ground truth at t+1) must be (N, 3)");
+  LossInput<double> L;
+  L.target = relative(s.x_tp1, s.root[3]);
+  L.faces = s.faces;
+  L.garment_offsets = s.garment_offsets;
+  L.target_normals = model::vertex_normals(L.target, s.faces);
+  L.target_patch.assign(in.P * 3, 0.0);
+  for (int64_t p = 0; p < in.P; ++p) {
+    const int32_t b = in.p2v_offsets[p], e = in.p2v_offsets[p + 1];
+    for (int32_t k = b; k < e; ++k)
+      for (int c = 0; c < 3; ++c) L.target_patch[3 * p + c] += L.target[3 * in.p2v_vertices[k] + c];
+    for (int c = 0; c < 3; ++c) L.target_patch[3 * p + c] /= std::max(1, e - b);
+  }
+  L.body_pos = relative(s.body_tp1, s.root[3]);
+  L.body_normals = model::vertex_normals(L.body_pos, s.body_faces);
+  return L;
+}
+
+template <class T>
+Var<T> vertex_normals(ad::Tape<T>& tape, const Var<T>& x, const std::vector<int32_t>& faces) {
+  const int64_t F = static_cast<int64_t>(faces.size() / 3);
+  std::vector<int32_t> corner[3];
+  for (int k = 0; k < 3; ++k) {
+    corner[k].resize(F);
+    for (int64_t f = 0; f < F; ++f) corner[k][f] = faces[3 * f + k];
+  }
+  const Var<T> v0 = ad::gather_rows(tape, x, corner[0]), v1 = ad::gather_rows(tape, x, corner[1]),
+               v2 = ad::gather_rows(tape, x, corner[2]);
+  const Var<T> fn = ad::row_normalize(tape, ad::cross3(tape, ad::sub(tape, v2, v1), ad::sub(tape, v0, v1)));
+  // Each face adds its unit normal to its three corners: one scatter over the stacked corners.
+  std::vector<int32_t> idx(corner[0]);
+  idx.insert(idx.end(), corner[1].begin(), corner[1].end());
+  idx.insert(idx.end(), corner[2].begin(), corner[2].end());
+  const Var<T> fn3 = ad::concat_rows(tape, ad::concat_rows(tape, fn, fn), fn);
+  return ad::row_normalize(tape, ad::scatter_add_rows(tape, fn3, idx, x.rows));
+}
+
+template <class T>
+LossTerms<T> compute_losses(ad::Tape<T>& tape, ad::ParamStore<T>& params, const ModelConfig& mc, const LossConfig& lc,
+                            const LossInput<T>& tg, const model::Predictions<T>& pred) {
+  const int64_t N = pred.vertex.rows, P = pred.patch.rows;
+  LAYERSNET_CHECK(static_cast<int64_t>(tg.target.size()) == 3 * N && static_cast<int64_t>(tg.target_patch.size()) == 3 * P,
+                  "LossInput target (N, 3) / target_patch (P, 3) do not match the predictions (N = " << N << ", P = " << P
+                                                                                                     << ")");
+  LossTerms<T> out;
+  std::vector<Var<T>> weighted;
+  auto add_term = [&](const Var<T>& term, double weight, double& value) {
+    value = static_cast<double>(term.scalar());
+    weighted.push_back(ad::scale(tape, term, static_cast<T>(weight)));
+  };
+  const Var<T> x = ad::slice_cols(tape, pred.vertex, 0, 3);
+  if (lc.vertex != 0)
+    add_term(ad::mean_all(tape, ad::squared_error(tape, x, model::constant(tape, tg.target, N, 3))), lc.vertex, out.vertex);
+  if (lc.patch != 0)
+    add_term(ad::mean_all(tape, ad::squared_error(tape, ad::slice_cols(tape, pred.patch, 0, 3),
+                                                  model::constant(tape, tg.target_patch, P, 3))),
+             lc.patch, out.patch);
+  const int64_t G = static_cast<int64_t>(tg.garment_offsets.size()) - 1;
+  const bool layer_term = lc.collision_layer != 0 && G >= 2;
+  Var<T> normals;
+  if (lc.normal != 0 || layer_term) normals = vertex_normals(tape, x, tg.faces);
+  if (lc.normal != 0)
+    add_term(ad::mean_all(tape, ad::squared_error(tape, normals, model::constant(tape, tg.target_normals, N, 3))),
+             lc.normal, out.normal);
+  const T eps = static_cast<T>(lc.collision_eps);
+  if (lc.collision_body != 0) {
+    std::vector<int32_t> idx;
+    std::vector<double> dist;
+    model::nearest_points(to_double(column_block(pred.vertex, 0, 3)), to_double(tg.body_pos), idx, dist);
+    const int64_t B = static_cast<int64_t>(tg.body_pos.size() / 3);
+    const Var<T> h = ad::gather_rows(tape, model::constant(tape, tg.body_pos, B, 3), idx);
+    const Var<T> n = ad::gather_rows(tape, model::constant(tape, tg.body_normals, B, 3), idx);
+    add_term(collision_term(tape, x, h, n, eps, out.body_collisions), lc.collision_body, out.collision_body);
+  }
+  if (layer_term) {
+    const int64_t o0 = tg.garment_offsets[G - 1], o1 = tg.garment_offsets[G];
+    const std::vector<T> xv = column_block(pred.vertex, 0, 3);
+    std::vector<double> outer(xv.begin() + 3 * o0, xv.begin() + 3 * o1), inner(xv.begin(), xv.begin() + 3 * o0);
+    std::vector<int32_t> idx;
+    std::vector<double> dist;
+    model::nearest_points(outer, inner, idx, dist);  // indices into [0, o0) = global vertex ids
+    const Var<T> xo = model::rows_of(x, o0, o1);
+    add_term(collision_term(tape, xo, ad::gather_rows(tape, x, idx), ad::gather_rows(tape, normals, idx), eps,
+                            out.layer_collisions),
+             lc.collision_layer, out.collision_layer);
+  }
+  const auto rot_names = model::rotation_map_names(mc);
+  if (lc.orthogonality != 0 && !rot_names.empty()) {
+    const std::vector<T> eye3{1, 0, 0, 0, 1, 0, 0, 0, 1};
+    const Var<T> I3 = model::constant(tape, eye3, 3, 3);
+    std::vector<Var<T>> parts;
+    for (const auto& name : rot_names) {
+      const Var<T> W = params.var(name);  // (d, 3)
+      std::vector<T> eye_d(W.rows * W.rows, T(0));
+      for (int64_t i = 0; i < W.rows; ++i) eye_d[i * W.rows + i] = T(1);
+      const Var<T> Wt = ad::linear(tape, I3, W);  // (3, d)
+      parts.push_back(ad::sum_all(tape, ad::squared_error(tape, ad::linear(tape, W, W), model::constant(tape, eye_d, W.rows, W.rows))));
+      parts.push_back(ad::sum_all(tape, ad::squared_error(tape, ad::linear(tape, Wt, Wt), I3)));
+    }
+    Var<T> orth = parts[0];
+    for (std::size_t k = 1; k < parts.size(); ++k) orth = ad::add(tape, orth, parts[k]);
+    add_term(orth, lc.orthogonality, out.orthogonality);
+  }
+  LAYERSNET_CHECK(!weighted.empty(), "every loss weight is 0 (LossConfig): nothing to train");
+  out.total = weighted[0];
+  for (std::size_t k = 1; k < weighted.size(); ++k) out.total = ad::add(tape, out.total, weighted[k]);
+  return out;
+}
+
+template Var<float> vertex_normals(ad::Tape<float>&, const Var<float>&, const std::vector<int32_t>&);
+template Var<double> vertex_normals(ad::Tape<double>&, const Var<double>&, const std::vector<int32_t>&);
+template LossTerms<float> compute_losses(ad::Tape<float>&, ad::ParamStore<float>&, const ModelConfig&, const LossConfig&,
+                                         const LossInput<float>&, const model::Predictions<float>&);
+template LossTerms<double> compute_losses(ad::Tape<double>&, ad::ParamStore<double>&, const ModelConfig&,
+                                          const LossConfig&, const LossInput<double>&, const model::Predictions<double>&);
+
+}  // namespace layersnet::losses
