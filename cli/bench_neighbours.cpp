@@ -45,6 +45,7 @@ int run_bench(const BenchOptions& o) {
     so.garments = 2;
     so.segments = 64;
     so.body_segments = 64;
+    so.uv_per_unit = 0.1f;  // patch 0.04 UV = 0.4 units: ~9 vertices per patch
     so.rings = o.base_rings * scale;
     so.body_rings = o.base_rings * scale;
     so.height = 0.147f * static_cast<float>(so.rings - 1) / 0.8f;

@@ -24,7 +24,7 @@ struct SyntheticOptions {
   float layer_gap = 0.25f;   // radius step between garment layers
   float body_radius = 1.2f;
   float height = 4.0f;
-  float uv_per_unit = 0.1f;  // UV units per scene unit (0.04 UV = 0.4 units)
+  float uv_per_unit = 0.05f;  // UV units per scene unit (0.04 UV = 0.8 units)
   bool wind = false;
   float motion = 0.3f;       // amplitude of the body's sine translation (scene units)
   uint64_t seed = 1;         // varies attributes and a small ripple

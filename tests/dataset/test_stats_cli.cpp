@@ -1,0 +1,148 @@
+// Normalisation statistics against a brute-force computation, stats.h5 round trip and
+// validator, and the `prepare` / `inspect` commands on a synthetic data set.
+#include "dataset/stats.h"
+#include "dataset/synthetic.h"
+#include "dataset/wind.h"
+#include "test_util.h"
+
+#include <array>
+#include <filesystem>
+
+namespace layersnet::dataset {
+namespace {
+
+std::string run(const std::string& cmd, int* status) {
+  std::string out;
+  FILE* pipe = popen((cmd + " 2>&1").c_str(), "r");
+  char buf[512];
+  while (pipe && fgets(buf, sizeof buf, pipe)) out += buf;
+  const int s = pipe ? pclose(pipe) : -1;
+  *status = WIFEXITED(s) ? WEXITSTATUS(s) : -1;
+  return out;
+}
+
+TEST(Stats, MatchesBruteForceOverTheTrainingSplitOnly) {
+  const auto dir = testing::temp_dir("stats");
+  SyntheticOptions o;
+  o.garments = 2;
+  o.frames = 7;
+  const DatasetManifest m = write_synthetic_dataset(dir.string(), 2, 1, 0, o);
+  StatsOptions so;
+  so.window_frames = 3;  // windows split the sequence: differences must still cross them
+  const NormalisationStats s = compute_stats(m, so);
+  // Brute force in double over train sequences, garments and body.
+  std::vector<Eigen::Vector3d> pos, vel, acc;
+  for (const auto& id : m.train) {
+    const Sequence q = read_sequence(m.sequence_path(id));
+    auto rel = [&](int t) {
+      Eigen::MatrixX3d x(q.info.total_garment_vertices() + q.info.num_body_vertices, 3);
+      x << q.garment_at(0, t).cast<double>(), q.garment_at(1, t).cast<double>(), q.body_at(t).cast<double>();
+      x.rowwise() -= q.info.translation.row(t).cast<double>();
+      return x;
+    };
+    for (int t = 0; t < q.info.num_frames; ++t) {
+      const Eigen::MatrixX3d x = rel(t);
+      for (Eigen::Index i = 0; i < x.rows(); ++i) {
+        pos.push_back(x.row(i).transpose());
+        if (t >= 1) vel.push_back((x.row(i) - rel(t - 1).row(i)).transpose());
+        if (t >= 2) acc.push_back((x.row(i) - 2 * rel(t - 1).row(i) + rel(t - 2).row(i)).transpose());
+      }
+    }
+  }
+  auto check = [](const std::vector<Eigen::Vector3d>& v, const MeanStd& got) {
+    Eigen::Vector3d mean = Eigen::Vector3d::Zero(), var = Eigen::Vector3d::Zero();
+    for (const auto& x : v) mean += x;
+    mean /= static_cast<double>(v.size());
+    for (const auto& x : v) var += (x - mean).cwiseAbs2();
+    var /= static_cast<double>(v.size());
+    EXPECT_EQ(got.count, static_cast<int64_t>(v.size()));
+    EXPECT_TRUE(got.mean.isApprox(mean, 1e-6) || (got.mean - mean).norm() < 1e-9);
+    EXPECT_TRUE(got.std.isApprox(var.cwiseSqrt(), 1e-5));
+  };
+  check(pos, s.position);
+  check(vel, s.velocity);
+  check(acc, s.acceleration);
+  EXPECT_EQ(s.sequences, m.train);
+  EXPECT_EQ(s.root_velocity.count, 2 * 6);
+}
+
+TEST(Stats, RoundTripZeroStdStoredAsOneAndValidatorAgrees) {
+  const auto dir = testing::temp_dir("statsrt");
+  const DatasetManifest m = write_synthetic_dataset(dir.string(), 1, 1, 0);
+  NormalisationStats s = compute_stats(m);
+  // The synthetic root moves in x and y only: root z velocity has std 0 -> stored as 1.
+  EXPECT_EQ(s.root_velocity.std[2], 1.0);
+  write_stats(m.stats_path(), s);
+  const NormalisationStats r = load_stats_or_explain(m);
+  EXPECT_TRUE(r.position.mean.isApprox(s.position.mean));
+  EXPECT_TRUE(r.velocity.std.isApprox(s.velocity.std));
+  EXPECT_EQ(r.acceleration.count, s.acceleration.count);
+  EXPECT_EQ(r.sequences, m.train);
+  if (testing::validator_available()) {
+    std::string out;
+    EXPECT_EQ(testing::run_validator(dir.string(), &out), 0) << out;
+  }
+}
+
+TEST(Stats, MissingStatsSaysWhichCommandMakesThem) {
+  const auto dir = testing::temp_dir("nostats");
+  const DatasetManifest m = write_synthetic_dataset(dir.string(), 1, 0, 0);
+  try {
+    load_stats_or_explain(m);
+    FAIL() << "accepted a data set without stats.h5";
+  } catch (const DatasetError& e) {
+    EXPECT_NE(std::string(e.what()).find("layersnet prepare " + dir.string()), std::string::npos) << e.what();
+  }
+}
+
+TEST(Wind, SegmentsAndDirections) {
+  SyntheticOptions o;
+  o.wind = true;
+  o.frames = 9;
+  const Sequence s = make_synthetic_sequence(o);
+  const auto seg = wind_segments(s.info);
+  ASSERT_EQ(seg.size(), 3u);
+  EXPECT_EQ(seg[0].begin, 0);
+  EXPECT_EQ(seg[0].end, 3);
+  EXPECT_EQ(seg[0].strength, 0.f);
+  EXPECT_EQ(seg[2].strength, 300.f);
+  // Identity quaternion blows along +z; the all-zero quaternion is the identity.
+  EXPECT_TRUE(wind_direction(Eigen::Vector4f(1, 0, 0, 0)).isApprox(Eigen::Vector3f(0, 0, 1)));
+  EXPECT_TRUE(quaternion_matrix(Eigen::Vector4f::Zero()).isIdentity());
+  // 90 degrees about x: +z -> -y.
+  const float h = std::sqrt(0.5f);
+  EXPECT_TRUE(wind_direction(Eigen::Vector4f(h, h, 0, 0)).isApprox(Eigen::Vector3f(0, -1, 0), 1e-5f));
+  o.wind = false;
+  EXPECT_TRUE(wind_segments(make_synthetic_sequence(o).info).empty());
+}
+
+TEST(Cli, PrepareThenInspect) {
+  if (!std::filesystem::exists(LAYERSNET_BINARY)) GTEST_SKIP() << "layersnet binary not built";
+  const auto dir = testing::temp_dir("cli");
+  SyntheticOptions o;
+  o.garments = 2;
+  o.wind = true;
+  write_synthetic_dataset(dir.string(), 2, 1, 1, o);
+  int status = 0;
+  std::string out = run(std::string(LAYERSNET_BINARY) + " inspect " + dir.string(), &status);
+  EXPECT_EQ(status, 0) << out;
+  EXPECT_NE(out.find("4 sequences (train 2, val 1, test 1)"), std::string::npos) << out;
+  EXPECT_NE(out.find("stats.h5: missing (create it with `layersnet prepare"), std::string::npos) << out;
+  EXPECT_NE(out.find("garment g1_jacket"), std::string::npos) << out;
+  EXPECT_NE(out.find("wind: 3 segment(s)"), std::string::npos) << out;
+  EXPECT_NE(out.find("wind: none"), std::string::npos) << out;
+  out = run(std::string(LAYERSNET_BINARY) + " prepare " + dir.string(), &status);
+  EXPECT_EQ(status, 0) << out;
+  EXPECT_TRUE(std::filesystem::exists(dir / "stats.h5"));
+  out = run(std::string(LAYERSNET_BINARY) + " inspect --check " + dir.string(), &status);
+  EXPECT_EQ(status, 0) << out;
+  EXPECT_NE(out.find("stats.h5: from 2 training sequences"), std::string::npos) << out;
+  // A broken data set: the error names the file and the problem, exit status 1.
+  std::filesystem::resize_file(dir / "s0001.h5", 100);
+  out = run(std::string(LAYERSNET_BINARY) + " inspect " + dir.string(), &status);
+  EXPECT_EQ(status, 1) << out;
+  EXPECT_NE(out.find("s0001.h5: /: cannot be opened as HDF5"), std::string::npos) << out;
+}
+
+}  // namespace
+}  // namespace layersnet::dataset
