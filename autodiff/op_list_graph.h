@@ -11,4 +11,5 @@
   X(RowNormalize, row_normalize)    \
   X(Cross3, cross3)                 \
   X(Rotate3, rotate3)               \
-  X(RotMapApply, rot_map_apply)
+  X(RotMapApply, rot_map_apply)     \
+  X(RotInvAttention, rot_inv_attention)

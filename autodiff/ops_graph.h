@@ -53,4 +53,5 @@ void check_indices(const char* what, std::span<const int32_t> idx, int64_t bound
 
 }  // namespace layersnet::ad
 
+#include "autodiff/ops_attention.h"
 #include "autodiff/ops_geometry.h"

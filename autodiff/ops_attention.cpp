@@ -1,0 +1,294 @@
+#include "autodiff/ops_attention.h"
+
+#include "autodiff/ops_graph.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace layersnet::ad {
+
+namespace {
+
+constexpr int64_t kParallelMin = int64_t{1} << 14;
+
+// Sizes and pointers shared by the kernels. All matrices row-major.
+template <class T>
+struct RiaProblem {
+  int64_t n_recv = 0, n_send = 0, heads = 0, dim = 0;  // P, M, H, D
+  const int32_t* offsets = nullptr;                    // (P+1)
+  const int32_t* senders = nullptr;                    // (E)
+  const int32_t* kinds = nullptr;                      // (E)
+  const uint32_t* head_kinds = nullptr;                // (H)
+  uint32_t message_kinds = 0;
+  T scale = 0, eps = 0;
+  const T* q = nullptr;  // (P, H*D)
+  const T* r = nullptr;  // (P, H*D)
+  const T* s = nullptr;  // (M, H*D)
+
+  int64_t width() const { return heads * dim; }
+  bool attends(int64_t e, int64_t h) const { return (head_kinds[h] >> kinds[e]) & 1u; }
+  bool messages(int64_t e) const { return (message_kinds >> kinds[e]) & 1u; }
+};
+
+// Forward for all receivers. a, rho, w: (E, H); out: (P, H*D), overwritten.
+template <class T>
+void ria_forward(const RiaProblem<T>& pb, T* a, T* rho, T* w, T* out) {
+  const int64_t H = pb.heads, D = pb.dim, C = pb.width();
+#pragma omp parallel for schedule(dynamic, 16) if (int64_t{pb.offsets[pb.n_recv]} * C > kParallelMin)
+  for (int64_t i = 0; i < pb.n_recv; ++i) {
+    const int64_t e0 = pb.offsets[i], e1 = pb.offsets[i + 1];
+    std::fill_n(out + i * C, C, T(0));
+    for (int64_t h = 0; h < H; ++h) {
+      const T* qi = pb.q + i * C + h * D;
+      const T* ri = pb.r + i * C + h * D;
+      T zmax = -std::numeric_limits<T>::infinity();
+      for (int64_t e = e0; e < e1; ++e) {
+        const int64_t k = e * H + h;
+        if (!pb.attends(e, h)) {
+          a[k] = 0, rho[k] = 0, w[k] = 0;
+          continue;
+        }
+        const T* sj = pb.s + int64_t{pb.senders[e]} * C + h * D;
+        T dist2 = 0, c = 0;
+        for (int64_t d = 0; d < D; ++d) {
+          const T u = ri[d] - sj[d];
+          dist2 += u * u;
+          c += qi[d] * (sj[d] + ri[d]);
+        }
+        rho[k] = std::sqrt(dist2 + pb.eps * pb.eps);
+        a[k] = T(2) * pb.scale * c / rho[k];  // the logit, until normalised below
+        zmax = std::max(zmax, a[k]);
+      }
+      T sum = 0;
+      for (int64_t e = e0; e < e1; ++e)
+        if (pb.attends(e, h)) sum += (a[e * H + h] = std::exp(a[e * H + h] - zmax));
+      if (sum == T(0)) continue;  // no attended edge: zero output for this head
+      const T inv = T(1) / sum;
+      T* oi = out + i * C + h * D;
+      for (int64_t e = e0; e < e1; ++e) {
+        const int64_t k = e * H + h;
+        if (!pb.attends(e, h)) continue;
+        a[k] *= inv;
+        w[k] = a[k] / rho[k];
+        if (!pb.messages(e)) continue;
+        const T* sj = pb.s + int64_t{pb.senders[e]} * C + h * D;
+        for (int64_t d = 0; d < D; ++d) oi[d] += w[k] * (sj[d] + ri[d]);
+      }
+    }
+  }
+}
+
+// Backward, receiver part. g_out: (P, H*D); g_w: (E, H); adds into gq, gr (P, H*D) when
+// non-null and writes the per-edge sender gradient ds_edge (E, H*D) when non-null.
+template <class T>
+void ria_backward_receivers(const RiaProblem<T>& pb, const T* a, const T* rho, const T* g_out, const T* g_w, T* gq,
+                            T* gr, T* ds_edge) {
+  const int64_t H = pb.heads, D = pb.dim, C = pb.width();
+  const T two_scale = T(2) * pb.scale;
+#pragma omp parallel for schedule(dynamic, 16) if (int64_t{pb.offsets[pb.n_recv]} * C > kParallelMin)
+  for (int64_t i = 0; i < pb.n_recv; ++i) {
+    const int64_t e0 = pb.offsets[i], e1 = pb.offsets[i + 1];
+    for (int64_t h = 0; h < H; ++h) {
+      const T* qi = pb.q + i * C + h * D;
+      const T* ri = pb.r + i * C + h * D;
+      const T* gi = g_out + i * C + h * D;
+      // dL/dw_e: from the message (if any) and from the weights output.
+      const auto d_weight = [&](int64_t e, const T* sj) {
+        T dw = g_w[e * H + h];
+        if (pb.messages(e))
+          for (int64_t d = 0; d < D; ++d) dw += gi[d] * (sj[d] + ri[d]);
+        return dw;
+      };
+      // Softmax backward needs sum_e a_e * dL/da_e over the segment first.
+      T sum_ada = 0;
+      for (int64_t e = e0; e < e1; ++e) {
+        if (!pb.attends(e, h)) continue;
+        const int64_t k = e * H + h;
+        sum_ada += a[k] * d_weight(e, pb.s + int64_t{pb.senders[e]} * C + h * D) / rho[k];
+      }
+      for (int64_t e = e0; e < e1; ++e) {
+        T* dse = ds_edge ? ds_edge + e * C + h * D : nullptr;
+        if (!pb.attends(e, h)) {
+          if (dse) std::fill_n(dse, D, T(0));
+          continue;
+        }
+        const int64_t k = e * H + h;
+        const T* sj = pb.s + int64_t{pb.senders[e]} * C + h * D;
+        const T dw = d_weight(e, sj);
+        const T inv_rho = T(1) / rho[k];
+        const T da = dw * inv_rho;                // w = a / rho
+        const T dz = a[k] * (da - sum_ada);       // softmax
+        T c = 0;
+        for (int64_t d = 0; d < D; ++d) c += qi[d] * (sj[d] + ri[d]);
+        const T dc = two_scale * dz * inv_rho;    // z = 2 scale c / rho
+        const T drho = -(a[k] * dw + two_scale * c * dz) * inv_rho * inv_rho;
+        const T du_coef = drho * inv_rho;         // rho = sqrt(|u|^2 + eps^2), u = r - s
+        const T msg = pb.messages(e) ? a[k] * inv_rho : T(0);
+        for (int64_t d = 0; d < D; ++d) {
+          const T p = sj[d] + ri[d];
+          const T dp = msg * gi[d] + dc * qi[d];
+          const T du = du_coef * (ri[d] - sj[d]);
+          if (gq) gq[i * C + h * D + d] += dc * p;
+          if (gr) gr[i * C + h * D + d] += dp + du;
+          if (dse) dse[d] = dp - du;
+        }
+      }
+    }
+  }
+}
+
+// gs[j] += sum over edges of sender j (in edge order) of ds_edge[e].
+// by_sender: (M+1) CSR offsets, edges: (E) edge ids grouped by sender, ascending.
+template <class T>
+void ria_backward_senders(int64_t n_send, int64_t width, const int32_t* by_sender, const int32_t* edges,
+                          const T* ds_edge, T* gs) {
+#pragma omp parallel for schedule(static) if (int64_t{by_sender[n_send]} * width > kParallelMin)
+  for (int64_t j = 0; j < n_send; ++j) {
+    T* dst = gs + j * width;
+    for (int64_t k = by_sender[j]; k < by_sender[j + 1]; ++k) {
+      const T* src = ds_edge + int64_t{edges[k]} * width;
+      for (int64_t c = 0; c < width; ++c) dst[c] += src[c];
+    }
+  }
+}
+
+// Counting sort of the edges by sender (stable: ascending edge id within a sender).
+void transpose_csr(std::span<const int32_t> senders, int64_t n_send, int32_t* by_sender, int32_t* edges) {
+  std::fill_n(by_sender, n_send + 1, 0);
+  for (int32_t j : senders) ++by_sender[j + 1];
+  for (int64_t j = 0; j < n_send; ++j) by_sender[j + 1] += by_sender[j];
+  // by_sender[j] doubles as the fill cursor of sender j, then is shifted back (no allocation).
+  for (std::size_t e = 0; e < senders.size(); ++e) edges[by_sender[senders[e]]++] = static_cast<int32_t>(e);
+  for (int64_t j = n_send; j > 0; --j) by_sender[j] = by_sender[j - 1];
+  by_sender[0] = 0;
+}
+
+template <class T>
+RiaProblem<T> make_problem(const Node<T>& node) {
+  RiaProblem<T> pb;
+  const Var<T>& q = node.in[0];
+  const Var<T>& s = node.in[2];
+  const int64_t n_edges = node.idx_len[1];
+  pb.n_recv = q.rows;
+  pb.n_send = s.rows;
+  pb.heads = node.i[0];
+  pb.dim = node.i[2];
+  pb.message_kinds = static_cast<uint32_t>(node.i[1]);
+  pb.offsets = node.idx[0];
+  pb.senders = node.idx[1];
+  pb.kinds = node.idx[2];
+  pb.head_kinds = reinterpret_cast<const uint32_t*>(node.idx[2] + n_edges);
+  pb.scale = node.s[0];
+  pb.eps = node.s[1];
+  pb.q = q.value;
+  pb.r = node.in[1].value;
+  pb.s = s.value;
+  return pb;
+}
+
+}  // namespace
+
+std::vector<uint32_t> layersnet_head_kinds(int64_t heads) {
+  std::vector<uint32_t> table(static_cast<std::size_t>(heads));
+  for (int64_t h = 0; h < heads; ++h)
+    table[static_cast<std::size_t>(h)] = h % 2 == 0 ? (1u << kRiaWorld) | (1u << kRiaInter) : (1u << kRiaMesh);
+  return table;
+}
+
+// Node: in[0] = q, in[1] = r, in[2] = s, in[3] = the weights output (a second output: its
+// gradient is read, never written); idx[0] = offsets (P+1), idx[1] = senders (E),
+// idx[2] = one int32 block [kinds (E) | head_kinds (H) | by_sender (M+1) | edges (E)];
+// i[0] = H, i[1] = message_kinds, i[2] = D; s[0] = scale, s[1] = eps;
+// saved = [a (E*H) | rho (E*H) | ds_edge (E*H*D), only when s needs a gradient].
+template <class T>
+RiaResult<T> rot_inv_attention(Tape<T>& tape, const Var<T>& q, const Var<T>& r, const Var<T>& s,
+                               const RiaGraph& graph, T scale, T eps) {
+  const auto H = static_cast<int64_t>(graph.head_kinds.size());
+  const auto n_edges = static_cast<int64_t>(graph.senders.size());
+  LAYERSNET_CHECK(H > 0 && q.cols % H == 0, "rot_inv_attention: " << q.cols << " columns do not split into " << H
+                                                                    << " heads (one head_kinds entry per head)");
+  LAYERSNET_CHECK(r.rows == q.rows && r.cols == q.cols && s.cols == q.cols,
+                  "rot_inv_attention: q (" << q.rows << ", " << q.cols << "), r (" << r.rows << ", " << r.cols
+                                           << "), s (" << s.rows << ", " << s.cols
+                                           << "); q and r must match and s needs the same width");
+  LAYERSNET_CHECK(static_cast<int64_t>(graph.kinds.size()) == n_edges,
+                  "rot_inv_attention: " << graph.kinds.size() << " edge kinds for " << n_edges << " edges");
+  LAYERSNET_CHECK(static_cast<int64_t>(graph.offsets.size()) == q.rows + 1,
+                  "rot_inv_attention: offsets need P+1 = " << q.rows + 1 << " entries, got " << graph.offsets.size());
+  LAYERSNET_CHECK(eps > T(0), "rot_inv_attention: eps must be positive, got " << eps);
+  check_csr("rot_inv_attention", graph.offsets, n_edges);
+  check_indices("rot_inv_attention senders", graph.senders, s.rows);
+  check_indices("rot_inv_attention kinds", graph.kinds, 32);
+
+  RiaProblem<T> pb;
+  pb.n_recv = q.rows;
+  pb.n_send = s.rows;
+  pb.heads = H;
+  pb.dim = q.cols / H;
+  pb.offsets = graph.offsets.data();
+  pb.senders = graph.senders.data();
+  pb.kinds = graph.kinds.data();
+  pb.head_kinds = graph.head_kinds.data();
+  pb.message_kinds = graph.message_kinds;
+  pb.scale = scale;
+  pb.eps = eps;
+  pb.q = q.value;
+  pb.r = r.value;
+  pb.s = s.value;
+
+  const bool grad = tape.wants_grad({q, r, s});
+  RiaResult<T> res{tape.new_var(q.rows, q.cols, grad), tape.new_var(n_edges, H, grad)};
+  const bool s_grad = grad && s.grad;
+  T* saved = tape.scratch(static_cast<std::size_t>(2 * n_edges * H + (s_grad ? n_edges * q.cols : 0)));
+  ria_forward(pb, saved, saved + n_edges * H, res.weights.value, res.out.value);
+  if (!grad) return res;
+
+  Node<T>& node = tape.record(OpKind::RotInvAttention, res.out, {q, r, s, res.weights});
+  node.idx[0] = tape.copy_indices(graph.offsets);
+  node.idx[1] = tape.copy_indices(graph.senders);
+  node.idx_len[0] = q.rows + 1;
+  node.idx_len[1] = n_edges;
+  const int64_t n_ints = n_edges + H + (s.rows + 1) + n_edges;
+  int32_t* ints = tape.arena().template allocate_array<int32_t>(static_cast<std::size_t>(n_ints));
+  std::copy(graph.kinds.begin(), graph.kinds.end(), ints);
+  for (int64_t h = 0; h < H; ++h) ints[n_edges + h] = static_cast<int32_t>(graph.head_kinds[static_cast<std::size_t>(h)]);
+  if (s_grad) transpose_csr(graph.senders, s.rows, ints + n_edges + H, ints + n_edges + H + s.rows + 1);
+  node.idx[2] = ints;
+  node.idx_len[2] = n_ints;
+  node.i[0] = H;
+  node.i[1] = graph.message_kinds;
+  node.i[2] = pb.dim;
+  node.s[0] = scale;
+  node.s[1] = eps;
+  node.saved = saved;
+  return res;
+}
+
+template <class T>
+void backward_rot_inv_attention(const Node<T>& node) {
+  const RiaProblem<T> pb = make_problem(node);
+  const Var<T>& q = node.in[0];
+  const Var<T>& r = node.in[1];
+  const Var<T>& s = node.in[2];
+  const Var<T>& w = node.in[3];
+  const int64_t n_edges = node.idx_len[1];
+  const T* a = node.saved;
+  const T* rho = node.saved + n_edges * pb.heads;
+  T* ds_edge = s.grad ? node.saved + 2 * n_edges * pb.heads : nullptr;
+  ria_backward_receivers(pb, a, rho, node.out.grad, w.grad, q.grad, r.grad, ds_edge);
+  if (s.grad) {
+    const int32_t* by_sender = node.idx[2] + n_edges + pb.heads;
+    ria_backward_senders(pb.n_send, pb.width(), by_sender, by_sender + pb.n_send + 1, ds_edge, s.grad);
+  }
+}
+
+#define LAYERSNET_INSTANTIATE(T)                                                                          \
+  template RiaResult<T> rot_inv_attention<T>(Tape<T>&, const Var<T>&, const Var<T>&, const Var<T>&,       \
+                                             const RiaGraph&, T, T);                                      \
+  template void backward_rot_inv_attention<T>(const Node<T>&);
+LAYERSNET_INSTANTIATE(float)
+LAYERSNET_INSTANTIATE(double)
+#undef LAYERSNET_INSTANTIATE
+
+}  // namespace layersnet::ad
