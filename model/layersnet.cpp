@@ -218,7 +218,7 @@ Var<T> integrate(ad::Tape<T>& tape, const ModelInput<T>& in, const Var<T>& a_loc
 
 template <class T>
 Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfig& cfg, const ModelDims& m,
-                      const ModelInput<T>& in, const Var<T>& emb, const Var<T>& body_x) {
+                      const ModelInput<T>& in, const Var<T>& emb, const Var<T>& body_x, const ForwardOptions& opt) {
   const int64_t N = in.N, P = in.P, d = m.d, U = in.U;
   const bool ret = cfg.rotation_equivalent;
   // Body features with a zero row for "no body vertex within R_b" (index U).
@@ -237,21 +237,13 @@ Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
     Wt = ad::linear(tape, constant(tape, eye3, 3, 3), W);  // (3, d) = Wᵀ
   }
 
-  // ---- patch branch: [0 (12), φ(R_p) e_p, φ(R_p) h_p] -> MLP -> R_pᵀ a ------------------------------
   const Var<T> Rp = constant(tape, frames_of(in, in.patch_body), P, 9);
   const Var<T> phi_p = ad::gather_rows(tape, body_tab, body_index(in.patch_body));
-  const Var<T> He_p = ret ? ad::rot_map_apply(tape, W, Rp, emb) : emb;
-  const Var<T> Hh_p = ret ? ad::rot_map_apply(tape, W, Rp, phi_p) : phi_p;
-  const Var<T> feat_p = ad::concat_cols(tape, {tape.zeros(P, 12), He_p, Hh_p});
-  const Var<T> a_p = mlp(tape, p, "decoder.proj", 3, false, feat_p);
-  std::vector<T> base_p(P * 6);
-  for (int64_t i = 0; i < P; ++i) std::copy_n(&in.patch_state[12 * i], 6, &base_p[6 * i]);
-  const Var<T> pred_patch = integrate(tape, in, a_p, Rp, ret, base_p);
-
-  // ---- vertex branch over the candidate patches (eq. 12–15) ------------------------------------------------
-  const int64_t Ec = static_cast<int64_t>(in.cand_patches.size());
+  const Var<T> phi_v = ad::gather_rows(tape, body_tab, body_index(in.vertex_body));
   std::vector<T> Rv_host = frames_of(in, in.vertex_body);
   const Var<T> Rv = constant(tape, Rv_host, N, 9);
+  // Candidate rows: owning vertex, its frame, and R_v (s_v − s_p) as four 3-vectors (raw units).
+  const int64_t Ec = static_cast<int64_t>(in.cand_patches.size());
   std::vector<int32_t> cand_vertex(Ec);
   std::vector<T> rel(Ec * 12), Re(Ec * 9);
   for (int64_t v = 0; v < N; ++v)
@@ -259,7 +251,7 @@ Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
       cand_vertex[k] = static_cast<int32_t>(v);
       const T* R = &Rv_host[9 * v];
       std::copy_n(R, 9, &Re[9 * k]);
-      for (int blk = 0; blk < 4; ++blk) {  // R_v (s_v − s_p), four 3-vectors, raw units
+      for (int blk = 0; blk < 4; ++blk) {
         T dlt[3];
         for (int c = 0; c < 3; ++c)
           dlt[c] = in.state[12 * v + 3 * blk + c] - in.patch_state[12 * in.cand_patches[k] + 3 * blk + c];
@@ -267,20 +259,49 @@ Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
           rel[12 * k + 3 * blk + c] = ret ? R[3 * c] * dlt[0] + R[3 * c + 1] * dlt[1] + R[3 * c + 2] * dlt[2] : dlt[c];
       }
     }
-  Var<T> He_v, Hh_v;
-  const Var<T> phi_v = ad::gather_rows(tape, body_tab, body_index(in.vertex_body));
-  if (ret) {
-    // φ(R_v) e_p = W R_v (Wᵀ e_p): Wᵀ e_p once per patch, then 3-vectors per candidate.
-    const Var<T> z_p = ad::linear(tape, emb, Wt);  // (P, 3)
-    const Var<T> z_e = ad::rotate3(tape, constant(tape, Re, Ec, 9), ad::gather_rows(tape, z_p, in.cand_patches));
-    He_v = ad::linear(tape, z_e, W);  // (Ec, d)
-    Hh_v = ad::gather_rows(tape, ad::rot_map_apply(tape, W, Rv, phi_v), cand_vertex);
+  const Var<T> rel_v = constant(tape, rel, Ec, 12);
+
+  Var<T> a_p, a_e;  // decoder outputs (local frame): per patch (P, 3), per candidate (Ec, 3)
+  if (ret && opt.factor_decoder) {
+    // First layer on [rel, R Wᵀe, R Wᵀh] with weight [W1_rel | W1_e W | W1_h W] (exact, rank 3).
+    const Var<T> W1 = p("decoder.proj.0.weight"), b1 = p("decoder.proj.0.bias");
+    const Var<T> M = ad::concat_cols(tape, {ad::slice_cols(tape, W1, 0, 12),
+                                            ad::linear(tape, ad::slice_cols(tape, W1, 12, 12 + d), Wt),
+                                            ad::linear(tape, ad::slice_cols(tape, W1, 12 + d, 12 + 2 * d), Wt)});
+    const Var<T> z_p = ad::linear(tape, emb, Wt);  // Wᵀ e_p  (P, 3)
+    const Var<T> feat_p = ad::concat_cols(tape, {tape.zeros(P, 12), ad::rotate3(tape, Rp, z_p),
+                                                 ad::rotate3(tape, Rp, ad::linear(tape, phi_p, Wt))});
+    const Var<T> zh_v = ad::rotate3(tape, Rv, ad::linear(tape, phi_v, Wt));  // R_v Wᵀ h_v  (N, 3)
+    const Var<T> ze_v = ad::rotate3(tape, constant(tape, Re, Ec, 9), ad::gather_rows(tape, z_p, in.cand_patches));
+    const Var<T> feat_v = ad::concat_cols(tape, {rel_v, ze_v, ad::gather_rows(tape, zh_v, cand_vertex)});
+    auto rest = [&](const Var<T>& f) {
+      const Var<T> h = ad::relu(tape, ad::linear(tape, f, M, b1));
+      const Var<T> h2 = ad::relu(tape, ad::linear(tape, h, p("decoder.proj.1.weight"), p("decoder.proj.1.bias")));
+      return ad::linear(tape, h2, p("decoder.proj.2.weight"), p("decoder.proj.2.bias"));
+    };
+    a_p = rest(feat_p);
+    a_e = rest(feat_v);
   } else {
-    He_v = ad::gather_rows(tape, emb, in.cand_patches);
-    Hh_v = ad::gather_rows(tape, phi_v, cand_vertex);
+    // Patch branch: [0 (12), φ(R_p) e_p, φ(R_p) h_p]; vertex branch: [rel, φ(R_v) e_p, φ(R_v) h_v].
+    const Var<T> He_p = ret ? ad::rot_map_apply(tape, W, Rp, emb) : emb;
+    const Var<T> Hh_p = ret ? ad::rot_map_apply(tape, W, Rp, phi_p) : phi_p;
+    a_p = mlp(tape, p, "decoder.proj", 3, false, ad::concat_cols(tape, {tape.zeros(P, 12), He_p, Hh_p}));
+    Var<T> He_v, Hh_v;
+    if (ret) {
+      const Var<T> z_e = ad::rotate3(tape, constant(tape, Re, Ec, 9),
+                                     ad::gather_rows(tape, ad::linear(tape, emb, Wt), in.cand_patches));
+      He_v = ad::linear(tape, z_e, W);  // W R_v Wᵀ e_p  (Ec, d)
+      Hh_v = ad::gather_rows(tape, ad::rot_map_apply(tape, W, Rv, phi_v), cand_vertex);
+    } else {
+      He_v = ad::gather_rows(tape, emb, in.cand_patches);
+      Hh_v = ad::gather_rows(tape, phi_v, cand_vertex);
+    }
+    a_e = mlp(tape, p, "decoder.proj", 3, false, ad::concat_cols(tape, {rel_v, He_v, Hh_v}));
   }
-  const Var<T> feat_v = ad::concat_cols(tape, {constant(tape, rel, Ec, 12), He_v, Hh_v});
-  const Var<T> a_e = mlp(tape, p, "decoder.proj", 3, false, feat_v);
+  std::vector<T> base_p(P * 6);
+  for (int64_t i = 0; i < P; ++i) std::copy_n(&in.patch_state[12 * i], 6, &base_p[6 * i]);
+  const Var<T> pred_patch = integrate(tape, in, a_p, Rp, ret, base_p);
+
   std::vector<T> inv_count(N);
   for (int64_t v = 0; v < N; ++v)
     inv_count[v] = T(1) / static_cast<T>(std::max(1, in.cand_offsets[v + 1] - in.cand_offsets[v]));
@@ -298,7 +319,8 @@ Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
 }  // namespace
 
 template <class T>
-Predictions<T> forward(ad::Tape<T>& tape, ad::ParamStore<T>& params, const ModelConfig& cfg, const ModelInput<T>& in) {
+Predictions<T> forward(ad::Tape<T>& tape, ad::ParamStore<T>& params, const ModelConfig& cfg, const ModelInput<T>& in,
+                       const ForwardOptions& options) {
   const ModelDims m = model_dims(cfg);
   const ParamView<T> p{params};
   const Graph<T> gr = build_graph(in);
@@ -327,12 +349,12 @@ Predictions<T> forward(ad::Tape<T>& tape, ad::ParamStore<T>& params, const Model
   for (int l = 0; l < m.layers; ++l) st = encoder_layer(tape, p, cfg, m, gr, inter_rot, is_world, l, st);
 
   // ---- decoder ---------------------------------------------------------------------------------------------
-  return decode(tape, p, cfg, m, in, rows_of(st.X, 0, P), body_x);
+  return decode(tape, p, cfg, m, in, rows_of(st.X, 0, P), body_x, options);
 }
 
 template Predictions<float> forward(ad::Tape<float>&, ad::ParamStore<float>&, const ModelConfig&,
-                                    const ModelInput<float>&);
+                                    const ModelInput<float>&, const ForwardOptions&);
 template Predictions<double> forward(ad::Tape<double>&, ad::ParamStore<double>&, const ModelConfig&,
-                                     const ModelInput<double>&);
+                                     const ModelInput<double>&, const ForwardOptions&);
 
 }  // namespace layersnet::model

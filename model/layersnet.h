@@ -30,11 +30,19 @@ struct Predictions {
   ad::Var<T> patch;   // (P, 9)
 };
 
+// Implementation switches that do not change the function (tests compare both ways).
+struct ForwardOptions {
+  // Decoder with RET: φ(R) = W R Wᵀ has rank 3, so the first decoder layer's input
+  // [rel, φ(R) e, φ(R) h] (12 + 2d) is replaced by [rel, R Wᵀe, R Wᵀh] (18) with the
+  // weight [W1_rel | W1_e W | W1_h W] — exact, and the first layer costs 18/(12+2d) as much.
+  bool factor_decoder = true;
+};
+
 // One forward. `params` must come from register_params(config). With the tape recording,
 // backward of anything computed from the predictions reaches every parameter that
 // contributed; with NoRecord it is inference only.
 template <class T>
 Predictions<T> forward(ad::Tape<T>& tape, ad::ParamStore<T>& params, const ModelConfig& config,
-                       const ModelInput<T>& input);
+                       const ModelInput<T>& input, const ForwardOptions& options = {});
 
 }  // namespace layersnet::model

@@ -1,4 +1,6 @@
 // Forward pass: shapes, finiteness, parameter layout and counts.
+#include "autodiff/ops_dense.h"
+#include "autodiff/ops_graph.h"
 #include "model/layersnet.h"
 #include "model/params_layout.h"
 #include "model_test_util.h"
@@ -51,6 +53,35 @@ TEST(ModelForward, ShapesAndFiniteOutputs) {
   ASSERT_EQ(pred.vertex.cols, 9);
   ASSERT_EQ(pred.patch.rows, in.P);
   for (int64_t i = 0; i < pred.vertex.size(); ++i) ASSERT_TRUE(std::isfinite(pred.vertex.value[i]));
+}
+
+// The rank-3 factored decoder is the same function as the explicit φ(R) one, with the same
+// gradients.
+TEST(ModelForward, FactoredDecoderEqualsExplicit) {
+  const ModelConfig c = testing::tiny_config();
+  const auto in = build_model_input(make_synthetic_scene(testing::tiny_scene()), c);
+  ad::ParamStore<double> ps;
+  register_params(ps, c);
+  init_params(ps, c, 4);
+  std::vector<double> out[2], grad[2];
+  for (int k = 0; k < 2; ++k) {
+    ad::Tape<double> tape;
+    ForwardOptions opt;
+    opt.factor_decoder = k == 0;
+    const auto pred = forward(tape, ps, c, in, opt);
+    out[k].assign(pred.vertex.value, pred.vertex.value + pred.vertex.size());
+    out[k].insert(out[k].end(), pred.patch.value, pred.patch.value + pred.patch.size());
+    ps.zero_grads();
+    tape.backward(ad::sum_all(tape, ad::concat_rows(tape, pred.vertex, pred.patch)));
+    grad[k].assign(ps.grads().begin(), ps.grads().end());
+  }
+  ASSERT_EQ(out[0].size(), out[1].size());
+  for (std::size_t i = 0; i < out[0].size(); ++i) ASSERT_NEAR(out[0][i], out[1][i], 1e-12) << i;
+  double gmax = 0, dmax = 0;
+  for (std::size_t i = 0; i < grad[0].size(); ++i)
+    gmax = std::max(gmax, std::abs(grad[1][i])), dmax = std::max(dmax, std::abs(grad[0][i] - grad[1][i]));
+  EXPECT_GT(gmax, 0.0);
+  EXPECT_LT(dmax, 1e-10 * gmax);
 }
 
 }  // namespace
