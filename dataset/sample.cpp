@@ -1,0 +1,184 @@
+// Training sample builder (see sample.h for every tensor's definition).
+#include "dataset/sample.h"
+
+#include "dataset/wind.h"
+
+#include <algorithm>
+
+namespace layersnet::dataset {
+namespace {
+
+// Root-relative positions of all garments at frame f, stacked in layer order: (N, 3).
+Points garments_relative(const SequenceInfo& info, const FrameWindow& w, int f, int n_total) {
+  Points x(n_total, 3);
+  Eigen::Index r = 0;
+  for (int g = 0; g < info.num_garments(); ++g) {
+    const int n = info.garments[g].num_vertices;
+    x.middleRows(r, n) = w.garment_at(g, f, n);
+    r += n;
+  }
+  x.rowwise() -= info.translation.row(f);
+  return x;
+}
+
+Points body_relative(const SequenceInfo& info, const FrameWindow& w, int f) {
+  Points x = w.body_at(f, info.num_body_vertices);
+  x.rowwise() -= info.translation.row(f);
+  return x;
+}
+
+// [p0, v0, p1, v1] -> normalised with position stats on p columns and velocity on v.
+RowMatrix normalise_state(const RowMatrix& s, const NormalisationStats& st) {
+  Eigen::Matrix<float, 1, 12> mean, inv_std;
+  for (int blk = 0; blk < 4; ++blk) {
+    const MeanStd& q = blk % 2 == 0 ? st.position : st.velocity;
+    mean.segment<3>(3 * blk) = q.mean.cast<float>().transpose();
+    inv_std.segment<3>(3 * blk) = q.std.cast<float>().cwiseInverse().transpose();
+  }
+  return ((s.rowwise() - mean).array().rowwise() * inv_std.array()).matrix();
+}
+
+RowMatrix make_state(const Points& p0, const Points& v0, const Points& p1, const Points& v1) {
+  RowMatrix s(p0.rows(), 12);
+  s << p0, v0, p1, v1;
+  return s;
+}
+
+Eigen::Vector3f root_velocity(const SequenceInfo& info, int f) {
+  return (info.translation.row(f) - info.translation.row(f - 1)).transpose();
+}
+Eigen::Vector3f root_acceleration(const SequenceInfo& info, int f) {
+  return (info.translation.row(f) - 2 * info.translation.row(f - 1) + info.translation.row(f - 2)).transpose();
+}
+
+}  // namespace
+
+Eigen::Matrix<float, 1, 5> normalised_attributes(const GarmentAttributes& g, float body_friction) {
+  Eigen::Matrix<float, 1, 5> a;
+  a << (g.tension_stiffness - 15.f) / 85.f, (g.bending_stiffness - 15.f) / 185.f, (g.mass - 0.2f) / 0.6f,
+      (g.self_friction - 40.f) / 40.f, (body_friction - 40.f) / 40.f;
+  return a;
+}
+
+std::shared_ptr<const SequenceStructure> build_structure(const SequenceInfo& info, float patch_size) {
+  auto s = std::make_shared<SequenceStructure>();
+  std::vector<const PatchStructure*> ptrs;
+  for (const auto& g : info.garments) s->garments.push_back(build_patches(g, patch_size));
+  for (const auto& p : s->garments) ptrs.push_back(&p);
+  s->all = concat_patches(ptrs, &s->vertex_offsets, &s->patch_offsets);
+  const int G = info.num_garments();
+  for (int g = 0; g < G; ++g) {
+    s->vertex_garment.insert(s->vertex_garment.end(), s->garments[g].num_vertices, g);
+    s->patch_garment.insert(s->patch_garment.end(), s->garments[g].num_patches, g);
+    s->garment_types.push_back(info.garments[g].type);
+  }
+  std::vector<Eigen::Matrix<float, 1, 5>> rows;
+  for (int g = 0; g < G; ++g) {
+    const auto a = normalised_attributes(info.garments[g].attributes, info.body_friction);
+    auto it = std::find(rows.begin(), rows.end(), a);  // identical vectors share one token
+    s->garment_attribute.push_back(static_cast<int32_t>(it - rows.begin()));
+    if (it == rows.end()) rows.push_back(a);
+  }
+  s->attributes.resize(static_cast<Eigen::Index>(rows.size()), 5);
+  for (size_t i = 0; i < rows.size(); ++i) s->attributes.row(static_cast<Eigen::Index>(i)) = rows[i];
+  return s;
+}
+
+TrainingSample build_sample(const SequenceInfo& info, const FrameWindow& w, int t, const NormalisationStats& st,
+                            std::shared_ptr<const SequenceStructure> structure, const SampleOptions& o) {
+  if (t < 2 || t + 1 >= info.num_frames)
+    throw DatasetError(info.path, "/", "sample frame t = " + std::to_string(t) + " needs frames t-2..t+1 within [0, " +
+                                           std::to_string(info.num_frames) + ")");
+  if (!w.contains(t - 2) || !w.contains(t + 1))
+    throw DatasetError(info.path, "/", "frame window [" + std::to_string(w.first) + ", " +
+                                           std::to_string(w.first + w.count) + ") does not hold frames t-2..t+1 for t = " +
+                                           std::to_string(t));
+  if (!structure) structure = build_structure(info, o.patch_size);
+  const SequenceStructure& S = *structure;
+  const int N = S.num_vertices();
+  TrainingSample s;
+  s.sequence_id = info.path;
+  s.frame = t;
+  s.structure = structure;
+  // Garments: frames t-2 .. t+1.
+  const Points g0 = garments_relative(info, w, t - 2, N), g1 = garments_relative(info, w, t - 1, N);
+  const Points g2 = garments_relative(info, w, t, N), g3 = garments_relative(info, w, t + 1, N);
+  const Points v1 = g1 - g0, v2 = g2 - g1, v3 = g3 - g2;
+  s.state = make_state(g2, v2, g1, v1);
+  s.state_norm = normalise_state(s.state, st);
+  s.target.resize(N, 6);
+  s.target << g3, v3;
+  // Body: frames t-1 .. t+1.
+  const Points b1 = body_relative(info, w, t - 1), b2 = body_relative(info, w, t), b3 = body_relative(info, w, t + 1);
+  s.body_state = make_state(b3, b3 - b2, b2, b2 - b1);
+  s.body_state_norm = normalise_state(s.body_state, st);
+  // Patches: means of member states (raw and normalised), target centres.
+  s.patch_state = patch_means(S.all, s.state);
+  s.patch_state_norm = patch_means(S.all, s.state_norm);
+  s.target_patch_centre = patch_means(S.all, g3);
+  const Points centres = s.patch_state.leftCols<3>();
+  // Root motion, gravity, wind (rows t+1, t).
+  s.root_translation = info.translation.row(t).transpose();
+  s.root_translation_next = info.translation.row(t + 1).transpose();
+  const Eigen::Vector3f g_per_frame = info.gravity / info.fps;  // official g / fps
+  for (int row = 0; row < 2; ++row) {
+    const int f = t + 1 - row;
+    const Eigen::Vector3f rv = root_velocity(info, f), ra = root_acceleration(info, f);
+    s.root_motion_norm.row(row).head<3>() =
+        ((rv.cast<double>() - st.root_velocity.mean).cwiseQuotient(st.root_velocity.std)).cast<float>().transpose();
+    s.root_motion_norm.row(row).tail<3>() =
+        ((ra.cast<double>() - st.root_acceleration.mean).cwiseQuotient(st.root_acceleration.std)).cast<float>().transpose();
+    s.gravity_norm.row(row) = (((g_per_frame - ra).cast<double>() - st.acceleration.mean)
+                                   .cwiseQuotient(st.acceleration.std))
+                                  .cast<float>()
+                                  .transpose();
+  }
+  s.has_wind = info.has_wind;
+  s.wind.resize(info.has_wind ? 2 : 0, 5);
+  if (info.has_wind)
+    for (int row = 0; row < 2; ++row) {
+      const int f = t + 1 - row;
+      s.wind.row(row) << info.wind_rotation.row(f), info.wind_strength[f] / kWindStrengthRange;
+      s.wind_rotation[row] = quaternion_matrix(info.wind_rotation.row(f).transpose());
+    }
+  s.has_layers = info.num_garments() >= 2;
+  // Neighbourhoods (dynamic).
+  s.world_edges = world_edges(centres, S.all.adjacency, o.neighbours.world_radius);
+  s.body_neighbours = body_neighbours(centres, b3, o.neighbours);
+  s.body_normals_next = vertex_normals(b3, info.body_faces, info.up_axis == 'y' ? Eigen::Vector3f::UnitY()
+                                                                                : Eigen::Vector3f::UnitZ());
+  s.vertex_nearest_body = nearest_body(g2, b3);
+  s.patch_nearest_body = nearest_body(centres, b3);
+  s.vertex_body_normal.resize(N, 3);
+  for (int v = 0; v < N; ++v) s.vertex_body_normal.row(v) = s.body_normals_next.row(s.vertex_nearest_body.index[v]);
+  s.patch_body_normal.resize(centres.rows(), 3);
+  for (Eigen::Index p = 0; p < centres.rows(); ++p)
+    s.patch_body_normal.row(p) = s.body_normals_next.row(s.patch_nearest_body.index[p]);
+  return s;
+}
+
+std::vector<int> sample_frames(int T, const FrameSelection& sel) {
+  const int end = sel.max_frames < 0 ? T : std::min(T, sel.start_frame + sel.max_frames);
+  std::vector<int> out;
+  for (int t = sel.start_frame + std::max(sel.first_offset, 2); t + 1 < end; ++t) out.push_back(t);
+  return out;
+}
+
+std::shared_ptr<const SequenceStructure> StructureCache::get(const std::string& id, const SequenceInfo& info) {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (auto it = cache_.find(id); it != cache_.end()) return it->second;
+  }
+  auto s = build_structure(info, patch_size_);
+  std::lock_guard<std::mutex> lock(mutex_);
+  auto [it, inserted] = cache_.emplace(id, s);
+  if (inserted) ++builds_;
+  return it->second;
+}
+
+size_t StructureCache::size() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return cache_.size();
+}
+
+}  // namespace layersnet::dataset

@@ -1,0 +1,153 @@
+// Training samples: every tensor checked against its definition in dataset/sample.h.
+#include "dataset/sample.h"
+#include "dataset/synthetic.h"
+
+#include <gtest/gtest.h>
+
+namespace layersnet::dataset {
+namespace {
+
+NormalisationStats simple_stats() {
+  NormalisationStats s;
+  s.position = {Eigen::Vector3d(0.1, 0.2, 1.0), Eigen::Vector3d(2, 2, 4), 1};
+  s.velocity = {Eigen::Vector3d(0.0, 0.01, 0.0), Eigen::Vector3d(0.5, 0.5, 0.25), 1};
+  s.acceleration = {Eigen::Vector3d(0, 0, -0.1), Eigen::Vector3d(0.1, 0.1, 0.2), 1};
+  s.root_velocity = {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(0.1, 0.1, 1), 1};
+  s.root_acceleration = {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(0.01, 0.01, 1), 1};
+  return s;
+}
+
+Sequence scene(int garments, bool wind) {
+  SyntheticOptions o;
+  o.garments = garments;
+  o.wind = wind;
+  o.frames = 10;
+  return make_synthetic_sequence(o);
+}
+
+TEST(Sample, StatesTargetsAndBodyFollowTheirDefinitions) {
+  const Sequence seq = scene(2, true);
+  const auto st = simple_stats();
+  const int t = 5;
+  const TrainingSample s = build_sample(seq.info, seq.frames, t, st, nullptr);
+  const int N = 2 * seq.info.garments[0].num_vertices, B = seq.info.num_body_vertices;
+  ASSERT_EQ(s.state.rows(), N);
+  ASSERT_EQ(s.state.cols(), 12);
+  ASSERT_EQ(s.body_state.rows(), B);
+  ASSERT_EQ(s.target.cols(), 6);
+  auto rel = [&](int g, int v, int f) {
+    return Eigen::RowVector3f(seq.garment_at(g, f).row(v) - seq.info.translation.row(f));
+  };
+  const int n0 = seq.info.garments[0].num_vertices;
+  for (int v : {0, 17, n0 + 3}) {  // a vertex of each garment
+    const int g = v < n0 ? 0 : 1, lv = v < n0 ? v : v - n0;
+    EXPECT_TRUE(s.state.row(v).segment<3>(0).isApprox(rel(g, lv, t)));
+    EXPECT_TRUE(s.state.row(v).segment<3>(3).isApprox(rel(g, lv, t) - rel(g, lv, t - 1), 1e-4f));
+    EXPECT_TRUE(s.state.row(v).segment<3>(6).isApprox(rel(g, lv, t - 1)));
+    EXPECT_TRUE(s.state.row(v).segment<3>(9).isApprox(rel(g, lv, t - 1) - rel(g, lv, t - 2), 1e-4f));
+    EXPECT_TRUE(s.target.row(v).segment<3>(0).isApprox(rel(g, lv, t + 1)));
+    EXPECT_TRUE(s.target.row(v).segment<3>(3).isApprox(rel(g, lv, t + 1) - rel(g, lv, t), 1e-4f));
+    // Normalised: position columns with position stats, velocity columns with velocity stats.
+    EXPECT_NEAR(s.state_norm(v, 2), (s.state(v, 2) - 1.0f) / 4.f, 1e-5f);
+    EXPECT_NEAR(s.state_norm(v, 4), (s.state(v, 4) - 0.01f) / 0.5f, 1e-5f);
+    EXPECT_NEAR(s.state_norm(v, 11), s.state(v, 11) / 0.25f, 1e-5f);
+  }
+  const Eigen::RowVector3f b_next = seq.body_at(t + 1).row(7) - seq.info.translation.row(t + 1);
+  const Eigen::RowVector3f b_now = seq.body_at(t).row(7) - seq.info.translation.row(t);
+  EXPECT_TRUE(s.body_state.row(7).segment<3>(0).isApprox(b_next));
+  EXPECT_TRUE(s.body_state.row(7).segment<3>(3).isApprox(b_next - b_now, 1e-4f));
+  EXPECT_TRUE(s.body_state.row(7).segment<3>(6).isApprox(b_now));
+  EXPECT_TRUE(s.root_translation_next.isApprox(seq.info.translation.row(t + 1).transpose()));
+}
+
+TEST(Sample, PatchesAttributesAndNeighbours) {
+  const Sequence seq = scene(2, false);
+  const TrainingSample s = build_sample(seq.info, seq.frames, 4, simple_stats(), nullptr);
+  const SequenceStructure& S = *s.structure;
+  ASSERT_EQ(s.patch_state.rows(), S.num_patches());
+  EXPECT_EQ(S.patch_offsets.size(), 3u);
+  EXPECT_EQ(S.vertex_garment.back(), 1);
+  // Patch state = mean of member states.
+  const int p = S.num_patches() - 1;
+  Eigen::Matrix<float, 1, 12> mean = Eigen::Matrix<float, 1, 12>::Zero();
+  for (const int32_t* v = S.all.patch_vertices.begin(p); v != S.all.patch_vertices.end(p); ++v) mean += s.state.row(*v);
+  mean /= static_cast<float>(S.all.patch_vertices.size(p));
+  EXPECT_TRUE(s.patch_state.row(p).isApprox(mean, 1e-5f));
+  // Attributes: official ranges, one row per distinct garment.
+  const auto& a = seq.info.garments[1].attributes;
+  EXPECT_NEAR(S.attributes(S.garment_attribute[1], 2), (a.mass - 0.2f) / 0.6f, 1e-6f);
+  EXPECT_NEAR(S.attributes(S.garment_attribute[1], 4), (seq.info.body_friction - 40.f) / 40.f, 1e-6f);
+  EXPECT_EQ(S.attributes.rows(), 2);
+  // World edges: within R, never mesh-adjacent; inner-outer layer pairs appear.
+  int cross_layer = 0;
+  for (int i = 0; i < s.num_patches(); ++i)
+    for (const int32_t* j = s.world_edges.begin(i); j != s.world_edges.end(i); ++j) {
+      EXPECT_LT((s.patch_state.row(i).head<3>() - s.patch_state.row(*j).head<3>()).norm(), 0.4f);
+      EXPECT_FALSE(std::binary_search(S.all.adjacency.begin(i), S.all.adjacency.end(i), *j));
+      cross_layer += S.patch_garment[i] != S.patch_garment[*j];
+    }
+  EXPECT_GT(cross_layer, 0);
+  // Body neighbours and nearest-body normals.
+  EXPECT_EQ(s.body_neighbours.index.rows(), s.num_patches());
+  EXPECT_EQ(s.body_neighbours.index.cols(), 16);
+  EXPECT_EQ(s.vertex_body_normal.rows(), s.num_vertices());
+  EXPECT_TRUE(s.vertex_body_normal.allFinite());
+  EXPECT_NEAR(s.patch_body_normal.row(0).norm(), 1.f, 1e-5f);
+  EXPECT_TRUE(s.has_layers);
+  EXPECT_FALSE(s.has_wind);
+  EXPECT_EQ(s.wind.rows(), 0);
+}
+
+TEST(Sample, WindGravityAndRootMotionRows) {
+  const Sequence seq = scene(1, true);
+  const auto st = simple_stats();
+  const int t = 7;  // frames 6..8 are in the third wind segment (strength 300)
+  const TrainingSample s = build_sample(seq.info, seq.frames, t, st, nullptr);
+  EXPECT_FALSE(s.has_layers);  // one garment: no layer structure
+  ASSERT_TRUE(s.has_wind);
+  ASSERT_EQ(s.wind.rows(), 2);
+  EXPECT_NEAR(s.wind(0, 4), 300.f / 400.f, 1e-6f);
+  EXPECT_TRUE(s.wind.row(1).head<4>().isApprox(seq.info.wind_rotation.row(t)));
+  EXPECT_TRUE(s.wind_rotation[0].isUnitary(1e-5f));
+  // gravity row for t: (g / fps - a_root(t) - mean_acc) / std_acc
+  const Eigen::Vector3f ra = (seq.info.translation.row(t) - 2 * seq.info.translation.row(t - 1) +
+                              seq.info.translation.row(t - 2)).transpose();
+  const Eigen::Vector3f g = seq.info.gravity / seq.info.fps;
+  EXPECT_NEAR(s.gravity_norm(1, 2), (g.z() - ra.z() + 0.1f) / 0.2f, 1e-4f);
+  EXPECT_NEAR(s.gravity_norm(1, 0), (g.x() - ra.x()) / 0.1f, 1e-3f);
+  const Eigen::Vector3f rv = (seq.info.translation.row(t + 1) - seq.info.translation.row(t)).transpose();
+  EXPECT_NEAR(s.root_motion_norm(0, 0), rv.x() / 0.1f, 1e-4f);
+  // Without wind the root motion is still there.
+  const TrainingSample calm = build_sample(scene(1, false).info, scene(1, false).frames, t, st, nullptr);
+  EXPECT_FALSE(calm.has_wind);
+  EXPECT_NE(calm.root_motion_norm.norm(), 0.f);
+}
+
+TEST(Sample, StaticStructureIsBuiltOncePerSequence) {
+  const Sequence seq = scene(2, false);
+  StructureCache cache;
+  const auto st = simple_stats();
+  std::vector<TrainingSample> samples;
+  for (int t : sample_frames(seq.info.num_frames, {}))
+    samples.push_back(build_sample(seq.info, seq.frames, t, st, cache.get("a", seq.info)));
+  EXPECT_EQ(samples.size(), 7u);  // t = 2..8 of 10 frames
+  EXPECT_EQ(cache.builds(), 1);
+  EXPECT_EQ(samples.front().structure.get(), samples.back().structure.get());
+}
+
+TEST(Sample, OfficialFrameSelectionAndRangeErrors) {
+  const auto f = sample_frames(150, FrameSelection::official());
+  ASSERT_EQ(f.size(), 36u);  // official ep1: inputs 63..98
+  EXPECT_EQ(f.front(), 63);
+  EXPECT_EQ(f.back(), 98);
+  EXPECT_TRUE(sample_frames(60, FrameSelection::official()).empty());
+  const Sequence seq = scene(1, false);
+  EXPECT_THROW(build_sample(seq.info, seq.frames, 1, simple_stats(), nullptr), DatasetError);
+  EXPECT_THROW(build_sample(seq.info, seq.frames, 9, simple_stats(), nullptr), DatasetError);
+  FrameWindow partial = seq.frames;
+  partial.first = 3;  // pretend the window starts at 3: t = 4 lacks t-2 = 2
+  EXPECT_THROW(build_sample(seq.info, partial, 4, simple_stats(), nullptr), DatasetError);
+}
+
+}  // namespace
+}  // namespace layersnet::dataset
