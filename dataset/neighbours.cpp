@@ -62,7 +62,7 @@ Csr world_edges(const Eigen::Ref<const Points>& centres, const Csr& mesh_adjacen
   const int P = static_cast<int>(centres.rows());
   const PointGrid grid(centres, radius);
   std::vector<std::vector<int32_t>> rows(P);
-#pragma omp parallel for schedule(dynamic, 64)
+#pragma omp parallel for schedule(dynamic, 64) if (P > 2048)
   for (int i = 0; i < P; ++i) {
     grid.for_each_within(centres.row(i).transpose(), radius, [&](int32_t j, float) {
       if (j != i && !std::binary_search(mesh_adjacency.begin(i), mesh_adjacency.end(i), j)) rows[i].push_back(j);
@@ -87,7 +87,7 @@ BodyNeighbours body_neighbours(const Eigen::Ref<const Points>& queries, const Ei
   out.hits.assign(Q, 0);
   if (Q == 0 || K <= 0) return out;
   const PointGrid grid(body, o.body_radius);
-#pragma omp parallel
+#pragma omp parallel if (Q > 2048)
   {
     std::vector<std::pair<float, int32_t>> found;  // (key, id): key = index or distance
 #pragma omp for schedule(dynamic, 64)
@@ -134,7 +134,7 @@ NearestBody nearest_body(const Eigen::Ref<const Points>& queries, const Eigen::R
   PointsAdaptor adaptor{body};
   KdTree tree(3, adaptor, nanoflann::KDTreeSingleIndexAdaptorParams(16));
   tree.buildIndex();
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (Q > 4096)
   for (Eigen::Index q = 0; q < Q; ++q) {
     const float pt[3] = {queries(q, 0), queries(q, 1), queries(q, 2)};
     uint32_t idx = 0;

@@ -172,7 +172,14 @@ std::shared_ptr<const SequenceStructure> StructureCache::get(const std::string& 
   auto s = build_structure(info, patch_size_);
   std::lock_guard<std::mutex> lock(mutex_);
   auto [it, inserted] = cache_.emplace(id, s);
-  if (inserted) ++builds_;
+  if (inserted) {
+    ++builds_;
+    insertion_order_.push_back(id);
+    while (cache_.size() > std::max<size_t>(max_entries_, 1)) {
+      cache_.erase(insertion_order_.front());
+      insertion_order_.erase(insertion_order_.begin());
+    }
+  }
   return it->second;
 }
 

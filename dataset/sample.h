@@ -122,18 +122,22 @@ struct FrameSelection {
 std::vector<int> sample_frames(int num_frames, const FrameSelection& selection);
 
 // Caches the static structure per sequence id (thread-safe); the structure is computed
-// once per garment set, not per sample.
+// once per garment set, not per sample. Holds at most max_entries sequences (oldest
+// dropped first) so that memory stays bounded on large data sets.
 class StructureCache {
  public:
-  explicit StructureCache(float patch_size = kDefaultPatchSize) : patch_size_(patch_size) {}
+  explicit StructureCache(float patch_size = kDefaultPatchSize, size_t max_entries = 256)
+      : patch_size_(patch_size), max_entries_(max_entries) {}
   std::shared_ptr<const SequenceStructure> get(const std::string& sequence_id, const SequenceInfo& info);
   size_t size() const;
   int builds() const { return builds_; }
 
  private:
   float patch_size_;
+  size_t max_entries_;
   mutable std::mutex mutex_;
   std::map<std::string, std::shared_ptr<const SequenceStructure>> cache_;
+  std::vector<std::string> insertion_order_;
   int builds_ = 0;
 };
 
