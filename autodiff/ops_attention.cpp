@@ -31,10 +31,11 @@ struct RiaProblem {
   bool messages(int64_t e) const { return (message_kinds >> kinds[e]) & 1u; }
 };
 
-// Forward for all receivers. a, rho, w: (E, H); out: (P, H*D), overwritten.
-template <class T>
-void ria_forward(const RiaProblem<T>& pb, T* a, T* rho, T* w, T* out) {
-  const int64_t H = pb.heads, D = pb.dim, C = pb.width();
+// Forward for all receivers. a, rho, w, cq = q.(s + r): (E, H); out: (P, H*D), overwritten.
+// kD > 0 fixes the head width at compile time (unrolled, vectorised inner loops).
+template <class T, int kD>
+void ria_forward(const RiaProblem<T>& pb, T* a, T* rho, T* cq, T* w, T* out) {
+  const int64_t H = pb.heads, D = kD > 0 ? kD : pb.dim, C = pb.width();
 #pragma omp parallel for schedule(dynamic, 16) if (int64_t{pb.offsets[pb.n_recv]} * C > kParallelMin)
   for (int64_t i = 0; i < pb.n_recv; ++i) {
     const int64_t e0 = pb.offsets[i], e1 = pb.offsets[i + 1];
@@ -46,7 +47,7 @@ void ria_forward(const RiaProblem<T>& pb, T* a, T* rho, T* w, T* out) {
       for (int64_t e = e0; e < e1; ++e) {
         const int64_t k = e * H + h;
         if (!pb.attends(e, h)) {
-          a[k] = 0, rho[k] = 0, w[k] = 0;
+          a[k] = 0, rho[k] = 0, cq[k] = 0, w[k] = 0;
           continue;
         }
         const T* sj = pb.s + int64_t{pb.senders[e]} * C + h * D;
@@ -57,6 +58,7 @@ void ria_forward(const RiaProblem<T>& pb, T* a, T* rho, T* w, T* out) {
           c += qi[d] * (sj[d] + ri[d]);
         }
         rho[k] = std::sqrt(dist2 + pb.eps * pb.eps);
+        cq[k] = c;
         a[k] = T(2) * pb.scale * c / rho[k];  // the logit, until normalised below
         zmax = std::max(zmax, a[k]);
       }
@@ -79,12 +81,13 @@ void ria_forward(const RiaProblem<T>& pb, T* a, T* rho, T* w, T* out) {
   }
 }
 
-// Backward, receiver part. g_out: (P, H*D); g_w: (E, H); adds into gq, gr (P, H*D) when
-// non-null and writes the per-edge sender gradient ds_edge (E, H*D) when non-null.
-template <class T>
-void ria_backward_receivers(const RiaProblem<T>& pb, const T* a, const T* rho, const T* g_out, const T* g_w, T* gq,
-                            T* gr, T* ds_edge) {
-  const int64_t H = pb.heads, D = pb.dim, C = pb.width();
+// Backward, receiver part. a, rho, cq from the forward; g_out: (P, H*D); g_w: (E, H);
+// dw: (E, H) scratch. Adds into gq, gr (P, H*D) when non-null and writes the per-edge sender
+// gradient ds_edge (E, H*D) when non-null.
+template <class T, int kD>
+void ria_backward_receivers(const RiaProblem<T>& pb, const T* a, const T* rho, const T* cq, const T* g_out,
+                            const T* g_w, T* dw_buf, T* gq, T* gr, T* ds_edge) {
+  const int64_t H = pb.heads, D = kD > 0 ? kD : pb.dim, C = pb.width();
   const T two_scale = T(2) * pb.scale;
 #pragma omp parallel for schedule(dynamic, 16) if (int64_t{pb.offsets[pb.n_recv]} * C > kParallelMin)
   for (int64_t i = 0; i < pb.n_recv; ++i) {
@@ -105,7 +108,8 @@ void ria_backward_receivers(const RiaProblem<T>& pb, const T* a, const T* rho, c
       for (int64_t e = e0; e < e1; ++e) {
         if (!pb.attends(e, h)) continue;
         const int64_t k = e * H + h;
-        sum_ada += a[k] * d_weight(e, pb.s + int64_t{pb.senders[e]} * C + h * D) / rho[k];
+        dw_buf[k] = d_weight(e, pb.s + int64_t{pb.senders[e]} * C + h * D);
+        sum_ada += a[k] * dw_buf[k] / rho[k];
       }
       for (int64_t e = e0; e < e1; ++e) {
         T* dse = ds_edge ? ds_edge + e * C + h * D : nullptr;
@@ -115,12 +119,11 @@ void ria_backward_receivers(const RiaProblem<T>& pb, const T* a, const T* rho, c
         }
         const int64_t k = e * H + h;
         const T* sj = pb.s + int64_t{pb.senders[e]} * C + h * D;
-        const T dw = d_weight(e, sj);
+        const T dw = dw_buf[k];
         const T inv_rho = T(1) / rho[k];
         const T da = dw * inv_rho;                // w = a / rho
         const T dz = a[k] * (da - sum_ada);       // softmax
-        T c = 0;
-        for (int64_t d = 0; d < D; ++d) c += qi[d] * (sj[d] + ri[d]);
+        const T c = cq[k];
         const T dc = two_scale * dz * inv_rho;    // z = 2 scale c / rho
         const T drho = -(a[k] * dw + two_scale * c * dz) * inv_rho * inv_rho;
         const T du_coef = drho * inv_rho;         // rho = sqrt(|u|^2 + eps^2), u = r - s
@@ -136,6 +139,19 @@ void ria_backward_receivers(const RiaProblem<T>& pb, const T* a, const T* rho, c
       }
     }
   }
+}
+
+// Head widths used by LayersNet (16 in the encoder) get a compile-time specialisation.
+template <class T>
+void ria_forward_any(const RiaProblem<T>& pb, T* a, T* rho, T* cq, T* w, T* out) {
+  if (pb.dim == 16) ria_forward<T, 16>(pb, a, rho, cq, w, out);
+  else ria_forward<T, 0>(pb, a, rho, cq, w, out);
+}
+template <class T>
+void ria_backward_receivers_any(const RiaProblem<T>& pb, const T* a, const T* rho, const T* cq, const T* g_out,
+                                const T* g_w, T* dw_buf, T* gq, T* gr, T* ds_edge) {
+  if (pb.dim == 16) ria_backward_receivers<T, 16>(pb, a, rho, cq, g_out, g_w, dw_buf, gq, gr, ds_edge);
+  else ria_backward_receivers<T, 0>(pb, a, rho, cq, g_out, g_w, dw_buf, gq, gr, ds_edge);
 }
 
 // gs[j] += sum over edges of sender j (in edge order) of ds_edge[e].
@@ -200,7 +216,8 @@ std::vector<uint32_t> layersnet_head_kinds(int64_t heads) {
 // gradient is read, never written); idx[0] = offsets (P+1), idx[1] = senders (E),
 // idx[2] = one int32 block [kinds (E) | head_kinds (H) | by_sender (M+1) | edges (E)];
 // i[0] = H, i[1] = message_kinds, i[2] = D; s[0] = scale, s[1] = eps;
-// saved = [a (E*H) | rho (E*H) | ds_edge (E*H*D), only when s needs a gradient].
+// saved = [a (E*H) | rho (E*H) | cq = q.(s + r) (E*H) | dw scratch (E*H) |
+//          ds_edge (E*H*D), only when s needs a gradient].
 template <class T>
 RiaResult<T> rot_inv_attention(Tape<T>& tape, const Var<T>& q, const Var<T>& r, const Var<T>& s,
                                const RiaGraph& graph, T scale, T eps) {
@@ -240,8 +257,9 @@ RiaResult<T> rot_inv_attention(Tape<T>& tape, const Var<T>& q, const Var<T>& r, 
   const bool grad = tape.wants_grad({q, r, s});
   RiaResult<T> res{tape.new_var(q.rows, q.cols, grad), tape.new_var(n_edges, H, grad)};
   const bool s_grad = grad && s.grad;
-  T* saved = tape.scratch(static_cast<std::size_t>(2 * n_edges * H + (s_grad ? n_edges * q.cols : 0)));
-  ria_forward(pb, saved, saved + n_edges * H, res.weights.value, res.out.value);
+  const int64_t EH = n_edges * H;
+  T* saved = tape.scratch(static_cast<std::size_t>(grad ? 4 * EH + (s_grad ? n_edges * q.cols : 0) : 3 * EH));
+  ria_forward_any(pb, saved, saved + EH, saved + 2 * EH, res.weights.value, res.out.value);
   if (!grad) return res;
 
   Node<T>& node = tape.record(OpKind::RotInvAttention, res.out, {q, r, s, res.weights});
@@ -273,10 +291,10 @@ void backward_rot_inv_attention(const Node<T>& node) {
   const Var<T>& s = node.in[2];
   const Var<T>& w = node.in[3];
   const int64_t n_edges = node.idx_len[1];
-  const T* a = node.saved;
-  const T* rho = node.saved + n_edges * pb.heads;
-  T* ds_edge = s.grad ? node.saved + 2 * n_edges * pb.heads : nullptr;
-  ria_backward_receivers(pb, a, rho, node.out.grad, w.grad, q.grad, r.grad, ds_edge);
+  const int64_t EH = n_edges * pb.heads;
+  T* ds_edge = s.grad ? node.saved + 4 * EH : nullptr;
+  ria_backward_receivers_any(pb, node.saved, node.saved + EH, node.saved + 2 * EH, node.out.grad, w.grad,
+                             node.saved + 3 * EH, q.grad, r.grad, ds_edge);
   if (s.grad) {
     const int32_t* by_sender = node.idx[2] + n_edges + pb.heads;
     ria_backward_senders(pb.n_send, pb.width(), by_sender, by_sender + pb.n_send + 1, ds_edge, s.grad);
