@@ -29,8 +29,10 @@ Vec3 normalized(Vec3 v) {
   return {v[0] / n, v[1] / n, v[2] / n};
 }
 
-// Official rotation_from_normals (reference §2.5) for a unit normal: rows [x; y; n].
-void frame_from_normal(const Vec3& n_in, double R[9]) {
+}  // namespace
+
+void normal_frame(const double normal[3], double R[9]) {
+  const Vec3 n_in{normal[0], normal[1], normal[2]};
   Vec3 n = normalized(n_in);
   if (n[0] == 0 && n[1] == 0 && n[2] == 0) {
     for (int k = 0; k < 9; ++k) R[k] = (k % 4 == 0) ? 1.0 : 0.0;
@@ -45,6 +47,8 @@ void frame_from_normal(const Vec3& n_in, double R[9]) {
   Vec3 y = cross(n, x);
   for (int c = 0; c < 3; ++c) R[c] = x[c], R[3 + c] = y[c], R[6 + c] = n[c];
 }
+
+namespace {
 
 // Root-relative copy of world positions: x - root.
 std::vector<double> relative(const std::vector<double>& x, const double root[3]) {
@@ -113,6 +117,31 @@ void nearest_points(const std::vector<double>& query, const std::vector<double>&
     index[q] = bi;
     distance[q] = std::sqrt(best);
   }
+}
+
+void decoder_candidates(const std::vector<double>& xt, const std::vector<double>& centre,
+                        const std::vector<int32_t>& own_patch, const std::vector<int32_t>& adj_offsets,
+                        const std::vector<int32_t>& adj_patches, int k_cand, std::vector<int32_t>& offsets,
+                        std::vector<int32_t>& items) {
+  const int64_t N = static_cast<int64_t>(own_patch.size());
+  std::vector<std::vector<int32_t>> cand(N);
+  for (int64_t v = 0; v < N; ++v) {
+    const int32_t own = own_patch[v];
+    if (own < 0) continue;
+    std::vector<std::pair<double, int32_t>> c;
+    for (int32_t k = adj_offsets[own]; k < adj_offsets[own + 1]; ++k) {
+      const int32_t p = adj_patches[k];
+      c.emplace_back(std::sqrt(dist2(row3(xt, v), row3(centre, p))), p);
+    }
+    const std::size_t kk = std::min<std::size_t>(c.size(), static_cast<std::size_t>(k_cand));
+    std::partial_sort(c.begin(), c.begin() + kk, c.end());
+    for (std::size_t j = 0; j < kk; ++j) {
+      const int32_t p = c[j].second;
+      const double pd = std::sqrt(dist2(row3(centre, own), row3(centre, p)));
+      if (p == own || pd == 0 || c[j].first < pd) cand[v].push_back(p);
+    }
+  }
+  to_csr(cand, offsets, items);
 }
 
 ModelInput<double> build_model_input(const SceneWindow& s, const ModelConfig& cfg) {
@@ -256,7 +285,7 @@ ModelInput<double> build_model_input(const SceneWindow& s, const ModelConfig& cf
       r[9 + c] = b0[3 * b + c] - bm[3 * b + c];
     }
     for (int c = 0; c < 12; ++c) r[c] = (r[c] - in.mean12[c]) / in.std12[c];
-    frame_from_normal(row3(body_n, b), &in.body_rot[9 * u]);
+    normal_frame(&body_n[3 * b], &in.body_rot[9 * u]);
   }
 
   // ---- wind and gravity ----------------------------------------------------------------------------------
@@ -284,28 +313,11 @@ ModelInput<double> build_model_input(const SceneWindow& s, const ModelConfig& cf
       in.gravity[9 + 6 * f + c] = (ra[f][c] - st.root_acc_mean[c]) / st.root_acc_std[c];
     }
   in.gravity_rot.resize(9);
-  frame_from_normal({g_raw_t[0], g_raw_t[1], g_raw_t[2]}, in.gravity_rot.data());
+  normal_frame(g_raw_t, in.gravity_rot.data());
 
   // ---- decoder candidates (reference §2.8) -------------------------------------------------------------------
-  std::vector<std::vector<int32_t>> cand(N);
-  const int k_cand = cfg.decoder_patch_candidates;
-  for (int64_t v = 0; v < N; ++v) {
-    const int32_t own = s.own_patch[v];
-    if (own < 0) continue;
-    std::vector<std::pair<double, int32_t>> c;
-    for (int32_t k = s.adj_offsets[own]; k < s.adj_offsets[own + 1]; ++k) {
-      const int32_t p = s.adj_patches[k];
-      c.emplace_back(std::sqrt(dist2(row3(xt, v), row3(centre, p))), p);
-    }
-    const std::size_t kk = std::min<std::size_t>(c.size(), static_cast<std::size_t>(k_cand));
-    std::partial_sort(c.begin(), c.begin() + kk, c.end());
-    for (std::size_t j = 0; j < kk; ++j) {
-      const int32_t p = c[j].second;
-      const double pd = std::sqrt(dist2(row3(centre, own), row3(centre, p)));
-      if (p == own || pd == 0 || c[j].first < pd) cand[v].push_back(p);
-    }
-  }
-  to_csr(cand, in.cand_offsets, in.cand_patches);
+  decoder_candidates(xt, centre, s.own_patch, s.adj_offsets, s.adj_patches, cfg.decoder_patch_candidates,
+                     in.cand_offsets, in.cand_patches);
   validate(in);
   return in;
 }

@@ -26,6 +26,19 @@ namespace layersnet::model {
 
 ModelInput<double> build_model_input(const SceneWindow& scene, const ModelConfig& config);
 
+// Official rotation_from_normals (reference §2.5) of the unit direction of `normal`:
+// R = rows [x; y; n] (world -> local, n -> e_z), x from (1,0,0) with the |n_c| < 1e-7 rule.
+// A zero vector gives the identity.
+void normal_frame(const double normal[3], double R[9]);
+
+// Decoder candidates (reference §2.8): for each vertex, the k nearest (to x_t) patches
+// mesh-adjacent to its own patch, kept if own, or closer to the vertex than to the own
+// patch's centre. xt (N, 3), centre (P, 3), own_patch (N), adjacency CSR over P -> CSR over N.
+void decoder_candidates(const std::vector<double>& xt, const std::vector<double>& centre,
+                        const std::vector<int32_t>& own_patch, const std::vector<int32_t>& adj_offsets,
+                        const std::vector<int32_t>& adj_patches, int k, std::vector<int32_t>& offsets,
+                        std::vector<int32_t>& items);
+
 // 3x3 rotation (row-major, 9 numbers) of a unit quaternion (w, x, y, z); an all-zero
 // quaternion gives the identity (official, reference §1.5).
 void quaternion_to_rotation(const double q[4], double R[9]);
