@@ -245,7 +245,7 @@ GRADCHECK_TEST(RotInvAttention, LayersNetSizedSliceIsThreadCountInvariant) {
   const std::vector<GradcheckInput> in = {
       {random_matrix(P, heads * D, 161)}, {random_matrix(P, heads * D, 162)}, {random_matrix(M, heads * D, 163)}};
   GradcheckOptions opt;
-  opt.max_coords = 24;
+  opt.max_coords = 12;
   expect_gradcheck(OpKind::RotInvAttention, ria_out(g, 0.25), in, opt);
   const int saved = omp_get_max_threads();
   opt.max_coords = 1;
