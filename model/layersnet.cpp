@@ -1,5 +1,7 @@
 #include "model/layersnet.h"
 
+#include "autodiff/ops_attention.h"
+
 #include "model/params_layout.h"
 #include "model/tape_helpers.h"
 
@@ -22,11 +24,16 @@ struct Graph {
   std::vector<T> inter_rot;                       // (Ei, 9) frame of each inter edge's token
   // Mesh heads: mesh adjacency + own attribute token.
   std::vector<int32_t> mesh_offsets, mesh_recv, mesh_send;
+  // The fused op's single list: per receiver world, inter, mesh edges with their kinds.
+  std::vector<int32_t> fused_offsets, fused_send, fused_kind, fused_inter_pos, inter_recv, inter_send;
+  std::vector<uint32_t> head_kinds;  // heads [0, G): world + inter; [G, 2G): mesh
 };
 
 template <class T>
-Graph<T> build_graph(const ModelInput<T>& in) {
+Graph<T> build_graph(const ModelInput<T>& in, int64_t groups) {
   Graph<T> g;
+  for (int64_t h = 0; h < 2 * groups; ++h)
+    g.head_kinds.push_back(h < groups ? (1u << ad::kRiaWorld) | (1u << ad::kRiaInter) : (1u << ad::kRiaMesh));
   const int64_t P = in.P;
   g.P = P, g.A = in.A;
   const int64_t U = in.U, wind_tok = in.has_wind ? U : -1, grav_tok = U + (in.has_wind ? 1 : 0);
@@ -57,6 +64,21 @@ Graph<T> build_graph(const ModelInput<T>& in) {
       g.mesh_recv.push_back(ri), g.mesh_send.push_back(in.mesh_senders[k]);
     g.mesh_recv.push_back(ri), g.mesh_send.push_back(static_cast<int32_t>(P + in.patch_attr[i]));
     g.mesh_offsets.push_back(static_cast<int32_t>(g.mesh_recv.size()));
+  }
+  // Fused list from the two above.
+  g.fused_offsets.push_back(0);
+  for (int64_t i = 0; i < P; ++i) {
+    for (int32_t k = g.joint_offsets[i]; k < g.joint_offsets[i + 1]; ++k) {
+      const bool world = g.joint_is_world[k] != T(0);
+      if (!world) {
+        g.fused_inter_pos.push_back(static_cast<int32_t>(g.fused_send.size()));
+        g.inter_recv.push_back(static_cast<int32_t>(i)), g.inter_send.push_back(g.joint_send[k]);
+      }
+      g.fused_send.push_back(g.joint_send[k]), g.fused_kind.push_back(world ? ad::kRiaWorld : ad::kRiaInter);
+    }
+    for (int32_t k = g.mesh_offsets[i]; k < g.mesh_offsets[i + 1]; ++k)
+      g.fused_send.push_back(g.mesh_send[k]), g.fused_kind.push_back(ad::kRiaMesh);
+    g.fused_offsets.push_back(static_cast<int32_t>(g.fused_send.size()));
   }
   return g;
 }
@@ -133,7 +155,7 @@ Var<T> inter_messages(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
 template <class T>
 Streams<T> encoder_layer(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfig& cfg, const ModelDims& m,
                          const Graph<T>& gr, const Var<T>& inter_rot, const Var<T>& is_world, int layer,
-                         const Streams<T>& st) {
+                         const Streams<T>& st, const ForwardOptions& opt) {
   const std::string pre = "encoder.layers." + std::to_string(layer) + ".";
   const std::string at = pre + "attn.";
   const bool last = layer == m.layers - 1;
@@ -146,28 +168,44 @@ Streams<T> encoder_layer(ad::Tape<T>& tape, const ParamView<T>& p, const ModelCo
   const Var<T> s = ad::add(tape, ad::add(tape, ad::linear(tape, st.X, p(at + "sender_weight.weight")),
                                          ad::linear(tape, st.S, Wm)), st.S);
   const Var<T> q = ad::linear(tape, Xp, p(at + "q_proj.weight"));
-  // Channels [0, d/2): world heads, [d/2, d): mesh heads.
-  const Var<T> qw = ad::slice_cols(tape, q, 0, half), qm = ad::slice_cols(tape, q, half, d);
-  const Var<T> rw = ad::slice_cols(tape, r, 0, half), rm = ad::slice_cols(tape, r, half, d);
-  const Var<T> sw = ad::slice_cols(tape, s, 0, half), sm = ad::slice_cols(tape, s, half, d);
+  Var<T> out;
+  if (cfg.attention == "ria" && opt.fused_attention) {
+    const ad::RiaGraph graph{gr.fused_offsets, gr.fused_send, gr.fused_kind, gr.head_kinds, ad::kLayersnetMessageKinds};
+    const T scale = static_cast<T>(1.0 / std::sqrt(static_cast<double>(m.head_dim)));
+    const auto ria = ad::rot_inv_attention(tape, q, r, s, graph, scale, static_cast<T>(kEps));
+    out = ria.out;
+    if (!gr.fused_inter_pos.empty()) {
+      const Var<T> wi = ad::slice_cols(tape, ad::gather_rows(tape, ria.weights, gr.fused_inter_pos), 0, G);
+      const Var<T> fi = ad::slice_cols(
+          tape, ad::add(tape, ad::gather_rows(tape, r, gr.inter_recv), ad::gather_rows(tape, s, gr.inter_send)), 0, half);
+      const Var<T> u = inter_messages(tape, p, cfg, m, at, fi, inter_rot);
+      const Var<T> msg_inter = ad::segment_sum(tape, head_scale(tape, wi, u, G), gr.inter_offsets);
+      out = ad::concat_cols(tape, {ad::add(tape, ad::slice_cols(tape, out, 0, half), msg_inter),
+                                   ad::slice_cols(tape, out, half, d)});
+    }
+  } else {
+    // Channels [0, d/2): world heads, [d/2, d): mesh heads.
+    const Var<T> qw = ad::slice_cols(tape, q, 0, half), qm = ad::slice_cols(tape, q, half, d);
+    const Var<T> rw = ad::slice_cols(tape, r, 0, half), rm = ad::slice_cols(tape, r, half, d);
+    const Var<T> sw = ad::slice_cols(tape, s, 0, half), sm = ad::slice_cols(tape, s, half, d);
+    // World heads: world patches and inter tokens, one softmax per receiver.
+    const EdgeTerms<T> tw = edge_terms(tape, cfg, m, qw, rw, sw, gr.joint_recv, gr.joint_send);
+    const Var<T> aw = edge_weights(tape, tw, gr.joint_offsets);
+    const Var<T> msg_world = ad::segment_sum(tape, head_scale(tape, ad::mul(tape, aw, is_world), tw.f, G), gr.joint_offsets);
+    Var<T> msg_inter;
+    if (!gr.inter_pos.empty()) {
+      const Var<T> fi = ad::gather_rows(tape, tw.f, gr.inter_pos);
+      const Var<T> ai = ad::gather_rows(tape, aw, gr.inter_pos);
+      const Var<T> u = inter_messages(tape, p, cfg, m, at, fi, inter_rot);
+      msg_inter = ad::segment_sum(tape, head_scale(tape, ai, u, G), gr.inter_offsets);
+    }
+    // Mesh heads: mesh-adjacent patches and the garment's attribute token.
+    const EdgeTerms<T> tm = edge_terms(tape, cfg, m, qm, rm, sm, gr.mesh_recv, gr.mesh_send);
+    const Var<T> am = edge_weights(tape, tm, gr.mesh_offsets);
+    const Var<T> msg_mesh = ad::segment_sum(tape, head_scale(tape, am, tm.f, G), gr.mesh_offsets);
 
-  // World heads: world patches and inter tokens, one softmax per receiver.
-  const EdgeTerms<T> tw = edge_terms(tape, cfg, m, qw, rw, sw, gr.joint_recv, gr.joint_send);
-  const Var<T> aw = edge_weights(tape, tw, gr.joint_offsets);
-  const Var<T> msg_world = ad::segment_sum(tape, head_scale(tape, ad::mul(tape, aw, is_world), tw.f, G), gr.joint_offsets);
-  Var<T> msg_inter;
-  if (!gr.inter_pos.empty()) {
-    const Var<T> fi = ad::gather_rows(tape, tw.f, gr.inter_pos);
-    const Var<T> ai = ad::gather_rows(tape, aw, gr.inter_pos);
-    const Var<T> u = inter_messages(tape, p, cfg, m, at, fi, inter_rot);
-    msg_inter = ad::segment_sum(tape, head_scale(tape, ai, u, G), gr.inter_offsets);
+    out = ad::concat_cols(tape, {msg_inter.value ? ad::add(tape, msg_world, msg_inter) : msg_world, msg_mesh});
   }
-  // Mesh heads: mesh-adjacent patches and the garment's attribute token.
-  const EdgeTerms<T> tm = edge_terms(tape, cfg, m, qm, rm, sm, gr.mesh_recv, gr.mesh_send);
-  const Var<T> am = edge_weights(tape, tm, gr.mesh_offsets);
-  const Var<T> msg_mesh = ad::segment_sum(tape, head_scale(tape, am, tm.f, G), gr.mesh_offsets);
-
-  Var<T> out = ad::concat_cols(tape, {msg_inter.value ? ad::add(tape, msg_world, msg_inter) : msg_world, msg_mesh});
   out = ad::add(tape, ad::mul(tape, out, p(at + "n_weight")), p(at + "n_bias"));
   const Var<T> x_attn = ad::linear(tape, out, p(at + "proj.weight"), p(at + "proj.bias"));
 
@@ -323,7 +361,7 @@ Predictions<T> forward(ad::Tape<T>& tape, ad::ParamStore<T>& params, const Model
                        const ForwardOptions& options) {
   const ModelDims m = model_dims(cfg);
   const ParamView<T> p{params};
-  const Graph<T> gr = build_graph(in);
+  const Graph<T> gr = build_graph(in, m.groups);
   const int64_t P = in.P, A = in.A, U = in.U;
 
   // ---- token encoders ---------------------------------------------------------------------------------
@@ -346,7 +384,7 @@ Predictions<T> forward(ad::Tape<T>& tape, ad::ParamStore<T>& params, const Model
   // ---- simulator -----------------------------------------------------------------------------------------
   const Var<T> inter_rot = constant(tape, gr.inter_rot, static_cast<int64_t>(gr.inter_pos.size()), 9);
   const Var<T> is_world = constant(tape, gr.joint_is_world, static_cast<int64_t>(gr.joint_recv.size()), 1);
-  for (int l = 0; l < m.layers; ++l) st = encoder_layer(tape, p, cfg, m, gr, inter_rot, is_world, l, st);
+  for (int l = 0; l < m.layers; ++l) st = encoder_layer(tape, p, cfg, m, gr, inter_rot, is_world, l, st, options);
 
   // ---- decoder ---------------------------------------------------------------------------------------------
   return decode(tape, p, cfg, m, in, rows_of(st.X, 0, P), body_x, options);

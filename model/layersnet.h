@@ -36,6 +36,10 @@ struct ForwardOptions {
   // [rel, φ(R) e, φ(R) h] (12 + 2d) is replaced by [rel, R Wᵀe, R Wᵀh] (18) with the
   // weight [W1_rel | W1_e W | W1_h W] — exact, and the first layer costs 18/(12+2d) as much.
   bool factor_decoder = true;
+  // RIA through the fused op (autodiff/ops_attention.h) instead of gather/segment composites.
+  // Both compute eq. 7; they differ only in how eps enters the distance (fused:
+  // sqrt(‖r−s‖² + eps²), composite: ‖r−s‖ + eps), i.e. by O(eps / ‖r−s‖) relative.
+  bool fused_attention = true;
 };
 
 // One forward. `params` must come from register_params(config). With the tape recording,

@@ -84,5 +84,33 @@ TEST(ModelForward, FactoredDecoderEqualsExplicit) {
   EXPECT_LT(dmax, 1e-10 * gmax);
 }
 
+// The fused RIA op and the gather/segment composite give the same model (up to how eps
+// enters the distance) and the same gradients.
+TEST(ModelForward, FusedAttentionEqualsComposite) {
+  const ModelConfig c = testing::tiny_config();
+  const auto in = build_model_input(make_synthetic_scene(testing::tiny_scene()), c);
+  ad::ParamStore<double> ps;
+  register_params(ps, c);
+  init_params(ps, c, 6);
+  std::vector<double> out[2], grad[2];
+  for (int k = 0; k < 2; ++k) {
+    ad::Tape<double> tape;
+    ForwardOptions opt;
+    opt.fused_attention = k == 0;
+    const auto pred = forward(tape, ps, c, in, opt);
+    out[k].assign(pred.vertex.value, pred.vertex.value + pred.vertex.size());
+    ps.zero_grads();
+    tape.backward(ad::sum_all(tape, pred.vertex));
+    grad[k].assign(ps.grads().begin(), ps.grads().end());
+  }
+  double omax = 0, odiff = 0, gmax = 0, gdiff = 0;
+  for (std::size_t i = 0; i < out[0].size(); ++i)
+    omax = std::max(omax, std::abs(out[1][i])), odiff = std::max(odiff, std::abs(out[0][i] - out[1][i]));
+  for (std::size_t i = 0; i < grad[0].size(); ++i)
+    gmax = std::max(gmax, std::abs(grad[1][i])), gdiff = std::max(gdiff, std::abs(grad[0][i] - grad[1][i]));
+  EXPECT_LT(odiff, 1e-6 * omax);
+  EXPECT_LT(gdiff, 1e-5 * gmax);
+}
+
 }  // namespace
 }  // namespace layersnet::model
