@@ -1,5 +1,6 @@
 #include "losses/losses.h"
 
+#include "dataset/neighbours.h"
 #include "model/input_builder.h"
 #include "model/params_layout.h"
 #include "model/tape_helpers.h"
@@ -18,17 +19,14 @@ std::vector<double> relative(const std::vector<double>& x, const double root[3])
   return r;
 }
 
-template <class T>
-std::vector<T> column_block(const Var<T>& x, int64_t c0, int64_t c1) {
-  std::vector<T> out(x.rows * (c1 - c0));
-  for (int64_t i = 0; i < x.rows; ++i)
-    for (int64_t c = c0; c < c1; ++c) out[i * (c1 - c0) + (c - c0)] = x.value[i * x.cols + c];
-  return out;
-}
 
+// Rows [r0, r1) of a (rows, 3) array as float points for the k-d tree.
 template <class T>
-std::vector<double> to_double(const std::vector<T>& v) {
-  return std::vector<double>(v.begin(), v.end());
+dataset::Points points(const T* xyz, int64_t r0, int64_t r1, int64_t stride) {
+  dataset::Points out(r1 - r0, 3);
+  for (int64_t i = r0; i < r1; ++i)
+    for (int c = 0; c < 3; ++c) out(i - r0, c) = static_cast<float>(xyz[i * stride + c]);
+  return out;
 }
 
 // Eq. 18 for the query points `x` (Q, 3) against anchors: anchor position and normal per
@@ -113,21 +111,16 @@ LossTerms<T> compute_losses(ad::Tape<T>& tape, ad::ParamStore<T>& params, const 
              lc.normal, out.normal);
   const T eps = static_cast<T>(lc.collision_eps);
   if (lc.collision_body != 0) {
-    std::vector<int32_t> idx;
-    std::vector<double> dist;
-    model::nearest_points(to_double(column_block(pred.vertex, 0, 3)), to_double(tg.body_pos), idx, dist);
     const int64_t B = static_cast<int64_t>(tg.body_pos.size() / 3);
+    const auto idx = dataset::nearest_body(points(pred.vertex.value, 0, N, 9), points(tg.body_pos.data(), 0, B, 3)).index;
     const Var<T> h = ad::gather_rows(tape, model::constant(tape, tg.body_pos, B, 3), idx);
     const Var<T> n = ad::gather_rows(tape, model::constant(tape, tg.body_normals, B, 3), idx);
     add_term(collision_term(tape, x, h, n, eps, out.body_collisions), lc.collision_body, out.collision_body);
   }
   if (layer_term) {
     const int64_t o0 = tg.garment_offsets[G - 1], o1 = tg.garment_offsets[G];
-    const std::vector<T> xv = column_block(pred.vertex, 0, 3);
-    std::vector<double> outer(xv.begin() + 3 * o0, xv.begin() + 3 * o1), inner(xv.begin(), xv.begin() + 3 * o0);
-    std::vector<int32_t> idx;
-    std::vector<double> dist;
-    model::nearest_points(outer, inner, idx, dist);  // indices into [0, o0) = global vertex ids
+    // Indices into the inner vertices [0, o0) = global vertex ids.
+    const auto idx = dataset::nearest_body(points(pred.vertex.value, o0, o1, 9), points(pred.vertex.value, 0, o0, 9)).index;
     const Var<T> xo = model::rows_of(x, o0, o1);
     add_term(collision_term(tape, xo, ad::gather_rows(tape, x, idx), ad::gather_rows(tape, normals, idx), eps,
                             out.layer_collisions),
