@@ -77,6 +77,10 @@ void segment_softmax_forward(const T* z, const int32_t* offsets, int64_t n_seg, 
     for (int64_t h = 0; h < heads; ++h) {
       T zmax = -std::numeric_limits<T>::infinity();
       for (int64_t e = e0; e < e1; ++e) zmax = std::max(zmax, z[e * heads + h]);
+      if (zmax == -std::numeric_limits<T>::infinity()) {  // every logit masked with -inf: all zero
+        for (int64_t e = e0; e < e1; ++e) a[e * heads + h] = 0;
+        continue;
+      }
       T sum = 0;
       for (int64_t e = e0; e < e1; ++e) sum += (a[e * heads + h] = std::exp(z[e * heads + h] - zmax));
       const T inv = T(1) / sum;  // sum >= 1: the maximum contributes exp(0)

@@ -37,6 +37,7 @@ Var<T> segment_sum(Tape<T>& tape, const Var<T>& x, std::span<const int32_t> offs
 // Softmax over the rows of each segment, independently per column.
 // logits: (E, H), offsets: (S+1) CSR -> (E, H); each column of a non-empty segment sums to 1.
 // The segment maximum is subtracted first, so logits of +-80 (or +-1e4) do not overflow.
+// A logit of -inf gets weight 0 (masking); a column whose logits are all -inf gets all zeros.
 template <class T>
 Var<T> segment_softmax(Tape<T>& tape, const Var<T>& logits, std::span<const int32_t> offsets);
 
@@ -44,6 +45,20 @@ Var<T> segment_softmax(Tape<T>& tape, const Var<T>& logits, std::span<const int3
 // (e.g. encoder tokens = [patch tokens; attribute tokens], senders = [patches; inter]).
 template <class T>
 Var<T> concat_rows(Tape<T>& tape, const Var<T>& a, const Var<T>& b);
+
+// The same tensor seen as (rows, cols), rows * cols = x.rows * x.cols: a zero-copy alias of
+// the row-major values AND gradient, so no node is needed (e.g. the decoder's (N, 12) relative
+// states as (4N, 3) 3-vectors for rotate3).
+template <class T>
+Var<T> reshape(const Var<T>& x, int64_t rows, int64_t cols) {
+  LAYERSNET_CHECK(rows >= 0 && cols >= 0 && rows * cols == x.rows * x.cols,
+                  "reshape: (" << x.rows << ", " << x.cols << ") has " << x.size() << " entries, not (" << rows
+                               << ", " << cols << ")");
+  Var<T> v = x;
+  v.rows = rows;
+  v.cols = cols;
+  return v;
+}
 
 // Throws unless offsets is a valid CSR over n_rows rows (offsets[0] = 0, non-decreasing,
 // last = n_rows). `what` names the caller for the message.

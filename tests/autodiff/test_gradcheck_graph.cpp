@@ -6,6 +6,8 @@
 
 #include <omp.h>
 
+#include <cmath>
+#include <limits>
 #include <vector>
 
 namespace layersnet::ad::testing {
@@ -206,6 +208,39 @@ GRADCHECK_TEST(ConcatRows, TwoBlocksAndOneRowAndEmpty) {
   EXPECT_TRUE(rep.output.row(3).isApprox(b.row(0)));
   expect_gradcheck(OpKind::ConcatRows, f, {{RowMat<double>(0, 2)}, {b}});
   expect_gradcheck(OpKind::ConcatRows, f, {{a}, {b, false}});
+}
+
+}  // namespace layersnet::ad::testing
+
+namespace layersnet::ad::testing {
+
+TEST(SegmentSoftmax, MinusInfinityMasksAndAllMaskedGivesZeros) {
+  Tape<double> tape;
+  const double inf = std::numeric_limits<double>::infinity();
+  const double z[] = {0.0, -inf, 1.0, -inf, -inf};
+  Var<double> x = tape.leaf(z, 5, 1);
+  Var<double> a = segment_softmax(tape, x, Idx{0, 3, 5});
+  EXPECT_EQ(a.value[1], 0.0);
+  EXPECT_NEAR(a.value[0] + a.value[2], 1.0, 1e-15);
+  EXPECT_EQ(a.value[3], 0.0);
+  EXPECT_EQ(a.value[4], 0.0);
+  std::fill_n(a.grad, 5, 1.0);
+  tape.backward_seeded();
+  for (int k = 0; k < 5; ++k) EXPECT_TRUE(std::isfinite(x.grad[k])) << k;
+}
+
+TEST(Reshape, AliasesValuesAndGradients) {
+  // (2, 6) relative states seen as (4, 3) 3-vectors, rotated, and the gradient arrives in
+  // the (2, 6) tensor.
+  const auto f = [](Tape<double>& t, const std::vector<Var<double>>& v) {
+    return rotate3(t, v[0], reshape(v[1], 4, 3));
+  };
+  const RowMat<double> R = random_matrix(4, 9, 55), x = random_matrix(2, 6, 56);
+  const GradcheckReport rep = expect_gradcheck(OpKind::Rotate3, f, {{R}, {x}});
+  EXPECT_EQ(rep.gradients[1].rows(), 2);
+  Tape<double> tape;
+  Var<double> v = tape.leaf(x.data(), 2, 6);
+  EXPECT_THROW(reshape(v, 5, 3), CheckError);
 }
 
 }  // namespace layersnet::ad::testing
