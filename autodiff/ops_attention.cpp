@@ -112,11 +112,8 @@ void ria_backward_receivers(const RiaProblem<T>& pb, const T* a, const T* rho, c
         sum_ada += a[k] * dw_buf[k] / rho[k];
       }
       for (int64_t e = e0; e < e1; ++e) {
+        if (!pb.attends(e, h)) continue;  // its ds_edge slice is never read
         T* dse = ds_edge ? ds_edge + e * C + h * D : nullptr;
-        if (!pb.attends(e, h)) {
-          if (dse) std::fill_n(dse, D, T(0));
-          continue;
-        }
         const int64_t k = e * H + h;
         const T* sj = pb.s + int64_t{pb.senders[e]} * C + h * D;
         const T dw = dw_buf[k];
@@ -154,17 +151,22 @@ void ria_backward_receivers_any(const RiaProblem<T>& pb, const T* a, const T* rh
   else ria_backward_receivers<T, 0>(pb, a, rho, cq, g_out, g_w, dw_buf, gq, gr, ds_edge);
 }
 
-// gs[j] += sum over edges of sender j (in edge order) of ds_edge[e].
+// gs[j] += sum over edges of sender j (in edge order) of ds_edge[e], for the head slices
+// that attend to the edge (the others are never written).
 // by_sender: (M+1) CSR offsets, edges: (E) edge ids grouped by sender, ascending.
 template <class T>
-void ria_backward_senders(int64_t n_send, int64_t width, const int32_t* by_sender, const int32_t* edges,
-                          const T* ds_edge, T* gs) {
-#pragma omp parallel for schedule(static) if (int64_t{by_sender[n_send]} * width > kParallelMin)
-  for (int64_t j = 0; j < n_send; ++j) {
-    T* dst = gs + j * width;
+void ria_backward_senders(const RiaProblem<T>& pb, const int32_t* by_sender, const int32_t* edges, const T* ds_edge,
+                          T* gs) {
+  const int64_t H = pb.heads, D = pb.dim, C = pb.width();
+#pragma omp parallel for schedule(static) if (int64_t{by_sender[pb.n_send]} * C > kParallelMin)
+  for (int64_t j = 0; j < pb.n_send; ++j) {
+    T* dst = gs + j * C;
     for (int64_t k = by_sender[j]; k < by_sender[j + 1]; ++k) {
-      const T* src = ds_edge + int64_t{edges[k]} * width;
-      for (int64_t c = 0; c < width; ++c) dst[c] += src[c];
+      const int64_t e = edges[k];
+      const T* src = ds_edge + e * C;
+      for (int64_t h = 0; h < H; ++h)
+        if (pb.attends(e, h))
+          for (int64_t d = h * D; d < (h + 1) * D; ++d) dst[d] += src[d];
     }
   }
 }
@@ -297,7 +299,7 @@ void backward_rot_inv_attention(const Node<T>& node) {
                              node.saved + 3 * EH, q.grad, r.grad, ds_edge);
   if (s.grad) {
     const int32_t* by_sender = node.idx[2] + n_edges + pb.heads;
-    ria_backward_senders(pb.n_send, pb.width(), by_sender, by_sender + pb.n_send + 1, ds_edge, s.grad);
+    ria_backward_senders(pb, by_sender, by_sender + pb.n_send + 1, ds_edge, s.grad);
   }
 }
 
