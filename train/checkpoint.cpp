@@ -1,6 +1,7 @@
 #include "train/checkpoint.h"
 
 #include "dataset/h5.h"
+#include "model/params_layout.h"
 #include "layersnet_version.h"
 
 #include <fcntl.h>
@@ -223,6 +224,14 @@ Checkpoint read_checkpoint(const std::string& path, ad::ParamStore<float>& param
   } catch (const dataset::DatasetError& e) {
     throw CheckpointError(std::string("checkpoint is incomplete or corrupted: ") + e.what());
   }
+}
+
+LoadedModel load_model(const std::string& checkpoint_path) {
+  LoadedModel m;
+  m.config = parse_config_text(read_checkpoint_config(checkpoint_path), checkpoint_path + ":/config");
+  model::register_params(m.params, m.config.model);
+  m.checkpoint = read_checkpoint(checkpoint_path, m.params);
+  return m;
 }
 
 }  // namespace layersnet

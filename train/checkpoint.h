@@ -14,6 +14,7 @@
 // Writes go to "<path>.tmp", are flushed and fsync'ed, then renamed over <path>: a crash at
 // any moment leaves either the old or the new checkpoint, never a torn one.
 #include "autodiff/params.h"
+#include "train/config.h"
 
 #include <cstdint>
 #include <map>
@@ -56,5 +57,14 @@ Checkpoint read_checkpoint(const std::string& path, ad::ParamStore<float>& param
 
 // Only the config text of a checkpoint (to rebuild the model before reading weights).
 std::string read_checkpoint_config(const std::string& path);
+
+// A trained model ready to run: the checkpoint's own config, its parameters laid out by
+// model::register_params for that config, and the rest of the checkpoint.
+struct LoadedModel {
+  Config config;
+  ad::ParamStore<float> params;
+  Checkpoint checkpoint;
+};
+LoadedModel load_model(const std::string& checkpoint_path);
 
 }  // namespace layersnet

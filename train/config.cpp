@@ -287,6 +287,21 @@ void apply_config_file(Config& config, const std::string& path) {
   apply_file(config, path, stack);
 }
 
+Config parse_config_text(const std::string& toml_text, const std::string& origin) {
+  toml::table table;
+  try {
+    table = toml::parse(toml_text, origin);
+  } catch (const toml::parse_error& e) {
+    std::ostringstream msg;
+    msg << origin << ":" << e.source().begin.line << ":" << e.source().begin.column << ": " << e.description();
+    throw ConfigError(msg.str());
+  }
+  if (table.contains("include")) throw ConfigError(origin + ": 'include' is not allowed in an embedded config");
+  Config config;
+  apply_table(config, table, "", origin);
+  return config;
+}
+
 void apply_override(Config& config, const std::string& assignment) {
   const auto eq = assignment.find('=');
   if (eq == std::string::npos || eq == 0)

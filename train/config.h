@@ -62,6 +62,9 @@ class ConfigError : public std::runtime_error {
 Config load_config(const std::vector<std::string>& files, const std::vector<std::string>& overrides = {});
 // Applies one file (and its includes) on top of `config`.
 void apply_config_file(Config& config, const std::string& path);
+// A config from TOML text (e.g. the copy inside a checkpoint); `origin` names it in errors.
+// Includes are not allowed here: the text must be self-contained (to_toml() output is).
+Config parse_config_text(const std::string& toml_text, const std::string& origin);
 // Applies one "section.key=value" (value in TOML syntax; a bare word is a string).
 void apply_override(Config& config, const std::string& assignment);
 

@@ -1,6 +1,8 @@
 // Checkpoints: bit-exact round trip, atomic replacement, and refusal of what does not fit.
 #include "train/checkpoint.h"
 
+#include "model/params_layout.h"
+
 #include <gtest/gtest.h>
 
 #include <filesystem>
@@ -139,6 +141,21 @@ TEST_F(CheckpointTest, TruncatedCorruptedAndForeignFilesAreRefused) {
   EXPECT_THROW(read_checkpoint(corrupted, a), CheckpointError);
 
   EXPECT_THROW(read_checkpoint((dir_ / "missing.h5").string(), a), CheckpointError);
+}
+
+TEST_F(CheckpointTest, LoadModelRebuildsTheModelFromTheEmbeddedConfig) {
+  Config config = load_config({std::string(LAYERSNET_SOURCE_DIR) + "/configs/tiny.toml"});
+  ad::ParamStore<float> params;
+  model::register_params(params, config.model);
+  model::init_params(params, config.model, 7);
+  Checkpoint cp;
+  cp.config_toml = to_toml(config);
+  const std::string path = (dir_ / "model.h5").string();
+  write_checkpoint(path, params, cp);
+  const LoadedModel loaded = load_model(path);
+  EXPECT_EQ(to_toml(loaded.config), cp.config_toml);
+  EXPECT_EQ(loaded.params.entries().size(), params.entries().size());
+  EXPECT_TRUE(same_tensors(params, loaded.params));
 }
 
 }  // namespace
