@@ -12,6 +12,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
@@ -53,9 +54,9 @@ struct GenerateOptions {
 // Quality thresholds; why these values: generate/README.md ("Quality gates").
 struct Gates {
   double max_inside_body_share = 0.02;
-  double max_outer_inside_inner_share = 0.05;
-  double max_edge_stretch = 4.0;
-  double max_p99_edge_stretch = 0.6;
+  double max_outer_inside_inner_share = 0.06;
+  double max_edge_stretch = 8.0;
+  double max_p99_edge_stretch = 1.0;
 };
 
 json read_json(const fs::path& path) {
@@ -65,6 +66,18 @@ json read_json(const fs::path& path) {
     return json::parse(in);
   } catch (const json::exception& e) {
     throw GenerateError(path.string() + ": invalid JSON: " + e.what());
+  }
+}
+
+// Unknown recipe keys are errors (a misspelt key would silently keep a default).
+void check_keys(const json& obj, const std::vector<std::string>& known, const std::string& where) {
+  if (!obj.is_object()) throw GenerateError(where + ": must be a JSON object");
+  for (const auto& [key, value] : obj.items()) {
+    if (std::find(known.begin(), known.end(), key) == known.end()) {
+      std::string list;
+      for (const auto& k : known) list += (list.empty() ? "" : ", ") + k;
+      throw GenerateError(where + ": unknown key '" + key + "' (known: " + list + ")");
+    }
   }
 }
 
@@ -191,6 +204,11 @@ int run_generate(const GenerateOptions& opt) {
   const fs::path script = find_script(opt.script);
   const fs::path recipe_path = find_recipe(opt.recipe);
   json recipe = read_json(recipe_path);
+  check_keys(recipe, {"comment", "count", "seed", "val_fraction", "test_fraction", "max_attempts", "gates", "scene"},
+             recipe_path.string());
+  if (recipe.contains("gates"))
+    check_keys(recipe["gates"], {"max_inside_body_share", "max_outer_inside_inner_share", "max_edge_stretch",
+                                 "max_p99_edge_stretch"}, recipe_path.string() + ": /gates");
   const int count = opt.count >= 0 ? opt.count : recipe.value("count", 8);
   const long long seed = opt.seed >= 0 ? opt.seed : recipe.value("seed", 1LL);
   const int max_attempts = opt.max_attempts > 0 ? opt.max_attempts : recipe.value("max_attempts", 3);

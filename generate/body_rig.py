@@ -159,13 +159,44 @@ def build_rig(mocap, body):
     return rig
 
 
-def bind_body(body, rig):
+def _spread_legs(body, rig, deg):
+    """Turns both thighs outwards by `deg` and makes that the rest pose of body and rig:
+    the MakeHuman thighs touch below the crotch, which leaves no room for trouser legs."""
+    bpy.context.view_layer.objects.active = rig
+    bpy.ops.object.mode_set(mode="POSE")
+    for name, axis in (("LeftUpLeg", (0, -1, 0)), ("RightUpLeg", (0, 1, 0))):
+        pb = rig.pose.bones[name]
+        local_axis = pb.bone.matrix_local.to_3x3().inverted() @ mathutils.Vector(axis)
+        rot = mathutils.Matrix.Rotation(math.radians(deg), 3, local_axis)
+        if pb.rotation_mode == "QUATERNION":
+            pb.rotation_quaternion = rot.to_quaternion()
+        else:
+            pb.rotation_euler = rot.to_euler(pb.rotation_mode)
+    bpy.ops.object.mode_set(mode="OBJECT")
+    bpy.context.view_layer.update()
+    bpy.ops.object.select_all(action="DESELECT")
+    bpy.context.view_layer.objects.active = body
+    body.select_set(True)
+    arm_mod = next(m for m in body.modifiers if m.type == "ARMATURE")
+    bpy.ops.object.modifier_apply(modifier=arm_mod.name)
+    bpy.context.view_layer.objects.active = rig
+    bpy.ops.object.mode_set(mode="POSE")
+    bpy.ops.pose.select_all(action="SELECT")
+    bpy.ops.pose.armature_apply(selected=False)
+    bpy.ops.object.mode_set(mode="OBJECT")
+    mod = body.modifiers.new("Armature", "ARMATURE")
+    mod.object = rig
+
+
+def bind_body(body, rig, leg_spread_deg=0.0):
     """Bone-heat weights; returns (B, nbones) weights and the bone names."""
     bpy.ops.object.select_all(action="DESELECT")
     body.select_set(True)
     rig.select_set(True)
     bpy.context.view_layer.objects.active = rig
     bpy.ops.object.parent_set(type="ARMATURE_AUTO")
+    if leg_spread_deg:
+        _spread_legs(body, rig, leg_spread_deg)
     names = [b.name for b in rig.data.bones]
     w = np.zeros((len(body.data.vertices), len(names)))
     gidx = {g.index: names.index(g.name) for g in body.vertex_groups if g.name in names}

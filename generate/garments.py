@@ -193,7 +193,9 @@ def _rows(z_top, z_bottom, spacing):
 
 def _max_x(z):
     """|x| (scene units) that separates the torso/legs from the arms and hands in the rest pose."""
-    return 0.175 * SCENE_SCALE if z > 0.97 * SCENE_SCALE else 0.25 * SCENE_SCALE
+    if z > 0.97 * SCENE_SCALE:
+        return 0.175 * SCENE_SCALE
+    return 0.25 * SCENE_SCALE if z > 0.88 * SCENE_SCALE else 0.35 * SCENE_SCALE
 
 
 def tube_rings(profile, z_rows, offset_fn, cols, hang_below):
@@ -257,13 +259,22 @@ def pants_garment(name, profile, z_waist, z_crotch, z_hem, offset, spacing, cols
         L = len(top_ids)
         top = np.array(b.pos)[top_ids]
         zc = profile.leg_centre(z_crotch - 0.05 * SCENE_SCALE, side)
-        ang = np.arctan2(top[:, 0] - zc[0], -(top[:, 1] - zc[1]))
+        ang = np.unwrap(np.arctan2(top[:, 0] - zc[0], -(top[:, 1] - zc[1])))
+        if ang[-1] < ang[0]:
+            ang = 2 * ang[0] - ang   # keep counter-clockwise order increasing
+        # The crotch ring's vertices bunch up in angle; going down the leg they spread evenly,
+        # so that hem edges are not a few millimetres long (noisy strain, stiff solver).
+        even = ang[0] + 2 * math.pi * np.arange(L) / L
         ring_ids = [top_ids]
         z_leg = _rows(z_crotch, z_hem, spacing)[1:]
         for j, z in enumerate(z_leg):
             c = profile.leg_centre(z, side)
-            r = _sample(profile.leg_hull(z, side, c), ang) + offset
-            leg_pt = _ring_point(c, ang, r, z)
+            a = ang + min(1.0, (j + 1) / 4.0) * (even - ang)
+            r = _sample(profile.leg_hull(z, side, c), a) + offset
+            leg_pt = _ring_point(c, a, r, z)
+            # Where the thighs touch, the leg hull plus offset would cross the midplane into
+            # the other thigh: keep each trouser leg on its own side of it.
+            leg_pt[:, 0] = side * np.maximum(side * leg_pt[:, 0], 0.003 * SCENE_SCALE)
             w = min(1.0, (j + 1) / 3.0)   # blend the crotch D-shape into the leg tube
             pts = (1 - w) * np.concatenate([top[:, :2], np.full((L, 1), z)], axis=1) + w * leg_pt
             ring_ids.append(b.add_vertices(pts))

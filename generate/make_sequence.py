@@ -35,6 +35,7 @@ DEFAULTS = {
     "frames": 48,                 # stored frames, 30 fps
     "rest_frames": 8,             # body in the rest pose while garments settle
     "ramp_frames": 15,            # rest pose -> mocap blend
+    "leg_spread_deg": 7.0,        # thighs turned apart in the rest pose (room for trousers)
     "decimate_ratio": 0.3,        # 13,380 -> ~4k body vertices
     "cloth_quality": 30,          # solver steps per frame (25 was unstable at x10)
     "clips": ["01_01.bvh", "01_03.bvh"],
@@ -184,12 +185,19 @@ def make_cloth(garments, body_w, bone_names, body_rest, layer_attrs, cfg):
     bpy.context.scene.collection.objects.link(obj)
     pin = np.concatenate([g.pin for g in garments])
     outer = np.concatenate([np.full(len(g.verts), float(i == len(garments) - 1)) for i, g in enumerate(garments)])
-    for name, w in (("pin", pin), ("outer", outer)):
+    # Self-collision only where the layers can meet: the outer layer and the part of the
+    # inner one under it (down to 10 cm below the outer hem). Blender's group lists the
+    # triangles to EXCLUDE; leg-to-leg contacts of trousers are left to the body collider
+    # (they cost most of the solver time otherwise).
+    outer_hem = garments[-1].verts[:, 2].min()
+    no_self = ((outer == 0) & (verts[:, 2] < outer_hem - 0.1 * SCENE_SCALE)).astype(float)
+    for name, w in (("pin", pin), ("outer", outer), ("no_self_collision", no_self)):
         vg = obj.vertex_groups.new(name=name)
         for i in np.nonzero(w > 0)[0]:
             vg.add([int(i)], float(w[i]), "REPLACE")
-    # Skin weights of the nearest torso/leg body vertex (arms would drag the waistband).
-    keep = np.array([not any(k in n for k in body_rig.ARM_BONES + ("Head", "Neck")) for n in bone_names])
+    # Skin weights (they move the pinned waistband / top edge) from the nearest body vertex,
+    # restricted to the pelvis and spine: thigh or arm weights would stretch the band.
+    keep = np.array([n in ("Hips", "LowerBack", "Spine", "Spine1") for n in bone_names])
     dominant = np.argmax(body_w, axis=1)
     torso = np.nonzero(keep[dominant] & (body_w.sum(1) > 0))[0]
     kd = KDTree(len(torso))
@@ -200,7 +208,7 @@ def make_cloth(garments, body_w, bone_names, body_rest, layer_attrs, cfg):
     for vi, p in enumerate(verts):
         _, j, _ = kd.find(p)
         bw = body_w[torso[j]] * keep
-        bw = bw / bw.sum()
+        bw = bw / bw.sum() if bw.sum() > 0 else keep / keep.sum()
         for bi in np.nonzero(bw > 1e-3)[0]:
             name = bone_names[bi]
             if name not in groups:
@@ -226,6 +234,7 @@ def make_cloth(garments, body_w, bone_names, body_rest, layer_attrs, cfg):
     c.use_self_collision = True
     c.self_distance_min = cfg["distance_self"]
     c.self_friction = inner_a["self_friction"]
+    c.vertex_group_self_collisions = "no_self_collision"
     mod.point_cache.frame_start = 1
     mod.point_cache.frame_end = cfg["frames"]
     return obj, offs
@@ -251,10 +260,10 @@ def main():
     scene.gravity = (0.0, 0.0, -9.8)
     scene.frame_start, scene.frame_end = 1, T
     body = body_rig.import_body(cfg["decimate_ratio"])
-    body_rest = body_rig._mesh_world(body)
     mocap = body_rig.import_bvh(clip)
     rig = body_rig.build_rig(mocap, body)
-    body_w, bone_names = body_rig.bind_body(body, rig)
+    body_w, bone_names = body_rig.bind_body(body, rig, cfg["leg_spread_deg"])
+    body_rest = body_rig._mesh_world(body)
     unweighted = int((body_w.sum(1) <= 0).sum())
     ramp_start = 1 + cfg["rest_frames"]
     body_rig.retime_mocap(mocap, rig, bvh_start, speed, ramp_start, yaw, abduction)
@@ -263,7 +272,7 @@ def main():
     del coll
     body.collision.cloth_friction = body_friction
 
-    profile = BodyProfile(body_rest, centre=(0.0, -0.03 * SCENE_SCALE), arm_x=0.25 * SCENE_SCALE)
+    profile = BodyProfile(body_rest, centre=(0.0, -0.03 * SCENE_SCALE), arm_x=0.35 * SCENE_SCALE)
     garments = outfits.build_outfit(profile, inner_kind, outer_kind, rng)
     cloth, offs = make_cloth(garments, body_w, bone_names, body_rest, layer_attrs, cfg)
     add_wind(pivots, (0.0, 0.0, 1.0 * SCENE_SCALE), cfg["field_seed"])
@@ -280,12 +289,15 @@ def main():
     cloth_v = np.zeros((T, N, 3))
     trans = np.zeros((T, 3))
     t0 = time.time()
+    frame_s = []
     for f in range(T):
+        tf = time.time()
         scene.frame_set(f + 1)
         dg = bpy.context.evaluated_depsgraph_get()
         body_v[f] = body_rig.body_mesh_frame(body, dg)
         cloth_v[f] = body_rig._mesh_world_eval(cloth.evaluated_get(dg))
         trans[f] = np.array(rig.matrix_world @ rig.pose.bones["Hips"].head)
+        frame_s.append(time.time() - tf)
     t_sim = time.time() - t0
 
     wind_rot, wind_strength = wind_arrays(pivots, T)
@@ -322,7 +334,7 @@ def main():
         "body_vertices": B, "cloth_vertices": int(N), "unweighted_body_vertices": unweighted,
         "finite": finite, "quality": q,
         "timing": {"setup_s": t_setup, "simulate_s": t_sim, "blender_s_per_frame": t_sim / T,
-                   "gates_s": t_gates},
+                   "gates_s": t_gates, "frame_s": frame_s},
     }
     extra = {"generator": "layersnet generate (Blender cloth, generate/make_sequence.py)",
              "seed": args.seed, "split": args.split, "tag_inner": tags["inner"], "tag_wind": tags["wind"],

@@ -22,7 +22,7 @@ Z_WAIST, Z_CROTCH, Z_HIP, Z_CHEST = 1.00, 0.84, 0.93, 1.22
 def _inner(profile, kind, rng):
     """Returns (garment, offset_fn metres->scene units, z_top) of the inner layer."""
     if kind == "pants_tight":
-        off = rng.uniform(0.025, 0.035)
+        off = rng.uniform(0.02, 0.03)
         hem = rng.uniform(0.10, 0.30)
         g = pants_garment("pants", profile, Z_WAIST * S, Z_CROTCH * S, hem * S, off * S, SPACING * S, COLS)
         return g, (lambda z: off * S), Z_WAIST
