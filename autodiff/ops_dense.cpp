@@ -111,36 +111,78 @@ void unary_backward(const Var<T>& x, const Var<T>& out, F&& f) {
 }  // namespace
 
 // ---- linear -----------------------------------------------------------------------------
-// The kernels: out = x Wᵀ + b as ONE GEMM accumulating into out pre-filled with the bias
-// (Eigen's `=` product would zero-fill first anyway, so the bias is free), and backward as
-// two GEMMs that accumulate straight into the gradients (no temporaries).
+// Threads: our loop owns them, Eigen runs single-threaded inside each chunk of rows.
+// Eigen's own threaded GEMM synchronises its threads by spinning once per panel of the
+// inner dimension; for dW = dyᵀ x (inner dimension N = 80,000) that is hundreds of spins,
+// ruinous on a shared machine. Independent row chunks need one join per call.
+//
+// Rows are cut into a number of chunks that depends only on N, so dW and db (sums over
+// the chunks, added in chunk order) are bit-identical for any thread count.
 
+namespace {
+
+// 16 chunks for large N (balances 1, 2, 4, 8 threads); chunks of >= 1024 rows otherwise.
+int64_t linear_chunks(int64_t n) { return std::clamp<int64_t>(n / 1024, 1, 16); }
+
+template <class F>
+void for_linear_chunks(int64_t n, int64_t width, F&& f) {
+  const int64_t chunks = linear_chunks(n);
+#pragma omp parallel for schedule(dynamic, 1) if (chunks > 1 && run_parallel(n, width))
+  for (int64_t k = 0; k < chunks; ++k) {
+    const int64_t r0 = n * k / chunks, r1 = n * (k + 1) / chunks;
+    f(k, r0, r1 - r0);
+  }
+}
+
+}  // namespace
+
+// out = x Wᵀ + b as one GEMM per chunk accumulating into rows pre-filled with the bias
+// (Eigen's `=` product would zero-fill first anyway, so the bias costs nothing).
 // x: (N, Cin); W: (Cout, Cin); b: (Cout) or null; out: (N, Cout).
 template <class T>
 void linear_forward(const ConstMatMap<T>& x, const ConstMatMap<T>& W, const T* b, MatMap<T> out) {
-  for_row_blocks(out.rows(), out.cols(), [&](int64_t r0, int64_t n) {
-    if (b) out.middleRows(r0, n).rowwise() = ConstRowVecMap<T>(b, out.cols());
-    else out.middleRows(r0, n).setZero();
+  for_linear_chunks(x.rows(), x.cols() + W.rows(), [&](int64_t, int64_t r0, int64_t n) {
+    auto rows = out.middleRows(r0, n);
+    if (b) rows.rowwise() = ConstRowVecMap<T>(b, out.cols());
+    else rows.setZero();
+    rows.noalias() += x.middleRows(r0, n) * W.transpose();
   });
-  out.noalias() += x * W.transpose();
 }
 
+// dx += dy W (per chunk of rows); dW += Σ_chunks dy_kᵀ x_k; db += Σ_chunks colsum(dy_k).
 // dy: (N, Cout); dx: (N, Cin) or null; dW: (Cout, Cin) or null; db: (Cout) or null.
 template <class T>
 void linear_backward(const ConstMatMap<T>& x, const ConstMatMap<T>& W, const ConstMatMap<T>& dy, T* dx, T* dW,
                      T* db) {
-  const int64_t n = x.rows(), cin = x.cols(), cout = W.rows();
-  if (dx) MatMap<T>(dx, n, cin).noalias() += dy * W;
-  if (dW) MatMap<T>(dW, cout, cin).noalias() += dy.transpose() * x;
-  if (db) {
-    const T* s = reduce_row_blocks<T>(n, cout, cout, [&](int64_t r0, int64_t rows, T* p) {
-      for (int64_t r = r0; r < r0 + rows; ++r) {
-        const T* row = dy.data() + r * cout;
-        for (int64_t c = 0; c < cout; ++c) p[c] += row[c];
-      }
-    });
-    for (int64_t c = 0; c < cout; ++c) db[c] += s[c];
-  }
+  const int64_t n = x.rows(), cin = x.cols(), cout = W.rows(), chunks = linear_chunks(n);
+  // Per-chunk partials [dW_k (cout*cin) | db_k (cout)]; grows once, then reused.
+  static thread_local std::vector<T> partial;
+  const int64_t stride = cout * cin + cout;
+  if (chunks > 1 && (dW || db)) partial.resize(static_cast<std::size_t>(chunks * stride));
+  T* const base = partial.data();  // captured: inside the workers `partial` names THEIR buffer
+  for_linear_chunks(n, cin + cout, [&](int64_t k, int64_t r0, int64_t rows) {
+    const auto dy_k = dy.middleRows(r0, rows);
+    if (dx) MatMap<T>(dx + r0 * cin, rows, cin).noalias() += dy_k * W;
+    if (chunks == 1) {  // no partials: straight into the gradients
+      if (dW) MatMap<T>(dW, cout, cin).noalias() += dy_k.transpose() * x.middleRows(r0, rows);
+      if (db) RowVecMap<T>(db, cout) += dy_k.colwise().sum();
+      return;
+    }
+    T* p = base + k * stride;
+    if (dW) MatMap<T>(p, cout, cin).noalias() = dy_k.transpose() * x.middleRows(r0, rows);
+    if (db) RowVecMap<T>(p + cout * cin, cout) = dy_k.colwise().sum();
+  });
+  if (chunks == 1 || !(dW || db)) return;
+  // Add the partials in chunk order, in parallel over the entries of [dW | db].
+  for_row_blocks(stride / 64 + 1, 64, [&](int64_t b0, int64_t nb) {
+    const int64_t j0 = b0 * 64, j1 = std::min(stride, (b0 + nb) * 64);
+    for (int64_t j = j0; j < j1; ++j) {
+      if (j < cout * cin ? !dW : !db) continue;
+      T acc = 0;
+      for (int64_t k = 0; k < chunks; ++k) acc += base[k * stride + j];
+      (j < cout * cin ? dW[j] : db[j - cout * cin]) += acc;
+    }
+  });
 }
 
 template <class T>

@@ -352,6 +352,21 @@ TEST(DenseForward, MatchesPlainEigen) {
   }
 }
 
+TEST(DenseForward, LinearInChunksMatchesPlainEigen) {
+  // N = 5000 runs linear in 4 row chunks with per-chunk dW/db partials.
+  Tape<double> t;
+  const RowMat<double> X = random_matrix(5000, 7, 80), W = random_matrix(3, 7, 81), b = random_matrix(1, 3, 82);
+  const RowMat<double> G = random_matrix(5000, 3, 83);
+  const auto x = t.leaf(X.data(), 5000, 7), w = t.leaf(W.data(), 3, 7), bb = t.leaf(b.data(), 1, 3);
+  const auto y = linear(t, x, w, bb);
+  EXPECT_TRUE(y.val().isApprox((X * W.transpose()).rowwise() + b.row(0), 1e-12));
+  y.grd() = G;
+  t.backward_seeded();
+  EXPECT_TRUE(x.grd().isApprox(G * W, 1e-12));
+  EXPECT_TRUE(w.grd().isApprox(G.transpose() * X, 1e-12));
+  EXPECT_TRUE(bb.grd().isApprox(G.colwise().sum(), 1e-12));
+}
+
 TEST(DenseForward, ReluAtExactlyZeroHasZeroGradient) {
   Tape<double> t;
   const RowMat<double> z = RowMat<double>::Zero(1, 3);

@@ -1,0 +1,179 @@
+// `layersnet bench linear`: the linear layer (autodiff/ops_dense.h) at LayersNet's shapes
+// against a plain Eigen GEMM of the same shape, in the same run, at 1 and 2 threads.
+//
+// Reference: C.noalias() = A * Bᵀ over row-major maps, A (N, Cin), B (Cout, Cin).
+// Ours:      linear(tape, x, W, b) recording (as in training: also zeroes the output's
+//            gradient buffer), the same without recording (rollouts), and the node's
+//            backward (dx, dW, db) via tape.backward_seeded().
+// Goals (issue 2): forward >= 0.8 of the GEMM rate, backward <= 2.2x the forward time.
+#include "autodiff/ops_dense.h"
+#include "cli/command_registry.h"
+
+#include <Eigen/Core>
+#include <omp.h>
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <memory>
+#include <random>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace {
+using namespace layersnet::ad;
+
+struct LinearBenchOptions {
+  std::string threads = "1,2";
+  int reps = 7;
+  int warmup = 2;
+  std::string json;
+};
+
+struct Shape {
+  int64_t n, cin, cout;
+};
+
+struct Result {
+  Shape shape;
+  int threads;
+  double gemm_ms, fwd_ms, fwd_norecord_ms, bwd_ms;
+};
+
+double median(std::vector<double> t) {
+  std::sort(t.begin(), t.end());
+  return t[t.size() / 2];
+}
+
+template <class Fn>
+double time_ms(Fn&& fn) {
+  const auto t0 = std::chrono::steady_clock::now();
+  fn();
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+
+std::vector<float> random_floats(int64_t n, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  std::vector<float> v(static_cast<std::size_t>(n));
+  for (float& x : v) x = u(rng);
+  return v;
+}
+
+Result bench_shape(const Shape& s, int threads, const LinearBenchOptions& o) {
+  omp_set_num_threads(threads);
+  Eigen::setNbThreads(threads);
+  const std::vector<float> xs = random_floats(s.n * s.cin, 1), ws = random_floats(s.cout * s.cin, 2),
+                           bs = random_floats(s.cout, 3), dys = random_floats(s.n * s.cout, 4);
+  // Each repetition times the four variants back to back, so that a busy machine slows
+  // all of them alike; medians are taken per variant.
+  std::vector<float> c(static_cast<std::size_t>(s.n * s.cout));
+  const ConstMatMap<float> A(xs.data(), s.n, s.cin), B(ws.data(), s.cout, s.cin);
+  MatMap<float> C(c.data(), s.n, s.cout);
+  // Ours: parameters as tape leaves (gradients wanted), x a leaf too (dx wanted, as for
+  // every layer but the first).
+  Tape<float> tape;
+  auto setup = [&] {
+    tape.reset();
+    return std::array<Var<float>, 3>{tape.leaf(xs.data(), s.n, s.cin), tape.leaf(ws.data(), s.cout, s.cin),
+                                     tape.leaf(bs.data(), 1, s.cout)};
+  };
+  std::vector<double> gemm, fwd, fwd0, bwd;
+  for (int rep = 0; rep < o.warmup + o.reps; ++rep) {
+    const bool keep = rep >= o.warmup;
+    const double t_gemm = time_ms([&] { C.noalias() = A * B.transpose(); });
+    double t_fwd0;
+    {
+      const auto v = setup();
+      NoRecord<float> off(tape);
+      t_fwd0 = time_ms([&] { linear(tape, v[0], v[1], v[2]); });
+    }
+    const auto v = setup();
+    Var<float> y;
+    const double t_fwd = time_ms([&] { y = linear(tape, v[0], v[1], v[2]); });
+    std::memcpy(y.grad, dys.data(), sizeof(float) * dys.size());
+    const double t_bwd = time_ms([&] { tape.backward_seeded(); });
+    if (keep) gemm.push_back(t_gemm), fwd.push_back(t_fwd), fwd0.push_back(t_fwd0), bwd.push_back(t_bwd);
+  }
+  Result r{s, threads, median(gemm), median(fwd), median(fwd0), median(bwd)};
+  // The result must be the GEMM's plus the bias (guards against timing a broken kernel).
+  {
+    NoRecord<float> off(tape);
+    const auto v = setup();
+    const Var<float> y = linear(tape, v[0], v[1], v[2]);
+    const float err = (y.val() - (C.rowwise() + ConstMatMap<float>(bs.data(), 1, s.cout).row(0))).cwiseAbs().maxCoeff();
+    if (!(err < 1e-3f)) throw std::runtime_error("bench linear: forward differs from the GEMM by " + std::to_string(err));
+  }
+  return r;
+}
+
+std::vector<int> parse_threads(const std::string& list) {
+  std::vector<int> out;
+  std::stringstream ss(list);
+  for (std::string item; std::getline(ss, item, ',');) {
+    const int t = std::stoi(item);
+    if (t < 1) throw std::runtime_error("bench linear: --threads '" + list + "' needs positive counts, e.g. 1,2");
+    out.push_back(t);
+  }
+  return out;
+}
+
+int run_bench(const LinearBenchOptions& o) {
+  const std::vector<Shape> shapes = {{80000, 268, 268}, {20000, 128, 128}};
+  std::vector<Result> results;
+  std::printf("bench linear: float, median of %d after %d warm-up; GEMM = Eigen C.noalias() = A * B^T (row-major)\n",
+              o.reps, o.warmup);
+  std::printf("fwd = linear() recording (incl. zeroing dy's buffer), fwd0 = without recording, bwd = dx + dW + db\n\n");
+  std::printf("%-18s %3s | %8s %8s %8s %8s | %7s %7s %7s %7s | %8s %8s %8s\n", "shape N x Cin>Cout", "thr", "gemm ms",
+              "fwd ms", "fwd0 ms", "bwd ms", "GF gemm", "GF fwd", "GF fwd0", "GF bwd", "fwd/gemm", "fwd0/gem",
+              "bwd/fwd");
+  for (int threads : parse_threads(o.threads)) {
+    for (const Shape& s : shapes) {
+      const Result r = bench_shape(s, threads, o);
+      results.push_back(r);
+      const double gf = 2e-6 * static_cast<double>(s.n * s.cin * s.cout);  // GFLOP * 1e3 (per ms)
+      char name[32];
+      std::snprintf(name, sizeof name, "%ldx%ld>%ld", static_cast<long>(s.n), static_cast<long>(s.cin),
+                    static_cast<long>(s.cout));
+      std::printf("%-18s %3d | %8.2f %8.2f %8.2f %8.2f | %7.1f %7.1f %7.1f %7.1f | %8.3f %8.3f %8.3f\n", name, threads,
+                  r.gemm_ms, r.fwd_ms, r.fwd_norecord_ms, r.bwd_ms, gf / r.gemm_ms, gf / r.fwd_ms,
+                  gf / r.fwd_norecord_ms, 2 * gf / r.bwd_ms, r.gemm_ms / r.fwd_ms, r.gemm_ms / r.fwd_norecord_ms,
+                  r.bwd_ms / r.fwd_ms);
+      std::fflush(stdout);
+    }
+  }
+  std::printf("\ngoals: fwd/gemm (rate ratio) >= 0.8, bwd/fwd (time ratio) <= 2.2\n");
+  if (!o.json.empty()) {
+    std::ofstream f(o.json);
+    if (!f) throw std::runtime_error("bench linear: cannot write --json file '" + o.json + "'");
+    f << "{\n  \"bench\": \"linear\",\n  \"reps\": " << o.reps << ",\n  \"results\": [\n";
+    for (std::size_t k = 0; k < results.size(); ++k) {
+      const Result& r = results[k];
+      f << "    {\"n\": " << r.shape.n << ", \"cin\": " << r.shape.cin << ", \"cout\": " << r.shape.cout
+        << ", \"threads\": " << r.threads << ", \"gemm_ms\": " << r.gemm_ms << ", \"forward_ms\": " << r.fwd_ms
+        << ", \"forward_norecord_ms\": " << r.fwd_norecord_ms << ", \"backward_ms\": " << r.bwd_ms
+        << ", \"forward_rate_vs_gemm\": " << r.gemm_ms / r.fwd_ms
+        << ", \"forward_norecord_rate_vs_gemm\": " << r.gemm_ms / r.fwd_norecord_ms
+        << ", \"backward_over_forward\": " << r.bwd_ms / r.fwd_ms << "}" << (k + 1 < results.size() ? "," : "")
+        << "\n";
+    }
+    f << "  ]\n}\n";
+  }
+  return 0;
+}
+
+}  // namespace
+
+LAYERSNET_BENCH(linear, "Linear layer forward/backward vs a plain Eigen GEMM (1 and 2 threads)", [](CLI::App& sub) {
+  auto opts = std::make_shared<LinearBenchOptions>();
+  sub.add_option("--threads", opts->threads, "comma-separated thread counts")->default_val("1,2");
+  sub.add_option("--reps", opts->reps, "timed repetitions (median is shown)")->default_val(7)->check(CLI::PositiveNumber);
+  sub.add_option("--warmup", opts->warmup, "untimed repetitions first")->default_val(2);
+  sub.add_option("--json", opts->json, "also write the figures to this JSON file");
+  return [opts] { return run_bench(*opts); };
+});
