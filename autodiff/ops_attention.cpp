@@ -2,6 +2,8 @@
 
 #include "autodiff/ops_graph.h"
 
+#include <Eigen/Core>
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -31,6 +33,13 @@ struct RiaProblem {
   bool messages(int64_t e) const { return (message_kinds >> kinds[e]) & 1u; }
 };
 
+// One head's D-vector inside a row. Eigen vectorises the dot products and norms (a plain
+// loop would not: float sums may not be reassociated without -ffast-math).
+template <class T, int kD>
+using HeadVec = Eigen::Map<const Eigen::Matrix<T, (kD > 0 ? kD : Eigen::Dynamic), 1>>;
+template <class T, int kD>
+using HeadVecMut = Eigen::Map<Eigen::Matrix<T, (kD > 0 ? kD : Eigen::Dynamic), 1>>;
+
 // Forward for all receivers. a, rho, w, cq = q.(s + r): (E, H); out: (P, H*D), overwritten.
 // kD > 0 fixes the head width at compile time (unrolled, vectorised inner loops).
 template <class T, int kD>
@@ -41,8 +50,7 @@ void ria_forward(const RiaProblem<T>& pb, T* a, T* rho, T* cq, T* w, T* out) {
     const int64_t e0 = pb.offsets[i], e1 = pb.offsets[i + 1];
     std::fill_n(out + i * C, C, T(0));
     for (int64_t h = 0; h < H; ++h) {
-      const T* qi = pb.q + i * C + h * D;
-      const T* ri = pb.r + i * C + h * D;
+      const HeadVec<T, kD> qi(pb.q + i * C + h * D, D), ri(pb.r + i * C + h * D, D);
       T zmax = -std::numeric_limits<T>::infinity();
       for (int64_t e = e0; e < e1; ++e) {
         const int64_t k = e * H + h;
@@ -50,13 +58,9 @@ void ria_forward(const RiaProblem<T>& pb, T* a, T* rho, T* cq, T* w, T* out) {
           a[k] = 0, rho[k] = 0, cq[k] = 0, w[k] = 0;
           continue;
         }
-        const T* sj = pb.s + int64_t{pb.senders[e]} * C + h * D;
-        T dist2 = 0, c = 0;
-        for (int64_t d = 0; d < D; ++d) {
-          const T u = ri[d] - sj[d];
-          dist2 += u * u;
-          c += qi[d] * (sj[d] + ri[d]);
-        }
+        const HeadVec<T, kD> sj(pb.s + int64_t{pb.senders[e]} * C + h * D, D);
+        const T dist2 = (ri - sj).squaredNorm();
+        const T c = qi.dot(sj + ri);
         rho[k] = std::sqrt(dist2 + pb.eps * pb.eps);
         cq[k] = c;
         a[k] = T(2) * pb.scale * c / rho[k];  // the logit, until normalised below
@@ -67,15 +71,15 @@ void ria_forward(const RiaProblem<T>& pb, T* a, T* rho, T* cq, T* w, T* out) {
         if (pb.attends(e, h)) sum += (a[e * H + h] = std::exp(a[e * H + h] - zmax));
       if (sum == T(0)) continue;  // no attended edge: zero output for this head
       const T inv = T(1) / sum;
-      T* oi = out + i * C + h * D;
+      HeadVecMut<T, kD> oi(out + i * C + h * D, D);
       for (int64_t e = e0; e < e1; ++e) {
         const int64_t k = e * H + h;
         if (!pb.attends(e, h)) continue;
         a[k] *= inv;
         w[k] = a[k] / rho[k];
         if (!pb.messages(e)) continue;
-        const T* sj = pb.s + int64_t{pb.senders[e]} * C + h * D;
-        for (int64_t d = 0; d < D; ++d) oi[d] += w[k] * (sj[d] + ri[d]);
+        const HeadVec<T, kD> sj(pb.s + int64_t{pb.senders[e]} * C + h * D, D);
+        oi += w[k] * (sj + ri);
       }
     }
   }
@@ -93,29 +97,22 @@ void ria_backward_receivers(const RiaProblem<T>& pb, const T* a, const T* rho, c
   for (int64_t i = 0; i < pb.n_recv; ++i) {
     const int64_t e0 = pb.offsets[i], e1 = pb.offsets[i + 1];
     for (int64_t h = 0; h < H; ++h) {
-      const T* qi = pb.q + i * C + h * D;
-      const T* ri = pb.r + i * C + h * D;
-      const T* gi = g_out + i * C + h * D;
-      // dL/dw_e: from the message (if any) and from the weights output.
-      const auto d_weight = [&](int64_t e, const T* sj) {
-        T dw = g_w[e * H + h];
-        if (pb.messages(e))
-          for (int64_t d = 0; d < D; ++d) dw += gi[d] * (sj[d] + ri[d]);
-        return dw;
-      };
-      // Softmax backward needs sum_e a_e * dL/da_e over the segment first.
+      const HeadVec<T, kD> qi(pb.q + i * C + h * D, D), ri(pb.r + i * C + h * D, D), gi(g_out + i * C + h * D, D);
+      // Softmax backward needs sum_e a_e * dL/da_e over the segment first; dL/dw_e comes
+      // from the message (if any) and from the weights output.
       T sum_ada = 0;
       for (int64_t e = e0; e < e1; ++e) {
         if (!pb.attends(e, h)) continue;
         const int64_t k = e * H + h;
-        dw_buf[k] = d_weight(e, pb.s + int64_t{pb.senders[e]} * C + h * D);
-        sum_ada += a[k] * dw_buf[k] / rho[k];
+        T dw = g_w[k];
+        if (pb.messages(e)) dw += gi.dot(HeadVec<T, kD>(pb.s + int64_t{pb.senders[e]} * C + h * D, D) + ri);
+        dw_buf[k] = dw;
+        sum_ada += a[k] * dw / rho[k];
       }
       for (int64_t e = e0; e < e1; ++e) {
         if (!pb.attends(e, h)) continue;  // its ds_edge slice is never read
-        T* dse = ds_edge ? ds_edge + e * C + h * D : nullptr;
         const int64_t k = e * H + h;
-        const T* sj = pb.s + int64_t{pb.senders[e]} * C + h * D;
+        const HeadVec<T, kD> sj(pb.s + int64_t{pb.senders[e]} * C + h * D, D);
         const T dw = dw_buf[k];
         const T inv_rho = T(1) / rho[k];
         const T da = dw * inv_rho;                // w = a / rho
@@ -125,14 +122,10 @@ void ria_backward_receivers(const RiaProblem<T>& pb, const T* a, const T* rho, c
         const T drho = -(a[k] * dw + two_scale * c * dz) * inv_rho * inv_rho;
         const T du_coef = drho * inv_rho;         // rho = sqrt(|u|^2 + eps^2), u = r - s
         const T msg = pb.messages(e) ? a[k] * inv_rho : T(0);
-        for (int64_t d = 0; d < D; ++d) {
-          const T p = sj[d] + ri[d];
-          const T dp = msg * gi[d] + dc * qi[d];
-          const T du = du_coef * (ri[d] - sj[d]);
-          if (gq) gq[i * C + h * D + d] += dc * p;
-          if (gr) gr[i * C + h * D + d] += dp + du;
-          if (dse) dse[d] = dp - du;
-        }
+        // p = s + r enters c (via q) and the message; u = r - s enters rho.
+        if (gq) HeadVecMut<T, kD>(gq + i * C + h * D, D) += dc * (sj + ri);
+        if (gr) HeadVecMut<T, kD>(gr + i * C + h * D, D) += msg * gi + dc * qi + du_coef * (ri - sj);
+        if (ds_edge) HeadVecMut<T, kD>(ds_edge + e * C + h * D, D) = msg * gi + dc * qi - du_coef * (ri - sj);
       }
     }
   }
@@ -154,10 +147,10 @@ void ria_backward_receivers_any(const RiaProblem<T>& pb, const T* a, const T* rh
 // gs[j] += sum over edges of sender j (in edge order) of ds_edge[e], for the head slices
 // that attend to the edge (the others are never written).
 // by_sender: (M+1) CSR offsets, edges: (E) edge ids grouped by sender, ascending.
-template <class T>
+template <class T, int kD>
 void ria_backward_senders(const RiaProblem<T>& pb, const int32_t* by_sender, const int32_t* edges, const T* ds_edge,
                           T* gs) {
-  const int64_t H = pb.heads, D = pb.dim, C = pb.width();
+  const int64_t H = pb.heads, D = kD > 0 ? kD : pb.dim, C = pb.width();
 #pragma omp parallel for schedule(static) if (int64_t{by_sender[pb.n_send]} * C > kParallelMin)
   for (int64_t j = 0; j < pb.n_send; ++j) {
     T* dst = gs + j * C;
@@ -165,8 +158,7 @@ void ria_backward_senders(const RiaProblem<T>& pb, const int32_t* by_sender, con
       const int64_t e = edges[k];
       const T* src = ds_edge + e * C;
       for (int64_t h = 0; h < H; ++h)
-        if (pb.attends(e, h))
-          for (int64_t d = h * D; d < (h + 1) * D; ++d) dst[d] += src[d];
+        if (pb.attends(e, h)) HeadVecMut<T, kD>(dst + h * D, D) += HeadVec<T, kD>(src + h * D, D);
     }
   }
 }
@@ -299,7 +291,8 @@ void backward_rot_inv_attention(const Node<T>& node) {
                              node.saved + 3 * EH, q.grad, r.grad, ds_edge);
   if (s.grad) {
     const int32_t* by_sender = node.idx[2] + n_edges + pb.heads;
-    ria_backward_senders(pb, by_sender, by_sender + pb.n_send + 1, ds_edge, s.grad);
+    if (pb.dim == 16) ria_backward_senders<T, 16>(pb, by_sender, by_sender + pb.n_send + 1, ds_edge, s.grad);
+    else ria_backward_senders<T, 0>(pb, by_sender, by_sender + pb.n_send + 1, ds_edge, s.grad);
   }
 }
 
