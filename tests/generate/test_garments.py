@@ -1,0 +1,106 @@
+#!/usr/bin/python3
+"""Checks the garment templates without Blender, on a synthetic rest body (ellipsoid torso,
+two cylinder legs): panels, metric UVs, outward faces, the outer layer outside the inner."""
+import os
+import sys
+
+import numpy as np
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "../../generate"))
+import outfits  # noqa: E402
+from garments import SCENE_SCALE, BodyProfile  # noqa: E402
+
+S = SCENE_SCALE
+
+
+def synthetic_body():
+    pts = []
+    for z in np.arange(0.0, 1.66, 0.01):
+        a = np.linspace(0, 2 * np.pi, 72, endpoint=False)
+        if z > 0.84:   # torso
+            pts.append(np.stack([0.16 * np.sin(a), -0.03 - 0.11 * np.cos(a), np.full_like(a, z)], 1))
+        else:          # legs
+            for x in (-0.1, 0.1):
+                pts.append(np.stack([x + 0.07 * np.sin(a), -0.03 - 0.07 * np.cos(a), np.full_like(a, z)], 1))
+    return np.concatenate(pts) * S
+
+
+def check(g):
+    F, V, uv = g.faces, g.verts, g.uv
+    assert F.min() >= 0 and F.max() < len(V), g.name
+    panels = np.unique(g.panel)
+    assert len(panels) >= 2, f"{g.name}: {len(panels)} panels"
+    # Metric UV: each UV edge is its rest 3-D edge in metres (within 20 %).
+    for k in range(3):
+        e3 = np.linalg.norm(V[F[:, k]] - V[F[:, (k + 1) % 3]], axis=1) / S
+        e2 = np.linalg.norm(uv[:, k] - uv[:, (k + 1) % 3], axis=1)
+        ratio = np.median(e2 / e3)
+        assert 0.8 < ratio < 1.2, f"{g.name}: UV/3-D edge ratio {ratio}"
+    # One island per panel: faces of a panel connected through shared UV corners.
+    for p in panels:
+        idx = np.nonzero(g.panel == p)[0]
+        key = {}
+        parent = list(range(len(idx)))
+        def find(i):
+            while parent[i] != i:
+                parent[i] = parent[parent[i]]
+                i = parent[i]
+            return i
+        for j, fi in enumerate(idx):
+            for k in range(3):
+                kk = (int(F[fi, k]), round(float(uv[fi, k, 0]), 5), round(float(uv[fi, k, 1]), 5))
+                if kk in key:
+                    parent[find(j)] = find(key[kk])
+                else:
+                    key[kk] = j
+        roots = {find(j) for j in range(len(idx))}
+        assert len(roots) == 1, f"{g.name}: panel {p} has {len(roots)} UV islands"
+    # Faces wind counter-clockwise seen from outside: normals point away from the body axis.
+    n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    c = V[F].mean(1)
+    radial = c[:, :2] - np.array([0.0, -0.03 * S])
+    if g.kind == "pants_tight":   # legs: measure from each leg's axis below the crotch
+        legs = c[:, 2] < 0.83 * S
+        radial[legs, 0] = c[legs, 0] - np.sign(c[legs, 0]) * 0.1 * S
+    outward = (n[:, :2] * radial).sum(1) > 0
+    assert outward.mean() > 0.95, f"{g.name}: only {outward.mean():.2f} of faces point outwards"
+    assert g.pin.max() == 1.0
+
+
+def main():
+    body = synthetic_body()
+    prof = BodyProfile(body, centre=(0.0, -0.03 * S), arm_x=0.25 * S)
+    kinds = 0
+    for i, inner in enumerate(outfits.INNER_KINDS):
+        for j, outer in enumerate(outfits.OUTER_KINDS):
+            rng = np.random.default_rng(10 * i + j)
+            gs = outfits.build_outfit(prof, inner, outer, rng)
+            for g in gs:
+                check(g)
+            # The outer layer starts outside the inner one: at matching heights its radius
+            # around the torso axis is larger (ring by ring, compared on common heights).
+            a, b = gs[0], gs[1]
+            if inner != "pants_tight":
+                cols = outfits.COLS
+                ra = a.verts.reshape(-1, cols, 3)
+                rb = b.verts.reshape(-1, cols, 3)
+                rad = lambda r: np.hypot(r[..., 0], r[..., 1] + 0.03 * S)
+                checked = 0
+                zb = rb[:, 0, 2]           # descending heights of the outer rings
+                for ring in ra:
+                    z = ring[0, 2]
+                    if not (zb[-1] <= z <= zb[0]):
+                        continue
+                    k = min(np.searchsorted(-zb, -z), len(zb) - 1)
+                    k0 = max(k - 1, 0)
+                    w = 0.0 if k == k0 else (zb[k0] - z) / (zb[k0] - zb[k])
+                    r_out = (1 - w) * rad(rb[k0]) + w * rad(rb[k])
+                    margin = r_out - rad(ring)
+                    assert margin.min() > 0.5 * outfits.GAP * S, f"{inner}/{outer}: outer only {margin.min()} outside"
+                    checked += 1
+                assert checked > 0
+            kinds += 1
+    print(f"ok: {kinds} outfits, {len(outfits.INNER_KINDS) + len(outfits.OUTER_KINDS)} garment kinds")
+
+
+main()
