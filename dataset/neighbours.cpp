@@ -39,9 +39,7 @@ PointGrid::PointGrid(const Eigen::Ref<const Points>& points, float cell) : point
   std::vector<std::pair<int64_t, int32_t>> keyed(n);
   for (int32_t i = 0; i < n; ++i) {
     const auto p = points_.row(i);
-    keyed[i] = {key_of(static_cast<int64_t>(std::floor(p.x() / cell_)), static_cast<int64_t>(std::floor(p.y() / cell_)),
-                       static_cast<int64_t>(std::floor(p.z() / cell_))),
-                i};
+    keyed[i] = {key_of(grid_cell(p.x(), cell_), grid_cell(p.y(), cell_), grid_cell(p.z(), cell_)), i};
   }
   std::sort(keyed.begin(), keyed.end());  // by key, then index
   order_.resize(n);

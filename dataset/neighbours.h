@@ -12,6 +12,7 @@
 
 #include <Eigen/Core>
 
+#include <cmath>
 #include <cstdint>
 #include <memory>
 #include <vector>
@@ -88,12 +89,16 @@ struct NearestBody {
 NearestBody nearest_body(const Eigen::Ref<const Points>& queries, const Eigen::Ref<const Points>& body);
 
 // ---- template implementation
+// Grid cell of a coordinate, clamped so that absurd (but finite) positions stay defined.
+inline int64_t grid_cell(float x, float cell) {
+  const double c = std::floor(static_cast<double>(x) / static_cast<double>(cell));
+  return static_cast<int64_t>(c < -1e15 ? -1e15 : c > 1e15 ? 1e15 : c);
+}
+
 template <typename Fn>
 void PointGrid::for_each_within(const Eigen::Vector3f& q, float radius, Fn&& fn) const {
   const float r2 = radius * radius;
-  const int64_t ci = static_cast<int64_t>(std::floor(q.x() / cell_));
-  const int64_t cj = static_cast<int64_t>(std::floor(q.y() / cell_));
-  const int64_t ck = static_cast<int64_t>(std::floor(q.z() / cell_));
+  const int64_t ci = grid_cell(q.x(), cell_), cj = grid_cell(q.y(), cell_), ck = grid_cell(q.z(), cell_);
   for (int64_t di = -1; di <= 1; ++di)
     for (int64_t dj = -1; dj <= 1; ++dj)
       for (int64_t dk = -1; dk <= 1; ++dk) {

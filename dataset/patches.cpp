@@ -23,6 +23,12 @@ Csr to_csr(std::vector<std::pair<int32_t, int32_t>> pairs, int rows) {
   return c;
 }
 
+// floor(x) as an integer cell, clamped so that absurd (but finite) UVs stay defined.
+int64_t cell_of(float x) {
+  const double c = std::floor(static_cast<double>(x));
+  return static_cast<int64_t>(std::clamp(c, -1e15, 1e15));
+}
+
 }  // namespace
 
 std::vector<std::pair<int32_t, int32_t>> mesh_edges(const Faces& faces) {
@@ -49,8 +55,7 @@ PatchStructure build_patches(const GarmentMesh& g, float patch_size) {
   for (int f = 0; f < F; ++f) {
     const float cu = (g.uv(3 * f, 0) + g.uv(3 * f + 1, 0) + g.uv(3 * f + 2, 0)) / 3.f;
     const float cv = (g.uv(3 * f, 1) + g.uv(3 * f + 1, 1) + g.uv(3 * f + 2, 1)) / 3.f;
-    face_key[f] = {g.panel[f], static_cast<int64_t>(std::floor(cu / patch_size)),
-                   static_cast<int64_t>(std::floor(cv / patch_size))};
+    face_key[f] = {g.panel[f], cell_of(cu / patch_size), cell_of(cv / patch_size)};
   }
   std::map<Key, int32_t> ids;
   for (const Key& k : face_key) ids.emplace(k, 0);
