@@ -207,5 +207,28 @@ TEST(ModelAbsentParts, OneGarmentHasNoLayerTerm) {
   EXPECT_GT(l0, 0.0);
 }
 
+// Degenerate scene: the body is far from every garment (no body token at all, U = 0), so
+// every patch attends only to patches, wind and gravity, and the decoder uses identity frames.
+TEST(ModelAbsentParts, NoBodyNearby) {
+  const auto c = testing::tiny_config();
+  auto scene = make_synthetic_scene(testing::tiny_scene());
+  for (auto* b : {&scene.body_tm1, &scene.body_t, &scene.body_tp1})
+    for (std::size_t i = 0; i < b->size(); i += 3) (*b)[i] += 100.0;
+  const auto in = build_model_input(scene, c);
+  ASSERT_EQ(in.U, 0);
+  ad::ParamStore<double> ps;
+  register_params(ps, c);
+  init_params(ps, c, 8);
+  ad::Tape<double> tape;
+  const auto pred = forward(tape, ps, c, in);
+  const auto target = losses::build_loss_input(scene, in);
+  const auto t = losses::compute_losses(tape, ps, c, LossConfig{}, target, pred);
+  EXPECT_EQ(t.body_collisions, 0);
+  ps.zero_grads();
+  tape.backward(t.total);
+  for (std::size_t i = 0; i < ps.grads().size(); ++i) ASSERT_TRUE(std::isfinite(ps.grads()[i]));
+  for (int64_t i = 0; i < pred.vertex.size(); ++i) ASSERT_TRUE(std::isfinite(pred.vertex.value[i]));
+}
+
 }  // namespace
 }  // namespace layersnet::model
