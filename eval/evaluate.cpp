@@ -1,0 +1,163 @@
+// Evaluation over a split (see evaluate.h).
+#include "eval/evaluate.h"
+
+#include "dataset/h5.h"
+
+#include <nlohmann/json.hpp>
+#include <omp.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+namespace layersnet::eval {
+
+std::map<std::string, std::vector<std::string>> read_subsets(const std::string& root) {
+  std::map<std::string, std::vector<std::string>> out;
+  const std::string path = (std::filesystem::path(root) / "dataset.json").string();
+  std::ifstream in(path);
+  if (!in) return out;
+  std::stringstream text;
+  text << in.rdbuf();
+  const nlohmann::json j = nlohmann::json::parse(text.str(), nullptr, false);
+  if (j.is_discarded() || !j.contains("subsets") || !j["subsets"].is_object()) return out;
+  for (const auto& [name, ids] : j["subsets"].items()) {
+    if (!ids.is_array()) continue;
+    for (const auto& id : ids)
+      if (id.is_string()) out[id.get<std::string>()].push_back(name);
+  }
+  return out;
+}
+
+double blender_seconds_per_frame(const std::string& path) {
+  namespace h5 = dataset::h5;
+  const h5::Handle f = h5::open_file(path);
+  if (!h5::has_attr(f.get(), "q_blender_s_per_frame")) return -1;
+  return h5::read_float_attr(f.get(), "q_blender_s_per_frame", {path, "/"});
+}
+
+SequenceResult score_rollout(const dataset::Sequence& seq, const Rollout& r, const CollisionOptions& o) {
+  const GarmentLayout L = garment_layout(seq.info);
+  SequenceResult s;
+  s.garment_types = L.types;
+  s.scale = seq.info.scale;
+  s.first_frame = r.first_frame;
+  s.step_ms = r.step_ms;
+  s.garment_error.assign(L.num_garments(), 0.0);
+  const double n = static_cast<double>(r.frames.size());
+  double inner = 0, outer = 0, h = 0, lo = 0, la = 0;
+  for (size_t k = 0; k < r.frames.size(); ++k) {
+    const int t = r.first_frame + static_cast<int>(k);
+    const Points truth = garments_at(seq, t);
+    const FrameMetrics m = frame_metrics(L, r.frames[k], truth, seq.body_at(t), seq.info.body_faces, o);
+    s.error_curve.push_back(m.error);
+    s.error += m.error / n;
+    for (int g = 0; g < L.num_garments(); ++g) s.garment_error[g] += m.garment_error[g] / n;
+    inner += m.inner_error / n;
+    outer += m.outer_error / n;
+    h += m.h_rate / n;
+    lo += m.l_rate_outer / n;
+    la += m.l_rate_all / n;
+  }
+  s.inner_error = inner;
+  s.h_rate = h;
+  if (L.layered()) {
+    s.outer_error = outer;
+    s.l_rate_outer = lo;
+    s.l_rate_all = la;
+  }
+  return s;
+}
+
+std::vector<MethodResult> evaluate(const dataset::DatasetManifest& manifest, std::vector<Predictor*> predictors,
+                                   const EvalOptions& o, bool progress) {
+  std::vector<std::string> ids = manifest.split(o.split);
+  if (o.max_sequences > 0 && static_cast<int>(ids.size()) > o.max_sequences) ids.resize(o.max_sequences);
+  if (ids.empty())
+    throw std::runtime_error(manifest.manifest_path() + ": split '" + o.split +
+                             "' lists no sequences; choose another with --split");
+  const auto subsets = read_subsets(manifest.root);
+  std::vector<MethodResult> results(predictors.size());
+  for (size_t p = 0; p < predictors.size(); ++p) results[p].name = predictors[p]->name();
+  for (const std::string& id : ids) {
+    const dataset::Sequence seq = dataset::read_sequence(manifest.sequence_path(id));
+    CollisionOptions co;
+    co.max_body_distance = o.max_body_distance_m * seq.info.scale;
+    for (size_t p = 0; p < predictors.size(); ++p) {
+      const Rollout r = rollout(*predictors[p], seq, o.start_frame, o.frames);
+      SequenceResult s = score_rollout(seq, r, co);
+      s.id = id;
+      if (auto it = subsets.find(id); it != subsets.end()) s.subsets = it->second;
+      if (progress)
+        std::printf("  %-10s %-22s %3zu frames  error %8.2f mm  H %5.2f %%  L %s\n", id.c_str(),
+                    predictors[p]->name().c_str(), r.frames.size(), s.error * s.mm(), 100 * s.h_rate,
+                    s.l_rate_outer < 0 ? "  -" : (std::to_string(100 * s.l_rate_outer).substr(0, 5) + " %").c_str());
+      results[p].sequences.push_back(std::move(s));
+    }
+    if (progress) std::fflush(stdout);
+  }
+  return results;
+}
+
+double median_ms_per_frame(Predictor& predictor, const dataset::Sequence& seq, int t0, int frames, int threads) {
+  const int before = omp_get_max_threads();
+  omp_set_num_threads(threads);
+  Rollout r;
+  try {
+    r = rollout(predictor, seq, t0, frames);
+  } catch (...) {
+    omp_set_num_threads(before);
+    throw;
+  }
+  omp_set_num_threads(before);
+  std::vector<double> ms = r.step_ms;
+  std::nth_element(ms.begin(), ms.begin() + static_cast<std::ptrdiff_t>(ms.size() / 2), ms.end());
+  return ms[ms.size() / 2];
+}
+
+Summary summarise(const MethodResult& m) {
+  Summary s;
+  std::vector<double> err, inner, outer, h, lo, la, steps;
+  std::map<std::string, std::vector<double>> by_type, by_subset;
+  std::vector<std::vector<double>> curve;
+  for (const SequenceResult& r : m.sequences) {
+    const double mm = r.mm();
+    err.push_back(r.error * mm);
+    inner.push_back(r.inner_error * mm);
+    h.push_back(100 * r.h_rate);
+    if (r.outer_error >= 0) {
+      outer.push_back(r.outer_error * mm);
+      lo.push_back(100 * r.l_rate_outer);
+      la.push_back(100 * r.l_rate_all);
+    }
+    // A type worn twice in one sequence counts once (its garments' vertex-weighted mean is
+    // not kept, so the plain mean of the two garments is used).
+    std::map<std::string, std::vector<double>> seq_types;
+    for (size_t g = 0; g < r.garment_types.size(); ++g) seq_types[r.garment_types[g]].push_back(r.garment_error[g] * mm);
+    for (const auto& [type, values] : seq_types) by_type[type].push_back(mean_std(values).mean);
+    for (const auto& sub : r.subsets) by_subset[sub].push_back(r.error * mm);
+    for (size_t k = 0; k < r.error_curve.size(); ++k) {
+      if (curve.size() <= k) curve.resize(k + 1);
+      curve[k].push_back(r.error_curve[k] * mm);
+    }
+    steps.insert(steps.end(), r.step_ms.begin(), r.step_ms.end());
+  }
+  s.error_mm = mean_std(err);
+  s.inner_mm = mean_std(inner);
+  s.outer_mm = mean_std(outer);
+  s.h_percent = mean_std(h);
+  s.l_outer_percent = mean_std(lo);
+  s.l_all_percent = mean_std(la);
+  for (const auto& [k, v] : by_type) s.by_type_mm[k] = mean_std(v);
+  for (const auto& [k, v] : by_subset) s.by_subset_mm[k] = mean_std(v);
+  for (const auto& v : curve) s.curve_mm.push_back(mean_std(v).mean);
+  if (!steps.empty()) {
+    std::nth_element(steps.begin(), steps.begin() + static_cast<std::ptrdiff_t>(steps.size() / 2), steps.end());
+    s.median_step_ms = steps[steps.size() / 2];
+  }
+  return s;
+}
+
+}  // namespace layersnet::eval

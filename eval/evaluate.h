@@ -1,0 +1,97 @@
+#pragma once
+// Evaluation of predictors over a split (issue 7 points 1–4, 6): rollouts, per-frame metrics,
+// per-sequence means and the summaries of paper Tables 1–3.
+//
+// Aggregation (paper §5.1: "mean of Euclidean errors for each frame, then average the errors
+// across all the frames within each sequence; the final results are the mean of errors from
+// all sequences"; official accuracy_l2_rollout):
+//   frame     mean over the frame's vertices (all garments, or one garment / layer);
+//   sequence  mean over the rollout's frames;
+//   summary   mean ± std (population) over sequences.
+// Millimetres: scene units / scale · 1000, per sequence (its file's `scale`), before the
+// summary. Collision rates are aggregated the same way (per frame -> per sequence -> mean ±
+// std), in percent. Layer metrics only over sequences with >= 2 garments.
+#include "dataset/manifest.h"
+#include "eval/metrics.h"
+#include "eval/rollout.h"
+
+#include <map>
+#include <string>
+#include <vector>
+
+namespace layersnet::eval {
+
+struct SequenceResult {
+  std::string id;
+  std::vector<std::string> subsets;        // Table-1 subsets holding the sequence (T, T+W, L, L+W)
+  std::vector<std::string> garment_types;  // (G,) layer order
+  double scale = 10;                       // scene units per metre
+  int first_frame = 0;                     // first predicted frame
+  // Scene units, means over the rollout's frames:
+  double error = 0;
+  std::vector<double> error_curve;    // (n,) per rollout frame
+  std::vector<double> garment_error;  // (G,)
+  double inner_error = 0, outer_error = -1;
+  // Rates in [0, 1], means over frames (-1: no layers):
+  double h_rate = 0, l_rate_outer = -1, l_rate_all = -1;
+  std::vector<double> step_ms;  // (n,)
+  double mm() const { return 1000.0 / scale; }  // millimetres per scene unit
+};
+
+struct MethodResult {
+  std::string name;
+  std::string kind;  // "model", "baseline", "ground truth"
+  std::string checkpoint;  // models only
+  std::vector<SequenceResult> sequences;
+  double ms_per_frame_1thread = -1, ms_per_frame_2threads = -1;  // median, -1 = not measured
+};
+
+struct EvalOptions {
+  std::string split = "test";
+  int frames = 36;          // predicted frames per sequence (clamped to the sequence)
+  int start_frame = 2;      // input frame t0 of the first prediction (>= 2)
+  int max_sequences = 0;    // 0 = every sequence of the split
+  double max_body_distance_m = 0.5;  // H-collision distance limit in metres (official 5.0 units at scale 10)
+};
+
+// Table-1 subsets of a data set: id -> subset names, from dataset.json "subsets" (written by
+// `layersnet generate`); empty when the file has none.
+std::map<std::string, std::vector<std::string>> read_subsets(const std::string& dataset_root);
+
+// Blender's seconds per frame recorded at generation (root attribute q_blender_s_per_frame),
+// or -1 when the file has none.
+double blender_seconds_per_frame(const std::string& sequence_path);
+
+// Predicts every sequence with every predictor. The same frames, metrics and sequences for all.
+// progress: print one line per sequence and method to stdout.
+std::vector<MethodResult> evaluate(const dataset::DatasetManifest& manifest, std::vector<Predictor*> predictors,
+                                   const EvalOptions& options, bool progress = false);
+
+// Metrics of one rollout against the sequence's ground truth.
+SequenceResult score_rollout(const dataset::Sequence& seq, const Rollout& r, const CollisionOptions& options);
+
+// Ground-truth "predictor": returns the data's next frame (its collision rates are the floor).
+class GroundTruth : public Predictor {
+ public:
+  std::string name() const override { return "ground truth"; }
+  Points step(const dataset::Sequence& seq, int t, const Points&, const Points&, const Points&) override {
+    return garments_at(seq, t + 1);
+  }
+};
+
+// Median wall time per predicted frame, from a rollout of `frames` frames of `seq` run with
+// `threads` OpenMP threads (the previous thread count is restored).
+double median_ms_per_frame(Predictor& predictor, const dataset::Sequence& seq, int t0, int frames, int threads);
+
+// ---- summaries (millimetres and percent)
+struct Summary {
+  MeanStd error_mm, inner_mm, outer_mm;
+  MeanStd h_percent, l_outer_percent, l_all_percent;
+  std::map<std::string, MeanStd> by_type_mm;    // garment type -> over sequences holding it
+  std::map<std::string, MeanStd> by_subset_mm;  // T, T+W, L, L+W
+  std::vector<double> curve_mm;                 // mean over sequences per rollout frame
+  double median_step_ms = 0;                    // over every step of every sequence
+};
+Summary summarise(const MethodResult& method);
+
+}  // namespace layersnet::eval

@@ -1,0 +1,118 @@
+// Per-frame metrics (definitions in metrics.h).
+#include "eval/metrics.h"
+
+#include "dataset/neighbours.h"
+
+#include <cmath>
+#include <stdexcept>
+
+namespace layersnet::eval {
+
+double mean_vertex_error(const Eigen::Ref<const Points>& pred, const Eigen::Ref<const Points>& truth) {
+  if (pred.rows() != truth.rows() || pred.rows() == 0)
+    throw std::invalid_argument("mean_vertex_error: prediction has " + std::to_string(pred.rows()) +
+                                " rows, ground truth " + std::to_string(truth.rows()) + " (need the same, > 0)");
+  double sum = 0;
+  for (Eigen::Index v = 0; v < pred.rows(); ++v)
+    sum += (pred.row(v).cast<double>() - truth.row(v).cast<double>()).norm();
+  return sum / static_cast<double>(pred.rows());
+}
+
+int64_t count_body_collisions(const Eigen::Ref<const Points>& garments, const Eigen::Ref<const Points>& body,
+                              const Faces& body_faces, double max_distance) {
+  if (garments.rows() == 0 || body.rows() == 0) return 0;
+  const Points normals = dataset::vertex_normals(body, body_faces);
+  const dataset::NearestBody nearest = dataset::nearest_body(garments, body);
+  int64_t count = 0;
+  for (Eigen::Index v = 0; v < garments.rows(); ++v) {
+    const int32_t h = nearest.index[v];
+    const Eigen::Vector3d d = (garments.row(v) - body.row(h)).cast<double>().transpose();
+    if (max_distance >= 0 && d.norm() > max_distance) continue;
+    if (d.dot(normals.row(h).cast<double>().transpose()) < 0) ++count;
+  }
+  return count;
+}
+
+int64_t count_layer_collisions(const Eigen::Ref<const Points>& outer, const Eigen::Ref<const Points>& inner,
+                               const Faces& inner_faces) {
+  if (outer.rows() == 0 || inner.rows() == 0) return 0;
+  const Points normals = dataset::vertex_normals(inner, inner_faces);
+  const dataset::NearestBody nearest = dataset::nearest_body(outer, inner);
+  int64_t count = 0;
+  for (Eigen::Index v = 0; v < outer.rows(); ++v) {
+    const int32_t y = nearest.index[v];
+    const Eigen::Vector3d d = (outer.row(v) - inner.row(y)).cast<double>().transpose();
+    if (d.dot(normals.row(y).cast<double>().transpose()) < 0) ++count;
+  }
+  return count;
+}
+
+GarmentLayout garment_layout(const dataset::SequenceInfo& info) {
+  GarmentLayout L;
+  L.offsets.push_back(0);
+  for (const auto& g : info.garments) {
+    L.offsets.push_back(L.offsets.back() + g.num_vertices);
+    L.faces.push_back(g.faces);
+    L.types.push_back(g.type);
+  }
+  return L;
+}
+
+namespace {
+// Inner garments' faces re-indexed into the concatenation of garments [0, G-1).
+Faces inner_faces(const GarmentLayout& L) {
+  Eigen::Index rows = 0;
+  for (int g = 0; g + 1 < L.num_garments(); ++g) rows += L.faces[g].rows();
+  Faces out(rows, 3);
+  Eigen::Index r = 0;
+  for (int g = 0; g + 1 < L.num_garments(); ++g) {
+    out.middleRows(r, L.faces[g].rows()) = L.faces[g].array() + L.offsets[g];
+    r += L.faces[g].rows();
+  }
+  return out;
+}
+}  // namespace
+
+FrameMetrics frame_metrics(const GarmentLayout& L, const Eigen::Ref<const Points>& pred,
+                           const Eigen::Ref<const Points>& truth, const Eigen::Ref<const Points>& body,
+                           const Faces& body_faces, const CollisionOptions& o) {
+  const int N = L.num_vertices();
+  if (pred.rows() != N || truth.rows() != N)
+    throw std::invalid_argument("frame_metrics: expected " + std::to_string(N) + " garment vertices, got " +
+                                std::to_string(pred.rows()) + " predicted and " + std::to_string(truth.rows()) +
+                                " ground-truth rows");
+  FrameMetrics m;
+  m.error = mean_vertex_error(pred, truth);
+  for (int g = 0; g < L.num_garments(); ++g) {
+    const int n = L.offsets[g + 1] - L.offsets[g];
+    m.garment_error.push_back(mean_vertex_error(pred.middleRows(L.offsets[g], n), truth.middleRows(L.offsets[g], n)));
+  }
+  const int n_inner = L.layered() ? L.offsets[L.num_garments() - 1] : N;
+  m.inner_error = mean_vertex_error(pred.topRows(n_inner), truth.topRows(n_inner));
+  m.body_collisions = count_body_collisions(pred, body, body_faces, o.max_body_distance);
+  m.h_rate = static_cast<double>(m.body_collisions) / N;
+  if (L.layered()) {
+    const int n_outer = N - n_inner;
+    m.outer_error = mean_vertex_error(pred.bottomRows(n_outer), truth.bottomRows(n_outer));
+    m.layer_collisions = count_layer_collisions(pred.bottomRows(n_outer), pred.topRows(n_inner), inner_faces(L));
+    m.l_rate_outer = static_cast<double>(m.layer_collisions) / n_outer;
+    m.l_rate_all = static_cast<double>(m.layer_collisions) / N;
+  } else {
+    m.layer_collisions = -1;
+  }
+  return m;
+}
+
+MeanStd mean_std(const std::vector<double>& values) {
+  MeanStd r;
+  r.count = static_cast<int64_t>(values.size());
+  if (values.empty()) return r;
+  for (double v : values) r.mean += v;
+  r.mean /= static_cast<double>(values.size());
+  double ss = 0;
+  for (double v : values) ss += (v - r.mean) * (v - r.mean);
+  r.std = std::sqrt(ss / static_cast<double>(values.size()));
+  return r;
+}
+
+}  // namespace layersnet::eval

@@ -1,0 +1,93 @@
+#pragma once
+// Per-frame evaluation metrics (paper §5.1; official losses/accuracy.py, reference §4).
+//
+// Dimension letters: N garment vertices of all garments (layer order, concatenated),
+// N_g of garment g, B body vertices. Positions are world coordinates in scene units.
+//
+//   Euclidean error   e_v = ‖x̂_v − x_v‖₂ per vertex; a frame's error is the mean over its
+//                     vertices (all garments: Σ_v e_v / N, which equals the official
+//                     vertex-weighted average of per-garment means Σ_g err_g·N_g / N).
+//   H-collision       vertex x collides with the body when, for its nearest body vertex h
+//                     (k-d tree, body of the same frame) with vertex normal n,
+//                     (x − h)·n < 0 and ‖x − h‖ ≤ max_distance (official: 5.0 data units,
+//                     i.e. 0.5 m at scale 10 — the far side of a limb is not "inside").
+//                     Rate = colliding / N (all garment vertices).
+//   L-collision       outer vertex x (last garment) collides when, for its nearest vertex y
+//                     among all inner garments (same frame, same source: predicted for a
+//                     prediction, ground truth for the floor) with that inner mesh's vertex
+//                     normal n (area-weighted... no: sum of unit face normals, dataset::
+//                     vertex_normals), (x − y)·n < 0. No distance limit (official).
+//                     Two denominators: rate_outer = colliding / N_outer (the share of
+//                     outer-layer vertices; our headline number) and rate_all = colliding / N
+//                     (what the official per-frame aggregate divides by, reference §4 and
+//                     model/README.md quirk 9).
+// All comparisons are strict (< 0), no epsilon, as the official code.
+#include "dataset/sequence.h"
+
+#include <Eigen/Core>
+
+#include <cstdint>
+#include <vector>
+
+namespace layersnet::eval {
+
+using dataset::Faces;
+using dataset::Points;
+
+// Mean per-vertex L2 distance; pred, truth: (n, 3), same n > 0.
+double mean_vertex_error(const Eigen::Ref<const Points>& pred, const Eigen::Ref<const Points>& truth);
+
+// Number of garment vertices inside the body (see above). garments (N, 3), body (B, 3),
+// body_faces (Fb, 3) counter-clockwise from outside. max_distance in scene units (< 0: none).
+int64_t count_body_collisions(const Eigen::Ref<const Points>& garments, const Eigen::Ref<const Points>& body,
+                              const Faces& body_faces, double max_distance);
+
+// Number of outer vertices on the inner side of the nearest inner-layer vertex.
+// outer (N_o, 3); inner: positions (N_i, 3) of all inner garments concatenated and their
+// faces re-indexed into that concatenation (inner_faces (F_i, 3)).
+int64_t count_layer_collisions(const Eigen::Ref<const Points>& outer, const Eigen::Ref<const Points>& inner,
+                               const Faces& inner_faces);
+
+// The garment layout of a sequence, for splitting the concatenated positions.
+struct GarmentLayout {
+  std::vector<int32_t> offsets;    // (G+1,) first vertex of each garment
+  std::vector<Faces> faces;        // per garment, local indices
+  std::vector<std::string> types;  // per garment
+  int num_garments() const { return static_cast<int>(types.size()); }
+  int num_vertices() const { return offsets.empty() ? 0 : offsets.back(); }
+  bool layered() const { return num_garments() >= 2; }  // the last garment is the outer layer
+  int outer_vertices() const { return layered() ? offsets.back() - offsets[offsets.size() - 2] : 0; }
+};
+GarmentLayout garment_layout(const dataset::SequenceInfo& info);
+
+// Everything one frame contributes (numerators and denominators, so sums stay exact).
+struct FrameMetrics {
+  double error = 0;                     // mean over all N vertices (scene units)
+  std::vector<double> garment_error;    // (G,) mean over each garment's vertices
+  double inner_error = 0;               // mean over the inner garments' vertices (all if G = 1)
+  double outer_error = -1;              // mean over the outer garment (-1 when not layered)
+  int64_t body_collisions = 0;          // H numerator; denominator N
+  int64_t layer_collisions = 0;         // L numerator; denominators N_outer and N (-1 count if not layered)
+  double h_rate = 0;                    // body_collisions / N
+  double l_rate_outer = -1;             // layer_collisions / N_outer, -1 when not layered
+  double l_rate_all = -1;               // layer_collisions / N (official aggregate)
+};
+
+struct CollisionOptions {
+  double max_body_distance = 5.0;  // scene units; official 5.0 (0.5 m at scale 10)
+};
+
+// Metrics of one frame. pred / truth (N, 3) world; body (B, 3) of the same frame.
+// Collisions are those of `pred` (pass truth as pred for the ground-truth floor).
+FrameMetrics frame_metrics(const GarmentLayout& layout, const Eigen::Ref<const Points>& pred,
+                           const Eigen::Ref<const Points>& truth, const Eigen::Ref<const Points>& body,
+                           const Faces& body_faces, const CollisionOptions& options = {});
+
+// Mean and population standard deviation (ddof 0, as numpy's default) of values.
+struct MeanStd {
+  double mean = 0, std = 0;
+  int64_t count = 0;
+};
+MeanStd mean_std(const std::vector<double>& values);
+
+}  // namespace layersnet::eval

@@ -1,0 +1,172 @@
+// Rollouts and predictors (see rollout.h).
+#include "eval/rollout.h"
+
+#include "model/layersnet.h"
+#include "model/sample_input.h"
+#include "train/checkpoint.h"
+
+#include <chrono>
+#include <stdexcept>
+
+namespace layersnet::eval {
+
+Points garments_at(const dataset::Sequence& seq, int t) {
+  Points x(seq.info.total_garment_vertices(), 3);
+  Eigen::Index row = 0;
+  for (int g = 0; g < seq.info.num_garments(); ++g) {
+    const int n = seq.info.garments[g].num_vertices;
+    x.middleRows(row, n) = seq.garment_at(g, t);
+    row += n;
+  }
+  return x;
+}
+
+Points ConstantVelocity::step(const dataset::Sequence&, int, const Points&, const Points& x_prev,
+                              const Points& x_now) {
+  return 2.f * x_now - x_prev;
+}
+
+Points FollowBody::step(const dataset::Sequence& seq, int t, const Points&, const Points&, const Points& x_now) {
+  const Eigen::RowVector3f shift = seq.info.translation.row(t + 1) - seq.info.translation.row(t);
+  Points x = x_now;
+  x.rowwise() += shift;
+  return x;
+}
+
+namespace {
+const char* const kStatQuantities[] = {"position", "velocity", "acceleration",
+                                       "root_position", "root_velocity", "root_acceleration"};
+dataset::MeanStd* stat_slot(dataset::NormalisationStats& s, int q) {
+  dataset::MeanStd* slots[] = {&s.position, &s.velocity, &s.acceleration,
+                               &s.root_position, &s.root_velocity, &s.root_acceleration};
+  return slots[q];
+}
+}  // namespace
+
+bool stats_from_checkpoint(const std::map<std::string, std::vector<double>>& stored, dataset::NormalisationStats& out) {
+  dataset::NormalisationStats s;
+  for (int q = 0; q < 6; ++q) {
+    const std::string base = kStatQuantities[q];
+    const auto mean = stored.find(base + "_mean"), std = stored.find(base + "_std");
+    if (mean == stored.end() || std == stored.end() || mean->second.size() != 3 || std->second.size() != 3)
+      return false;
+    dataset::MeanStd* slot = stat_slot(s, q);
+    slot->mean = Eigen::Vector3d(mean->second[0], mean->second[1], mean->second[2]);
+    slot->std = Eigen::Vector3d(std->second[0], std->second[1], std->second[2]);
+    if (const auto c = stored.find(base + "_count"); c != stored.end() && !c->second.empty())
+      slot->count = static_cast<int64_t>(c->second[0]);
+  }
+  out = s;
+  return true;
+}
+
+std::map<std::string, std::vector<double>> stats_to_checkpoint(const dataset::NormalisationStats& stats) {
+  std::map<std::string, std::vector<double>> out;
+  dataset::NormalisationStats s = stats;
+  for (int q = 0; q < 6; ++q) {
+    const dataset::MeanStd* slot = stat_slot(s, q);
+    const std::string base = kStatQuantities[q];
+    out[base + "_mean"] = {slot->mean[0], slot->mean[1], slot->mean[2]};
+    out[base + "_std"] = {slot->std[0], slot->std[1], slot->std[2]};
+    out[base + "_count"] = {static_cast<double>(slot->count)};
+  }
+  return out;
+}
+
+dataset::SampleOptions sample_options_for(const ModelConfig& c) {
+  dataset::SampleOptions o;
+  o.patch_size = static_cast<float>(c.patch_size);
+  o.neighbours.world_radius = static_cast<float>(c.world_radius);
+  o.neighbours.body_radius = static_cast<float>(c.body_radius);
+  o.neighbours.body_k = c.body_neighbors;
+  o.neighbours.body_query = c.body_query == "first" ? dataset::BodyQuery::kFirstInIndexOrder : dataset::BodyQuery::kNearest;
+  o.neighbours.official_padding = false;
+  return o;
+}
+
+ModelPredictor::ModelPredictor(std::string name, Config config, ad::ParamStore<float> params,
+                               dataset::NormalisationStats stats)
+    : name_(std::move(name)),
+      config_(std::move(config)),
+      params_(std::move(params)),
+      stats_(std::move(stats)),
+      sample_options_(sample_options_for(config_.model)) {}
+
+void ModelPredictor::begin(const dataset::Sequence& seq) {
+  structure_ = dataset::build_structure(seq.info, sample_options_.patch_size);
+}
+
+Points ModelPredictor::step(const dataset::Sequence& seq, int t, const Points& x_prev2, const Points& x_prev,
+                            const Points& x_now) {
+  const dataset::SequenceInfo& info = seq.info;
+  if (!structure_) begin(seq);
+  // The window t-2..t+1: body from the data, garments from the rollout (t+1 is only the
+  // sample's unused target, so the ground truth fills it).
+  dataset::FrameWindow w;
+  w.first = t - 2;
+  w.count = 4;
+  const int B = info.num_body_vertices;
+  w.body = seq.frames.body.middleRows(static_cast<Eigen::Index>(t - 2) * B, 4 * static_cast<Eigen::Index>(B));
+  const Points* hist[3] = {&x_prev2, &x_prev, &x_now};
+  Eigen::Index offset = 0;
+  for (int g = 0; g < info.num_garments(); ++g) {
+    const int n = info.garments[g].num_vertices;
+    Points x(4 * static_cast<Eigen::Index>(n), 3);
+    for (int k = 0; k < 3; ++k) x.middleRows(k * n, n) = hist[k]->middleRows(offset, n);
+    x.middleRows(3 * n, n) = seq.garment_at(g, t + 1);
+    w.garments.push_back(std::move(x));
+    offset += n;
+  }
+  const dataset::TrainingSample sample = dataset::build_sample(info, w, t, stats_, structure_, sample_options_);
+  const model::ModelInput<float> input = model::model_input_from_sample(sample, stats_, config_.model);
+  tape_.reset();
+  ad::NoRecord<float> off(tape_);
+  const model::Predictions<float> pred = model::forward(tape_, params_, config_.model, input);
+  const auto v = pred.vertex.val();
+  Points x(v.rows(), 3);
+  x = v.leftCols(3);
+  x.rowwise() += sample.root_translation_next.transpose();
+  return x;
+}
+
+std::unique_ptr<ModelPredictor> load_model_predictor(const std::string& path, const std::string& name,
+                                                     const dataset::NormalisationStats* fallback_stats) {
+  LoadedModel m = load_model(path);
+  dataset::NormalisationStats stats;
+  if (!stats_from_checkpoint(m.checkpoint.stats, stats)) {
+    if (!fallback_stats)
+      throw std::runtime_error(path + ": the checkpoint holds no normalisation statistics (/stats/position_mean ...) "
+                               "and no data set stats.h5 was given; run `layersnet prepare <dataset>`");
+    stats = *fallback_stats;
+  }
+  return std::make_unique<ModelPredictor>(name, std::move(m.config), std::move(m.params), std::move(stats));
+}
+
+Rollout rollout(Predictor& predictor, const dataset::Sequence& seq, int t0, int n) {
+  const int T = seq.info.num_frames;
+  if (t0 < 2 || t0 + 1 > T - 1)
+    throw std::invalid_argument(seq.info.path + ": a rollout from input frame " + std::to_string(t0) +
+                                " needs 2 <= t0 <= T-2 (T = " + std::to_string(T) + ")");
+  n = std::min(n, T - 1 - t0);
+  if (n < 1) throw std::invalid_argument(seq.info.path + ": rollout length must be >= 1");
+  Rollout r;
+  r.first_frame = t0 + 1;
+  predictor.begin(seq);
+  Points a = garments_at(seq, t0 - 2), b = garments_at(seq, t0 - 1), c = garments_at(seq, t0);
+  for (int k = 0; k < n; ++k) {
+    const int t = t0 + k;
+    const auto start = std::chrono::steady_clock::now();
+    Points next = predictor.step(seq, t, a, b, c);
+    r.step_ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
+    if (next.rows() != c.rows())
+      throw std::runtime_error(predictor.name() + " returned " + std::to_string(next.rows()) + " rows for " +
+                               std::to_string(c.rows()) + " garment vertices");
+    r.frames.push_back(next);
+    a = std::move(b);
+    b = std::move(c);
+    c = std::move(next);
+  }
+  return r;
+}
+
+}  // namespace layersnet::eval

@@ -1,0 +1,107 @@
+#pragma once
+// Autoregressive rollouts (issue 7 point 1) and the predictors that drive them.
+//
+// A rollout of sequence S from input frame t0 for n frames predicts frames t0+1 .. t0+n.
+// It starts from the ground truth at frames t0-2, t0-1, t0 (the model's state needs x_t, v_t,
+// x_{t-1}, v_{t-1}); every later garment state is the predictor's own output, while the body,
+// its root translation and the wind come from the data at every frame (official
+// single_gpu_rollout, reference §4). The model runs without recording (ad::NoRecord).
+//
+// Positions: world coordinates, scene units; garments concatenated in layer order (N, 3).
+#include "autodiff/params.h"
+#include "autodiff/tape.h"
+#include "dataset/sample.h"
+#include "dataset/sequence.h"
+#include "dataset/stats.h"
+#include "train/config.h"
+
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace layersnet::eval {
+
+using dataset::Points;
+
+// Garment positions of frame t concatenated in layer order: (N, 3), world.
+Points garments_at(const dataset::Sequence& seq, int t);
+
+// Predicts x_{t+1} (world, (N, 3)) from the three latest garment frames and the data.
+class Predictor {
+ public:
+  virtual ~Predictor() = default;
+  virtual std::string name() const = 0;
+  // Called once per sequence before its first step.
+  virtual void begin(const dataset::Sequence& /*seq*/) {}
+  // x_prev2, x_prev, x_now: garment positions at t-2, t-1, t (world, (N, 3)).
+  virtual Points step(const dataset::Sequence& seq, int t, const Points& x_prev2, const Points& x_prev,
+                      const Points& x_now) = 0;
+};
+
+// Baseline: x_{t+1} = 2 x_t − x_{t−1} (constant velocity in world space).
+class ConstantVelocity : public Predictor {
+ public:
+  std::string name() const override { return "constant velocity"; }
+  Points step(const dataset::Sequence& seq, int t, const Points& x_prev2, const Points& x_prev,
+              const Points& x_now) override;
+};
+
+// Baseline: the garment carried rigidly with the body's root motion,
+// x_{t+1} = x_t + (r_{t+1} − r_t) with r the body root translation (/body/translation;
+// a file without it has r = 0 and the garment then stays where it is).
+class FollowBody : public Predictor {
+ public:
+  std::string name() const override { return "follow the body"; }
+  Points step(const dataset::Sequence& seq, int t, const Points& x_prev2, const Points& x_prev,
+              const Points& x_now) override;
+};
+
+// Statistics stored in a checkpoint (/stats/<quantity>_{mean,std,count}, quantity one of
+// position, velocity, acceleration, root_position, root_velocity, root_acceleration).
+// Returns false (and leaves `out` untouched) when any mean/std is missing.
+bool stats_from_checkpoint(const std::map<std::string, std::vector<double>>& stored, dataset::NormalisationStats& out);
+// The inverse, for writing checkpoints in tests and tools.
+std::map<std::string, std::vector<double>> stats_to_checkpoint(const dataset::NormalisationStats& stats);
+
+// Sample options matching a model config (patch size, radii, K, body query order;
+// no duplicate padding — the model drops duplicates anyway, model/README.md quirk 3).
+dataset::SampleOptions sample_options_for(const ModelConfig& config);
+
+// The learned simulator: builds the dataset sample of the rollout's window, the model input,
+// runs forward without recording; world x_{t+1} = predicted root-relative x + r_{t+1}.
+class ModelPredictor : public Predictor {
+ public:
+  ModelPredictor(std::string name, Config config, ad::ParamStore<float> params, dataset::NormalisationStats stats);
+  std::string name() const override { return name_; }
+  void begin(const dataset::Sequence& seq) override;
+  Points step(const dataset::Sequence& seq, int t, const Points& x_prev2, const Points& x_prev,
+              const Points& x_now) override;
+  const Config& config() const { return config_; }
+
+ private:
+  std::string name_;
+  Config config_;
+  ad::ParamStore<float> params_;
+  dataset::NormalisationStats stats_;
+  dataset::SampleOptions sample_options_;
+  std::shared_ptr<const dataset::SequenceStructure> structure_;
+  ad::Tape<float> tape_;
+};
+
+// Loads a checkpoint into a ModelPredictor. Statistics: the checkpoint's own when present,
+// else `fallback_stats` (the data set's stats.h5); throws when neither exists.
+std::unique_ptr<ModelPredictor> load_model_predictor(const std::string& checkpoint_path, const std::string& name,
+                                                     const dataset::NormalisationStats* fallback_stats);
+
+struct Rollout {
+  int first_frame = 0;          // t0 + 1: the first predicted frame
+  std::vector<Points> frames;   // (n,) predicted garment positions (N, 3), world
+  std::vector<double> step_ms;  // (n,) wall time of each prediction, milliseconds
+};
+
+// Rolls `predictor` over seq from input frame t0 (2 <= t0) for n frames, clamped so that
+// t0 + n <= T − 1. Throws when not even one frame can be predicted.
+Rollout rollout(Predictor& predictor, const dataset::Sequence& seq, int t0, int n);
+
+}  // namespace layersnet::eval
