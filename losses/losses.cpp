@@ -127,7 +127,8 @@ LossTerms<T> compute_losses(ad::Tape<T>& tape, ad::ParamStore<T>& params, const 
              lc.collision_layer, out.collision_layer);
   }
   const auto rot_names = model::rotation_map_names(mc);
-  if (lc.orthogonality != 0 && !rot_names.empty()) {
+  // With model.orthogonality = "exact" the constraint holds by construction: no penalty.
+  if (lc.orthogonality != 0 && !rot_names.empty() && mc.orthogonality != "exact") {
     const std::vector<T> eye3{1, 0, 0, 0, 1, 0, 0, 0, 1};
     const Var<T> I3 = model::constant(tape, eye3, 3, 3);
     std::vector<Var<T>> parts;

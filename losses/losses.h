@@ -9,7 +9,8 @@
 //                    N_c = number of vertices with a non-zero term (eq. 18)
 //   collision_layer  the same for the outer (last) garment's vertices against the nearest
 //                    vertex of all inner garments, with the PREDICTED inner normals (eq. 18)
-//   orthogonality    Σ_W ‖W Wᵀ − I‖²_F + ‖Wᵀ W − I‖²_F over every RET map W (eq. 9 as a penalty)
+//   orthogonality    Σ_W ‖W Wᵀ − I‖²_F + ‖Wᵀ W − I‖²_F over every RET map W (eq. 9 as a penalty);
+//                    absent with model.orthogonality = "exact" (W orthonormal by construction)
 //
 //   total = Σ weight_k · term_k, weights from LossConfig (collision_layer is NOT multiplied by
 //   collision_body, as in the official code).

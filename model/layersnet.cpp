@@ -131,6 +131,25 @@ Var<T> edge_weights(ad::Tape<T>& tape, const EdgeTerms<T>& t, std::span<const in
   return t.inv_norm.value ? ad::div(tape, a, t.inv_norm) : a;
 }
 
+template <class T>
+Var<T> rotation_map_impl(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfig& cfg, const std::string& name) {
+  const Var<T> V = p(name);  // (d, 3)
+  if (cfg.orthogonality != "exact") return V;
+  const std::vector<T> eye3{1, 0, 0, 0, 1, 0, 0, 0, 1};
+  const Var<T> Vt = ad::linear(tape, constant(tape, eye3, 3, 3), V);  // (3, d): columns as rows
+  const Var<T> r0 = rows_of(Vt, 0, 1), r1 = rows_of(Vt, 1, 2), r2 = rows_of(Vt, 2, 3);
+  auto minus_proj = [&](const Var<T>& x, const Var<T>& u) {  // x − (x·u) u, u unit
+    return ad::sub(tape, x, ad::mul(tape, u, ad::row_sum(tape, ad::mul(tape, x, u))));
+  };
+  const Var<T> u0 = ad::row_normalize(tape, r0);
+  const Var<T> u1 = ad::row_normalize(tape, minus_proj(r1, u0));
+  const Var<T> u2 = ad::row_normalize(tape, minus_proj(minus_proj(r2, u0), u1));
+  const Var<T> Ut = ad::concat_rows(tape, ad::concat_rows(tape, u0, u1), u2);  // (3, d)
+  std::vector<T> eye_d(V.rows * V.rows, T(0));
+  for (int64_t i = 0; i < V.rows; ++i) eye_d[i * V.rows + i] = T(1);
+  return ad::linear(tape, constant(tape, eye_d, V.rows, V.rows), Ut);  // (d, 3)
+}
+
 // ψ with RET for the inter edges of group g: φ(R)ᵀ ReLU(A_g φ(R) v + c_g), φ(R) = W_g R W_gᵀ (eq. 10–11).
 template <class T>
 Var<T> inter_messages(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfig& cfg, const ModelDims& m,
@@ -141,7 +160,7 @@ Var<T> inter_messages(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
     Var<T> y = ad::slice_cols(tape, v, g * m.head_dim, (g + 1) * m.head_dim);
     Var<T> W;
     if (cfg.rotation_equivalent) {
-      W = p(prefix + "rot_mapping." + gs + ".weight");
+      W = rotation_map_impl(tape, p, cfg, prefix + "rot_mapping." + gs + ".weight");
       y = ad::rot_map_apply(tape, W, rot, y);
     }
     y = ad::relu(tape, ad::linear(tape, y, p(prefix + "rs_mlp." + gs + ".weight"), p(prefix + "rs_mlp." + gs + ".bias")));
@@ -270,7 +289,7 @@ Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
   };
   Var<T> W, Wt;
   if (ret) {
-    W = p("decoder.rot_mapping.weight");  // (d, 3)
+    W = rotation_map_impl(tape, p, cfg, "decoder.rot_mapping.weight");  // (d, 3)
     const std::vector<T> eye3{1, 0, 0, 0, 1, 0, 0, 0, 1};
     Wt = ad::linear(tape, constant(tape, eye3, 3, 3), W);  // (3, d) = Wᵀ
   }
@@ -390,6 +409,13 @@ Predictions<T> forward(ad::Tape<T>& tape, ad::ParamStore<T>& params, const Model
   return decode(tape, p, cfg, m, in, rows_of(st.X, 0, P), body_x, options);
 }
 
+template <class T>
+Var<T> rotation_map(ad::Tape<T>& tape, ad::ParamStore<T>& params, const ModelConfig& cfg, const std::string& name) {
+  return rotation_map_impl(tape, ParamView<T>{params}, cfg, name);
+}
+
+template Var<float> rotation_map(ad::Tape<float>&, ad::ParamStore<float>&, const ModelConfig&, const std::string&);
+template Var<double> rotation_map(ad::Tape<double>&, ad::ParamStore<double>&, const ModelConfig&, const std::string&);
 template Predictions<float> forward(ad::Tape<float>&, ad::ParamStore<float>&, const ModelConfig&,
                                     const ModelInput<float>&, const ForwardOptions&);
 template Predictions<double> forward(ad::Tape<double>&, ad::ParamStore<double>&, const ModelConfig&,

@@ -22,6 +22,8 @@
 #include "model/model_config.h"
 #include "model/model_input.h"
 
+#include <string>
+
 namespace layersnet::model {
 
 template <class T>
@@ -48,5 +50,14 @@ struct ForwardOptions {
 template <class T>
 Predictions<T> forward(ad::Tape<T>& tape, ad::ParamStore<T>& params, const ModelConfig& config,
                        const ModelInput<T>& input, const ForwardOptions& options = {});
+
+// The RET map W (d, 3) named `name` as the forward uses it: the parameter itself with
+// model.orthogonality = "penalty" (official; the loss adds ‖WWᵀ−I‖² + ‖WᵀW−I‖²), or, with
+// "exact", Gram–Schmidt of its columns, so WᵀW = I holds exactly for any parameter value of
+// rank 3 (φ(R) φ(R)ᵀ = W Wᵀ is then an exact rank-3 projector, the best eq. 9 allows with
+// d > 3); the initial orthonormal parameter maps to itself.
+template <class T>
+ad::Var<T> rotation_map(ad::Tape<T>& tape, ad::ParamStore<T>& params, const ModelConfig& config,
+                        const std::string& name);
 
 }  // namespace layersnet::model

@@ -41,8 +41,8 @@ ModelDims model_dims(const ModelConfig& c) {
                   "model.layers, ffn_width and decoder_width must be positive");
   LAYERSNET_CHECK(c.attention == "ria" || c.attention == "tie",
                   "model.attention = '" << c.attention << "': use \"ria\" or \"tie\"");
-  LAYERSNET_CHECK(c.orthogonality == "penalty",
-                  "model.orthogonality = '" << c.orthogonality << "': only \"penalty\" is implemented");
+  LAYERSNET_CHECK(c.orthogonality == "penalty" || c.orthogonality == "exact",
+                  "model.orthogonality = '" << c.orthogonality << "': use \"penalty\" or \"exact\"");
   ModelDims m;
   m.d = c.width, m.heads = c.heads, m.head_dim = c.width / c.heads, m.groups = c.heads / 2;
   m.layers = c.layers, m.ffn = c.ffn_width, m.dec_width = c.decoder_width, m.dec_in = 12 + 2 * c.width;

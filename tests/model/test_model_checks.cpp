@@ -83,6 +83,38 @@ TEST(ModelGradcheck, WholeModelVanillaNoRet) {
   directional_check(c);
 }
 
+TEST(ModelGradcheck, WholeModelExactOrthogonality) {
+  auto c = testing::tiny_config();
+  c.orthogonality = "exact";
+  directional_check(c);
+}
+
+// "exact": the effective W has orthonormal columns for any raw parameter, equals the raw
+// parameter at initialisation, and the loss has no orthogonality term.
+TEST(ModelOrthogonality, ExactParametrisationHoldsForAnyParameter) {
+  auto c = testing::tiny_config();
+  c.orthogonality = "exact";
+  ad::ParamStore<double> ps;
+  register_params(ps, c);
+  init_params(ps, c, 12);
+  std::mt19937_64 rng(3);
+  std::normal_distribution<double> normal(0, 1);
+  for (const auto& name : rotation_map_names(c)) {
+    ad::Tape<double> tape;
+    const auto W0 = rotation_map(tape, ps, c, name);
+    EXPECT_LT((W0.val() - ps.var(name).val()).norm(), 1e-12) << name;
+    for (auto& x : ps.value(ps.index_of(name))) x += 0.7 * normal(rng);
+    const auto W = rotation_map(tape, ps, c, name);
+    Eigen::MatrixXd WtW = W.val().transpose() * W.val();
+    EXPECT_LT((WtW - Eigen::MatrixXd::Identity(3, 3)).norm(), 1e-12) << name;
+  }
+  const auto s = make_sample<double>(testing::tiny_scene(), c);
+  ad::Tape<double> tape;
+  const auto pred = forward(tape, ps, c, s.input);
+  const auto t = losses::compute_losses(tape, ps, c, LossConfig{}, s.target, pred);
+  EXPECT_EQ(t.orthogonality, 0.0);
+}
+
 // Every registered tensor gets a non-zero gradient from one realistic sample (two garments,
 // wind, body contact), in float as in training.
 TEST(ModelGradients, EveryParameterGetsAGradient) {
