@@ -252,3 +252,25 @@ TEST(RotationFromNormals, ZeroNormalGivesIdentityAndNonUnitIsNotNormalised) {
 }
 
 }  // namespace layersnet::ad::testing
+
+namespace layersnet::ad::testing {
+
+GRADCHECK_TEST(Rotate3, OneRowEachDirectionAndConstantRotation) {
+  for (bool transpose : {false, true}) {
+    const auto f = [transpose](Tape<double>& t, const std::vector<Var<double>>& v) {
+      return rotate3(t, v[0], v[1], transpose);
+    };
+    expect_gradcheck(OpKind::Rotate3, f, {{random_matrix(1, 9, 72)}, {random_matrix(1, 3, 73)}});
+    expect_gradcheck(OpKind::Rotate3, f, {{random_matrix(1, 9, 74), false}, {random_matrix(1, 3, 75)}});
+  }
+}
+
+GRADCHECK_TEST(RowNormalize, OneRowOneColumn) {
+  const auto f = [](Tape<double>& t, const std::vector<Var<double>>& v) { return row_normalize(t, v[0]); };
+  RowMat<double> x(1, 1);
+  x << -2.5;
+  const GradcheckReport rep = expect_gradcheck(OpKind::RowNormalize, f, {{x}});
+  EXPECT_EQ(rep.output(0, 0), -1.0);
+}
+
+}  // namespace layersnet::ad::testing

@@ -244,3 +244,14 @@ TEST(Reshape, AliasesValuesAndGradients) {
 }
 
 }  // namespace layersnet::ad::testing
+
+namespace layersnet::ad::testing {
+
+GRADCHECK_TEST(SegmentSoftmax, OneRowTensor) {
+  const auto f = [](Tape<double>& t, const std::vector<Var<double>>& v) { return segment_softmax(t, v[0], Idx{0, 1}); };
+  const GradcheckReport rep = expect_gradcheck(OpKind::SegmentSoftmax, f, {{random_matrix(1, 3, 43)}});
+  EXPECT_TRUE(rep.output.isOnes());
+  EXPECT_TRUE(rep.gradients[0].isZero());
+}
+
+}  // namespace layersnet::ad::testing
