@@ -1,5 +1,7 @@
 #include "autodiff/tape.h"
 
+#include "autodiff/row_blocks.h"
+
 #include <algorithm>
 #include <cstring>
 
@@ -27,7 +29,10 @@ Var<T> Tape<T>::new_var(int64_t rows, int64_t cols, bool with_grad) {
   v.value = arena_.allocate_array<T>(static_cast<std::size_t>(rows * cols));
   if (with_grad && recording_) {
     v.grad = arena_.allocate_array<T>(static_cast<std::size_t>(rows * cols));
-    std::fill_n(v.grad, rows * cols, T(0));
+    // Zeroing is a full memory pass (10% of a linear layer's forward at N = 80,000):
+    // split it over the threads for large tensors.
+    T* g = v.grad;
+    for_row_blocks(rows * cols, 1, [g](int64_t i0, int64_t n) { std::fill_n(g + i0, n, T(0)); });
   }
   return v;
 }

@@ -367,6 +367,24 @@ TEST(DenseForward, LinearInChunksMatchesPlainEigen) {
   EXPECT_TRUE(bb.grd().isApprox(G.colwise().sum(), 1e-12));
 }
 
+TEST(DenseForward, ZeroRowTensorsFlowThrough) {
+  // N = 0 (e.g. no vertex of a garment in a batch): every op returns an empty result and
+  // backward leaves parameter gradients at zero.
+  Tape<double> t;
+  const RowMat<double> W = random_matrix(2, 3, 84), g1 = RowMat<double>::Ones(1, 2);
+  const auto x = t.leaf(nullptr, 0, 3), w = t.leaf(W.data(), 2, 3), gamma = t.leaf(g1.data(), 1, 2);
+  Var<double> h = relu(t, linear(t, x, w));
+  h = layer_norm(t, h, gamma, Var<double>{});
+  h = concat_cols(t, {h, slice_cols(t, x, 0, 1)});
+  const Var<double> loss = add(t, mean_all(t, squared_error(t, h, h)), sum_all(t, col_mean(t, row_sum(t, h))));
+  EXPECT_EQ(h.rows, 0);
+  EXPECT_EQ(h.cols, 3);
+  t.backward(loss);
+  EXPECT_EQ(loss.scalar(), 0.0);
+  EXPECT_EQ(w.grd().norm(), 0.0);
+  EXPECT_EQ(gamma.grd().norm(), 0.0);
+}
+
 TEST(DenseForward, ReluAtExactlyZeroHasZeroGradient) {
   Tape<double> t;
   const RowMat<double> z = RowMat<double>::Zero(1, 3);
