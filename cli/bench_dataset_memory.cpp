@@ -42,6 +42,11 @@ int make(const MemoryOptions& o) {
   so.height = 0.147f * 99 / 0.8f;
   so.uv_per_unit = 0.1f;
   so.wind = true;
+  if (o.make_gb < 0.1) {  // a small data set for examples and quick checks
+    so.frames = 40;
+    so.rings = so.body_rings = 20;
+    so.height = 0.147f * 19 / 0.8f;
+  }
   const Sequence probe = make_synthetic_sequence(so);
   const double per_sequence = static_cast<double>(probe.info.bytes_per_frame()) * so.frames;
   const int n = std::max(3, static_cast<int>(o.make_gb * (1 << 30) / per_sequence + 0.999));
