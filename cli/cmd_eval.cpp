@@ -1,0 +1,140 @@
+// `layersnet eval --checkpoint C [--checkpoint C2 ...] [--split test] [--frames N] [--out DIR]`:
+// rollouts of every checkpoint and of the two baselines (constant velocity, follow the body)
+// over a split, Euclidean error and collision rates (with the ground truth's own rates as the
+// floor), speed at 1 and 2 threads against Blender's recorded time; writes eval.json,
+// eval.md, curve.png, speed.png to --out and prints the summary table. See eval/README.md.
+#include "cli/command_registry.h"
+#include "dataset/manifest.h"
+#include "dataset/stats.h"
+#include "eval/evaluate.h"
+#include "eval/report.h"
+#include "train/checkpoint.h"
+
+#include <cstdio>
+#include <filesystem>
+#include <memory>
+
+namespace {
+using namespace layersnet;
+
+struct EvalCliOptions {
+  std::vector<std::string> checkpoints;
+  std::vector<std::string> names;
+  std::string dataset;
+  std::string split;
+  int frames = -1;
+  int start_frame = -1;
+  int max_sequences = 0;
+  int speed_frames = 10;
+  std::string out = "eval_out";
+};
+
+// "<folder>/<stem> (<attention>[+RET])": distinguishes ablation runs in one table.
+std::string default_name(const std::string& path, const Config& c) {
+  const std::filesystem::path p(path);
+  std::string folder = p.parent_path().filename().string();
+  std::string name = (folder.empty() ? "" : folder + "/") + p.stem().string();
+  return name + " (" + c.model.attention + (c.model.rotation_equivalent ? "+RET" : ", vanilla") + ")";
+}
+
+int run_eval(const EvalCliOptions& o) {
+  // Settings: the first checkpoint's config supplies the defaults.
+  Config base;
+  if (!o.checkpoints.empty()) base = parse_config_text(read_checkpoint_config(o.checkpoints[0]), o.checkpoints[0]);
+  const std::string root = o.dataset.empty() ? base.data.dataset : o.dataset;
+  const dataset::DatasetManifest manifest = dataset::read_manifest(root);
+  std::unique_ptr<dataset::NormalisationStats> fallback;
+  if (std::filesystem::exists(manifest.stats_path()))
+    fallback = std::make_unique<dataset::NormalisationStats>(dataset::read_stats(manifest.stats_path()));
+
+  eval::EvalOptions eo;
+  eo.split = o.split.empty() ? base.eval.split : o.split;
+  eo.frames = o.frames > 0 ? o.frames : base.eval.frames;
+  eo.start_frame = o.start_frame >= 2 ? o.start_frame : std::max(2, base.data.first_frame);
+  eo.max_sequences = o.max_sequences;
+
+  std::vector<std::unique_ptr<eval::Predictor>> owned;
+  std::vector<std::string> kinds, paths;
+  for (size_t i = 0; i < o.checkpoints.size(); ++i) {
+    const Config c = parse_config_text(read_checkpoint_config(o.checkpoints[i]), o.checkpoints[i]);
+    const std::string name = i < o.names.size() ? o.names[i] : default_name(o.checkpoints[i], c);
+    owned.push_back(eval::load_model_predictor(o.checkpoints[i], name, fallback.get()));
+    kinds.push_back("model");
+    paths.push_back(o.checkpoints[i]);
+  }
+  owned.push_back(std::make_unique<eval::ConstantVelocity>());
+  owned.push_back(std::make_unique<eval::FollowBody>());
+  owned.push_back(std::make_unique<eval::GroundTruth>());
+  for (const char* k : {"baseline", "baseline", "ground truth"}) {
+    kinds.push_back(k);
+    paths.push_back("");
+  }
+  std::vector<eval::Predictor*> predictors;
+  for (auto& p : owned) predictors.push_back(p.get());
+
+  std::printf("eval: %s split '%s', %zu method(s) + 2 baselines, up to %d frames from input frame %d\n", root.c_str(),
+              eo.split.c_str(), o.checkpoints.size(), eo.frames, eo.start_frame);
+  std::vector<eval::MethodResult> results = eval::evaluate(manifest, predictors, eo, true);
+  for (size_t p = 0; p < results.size(); ++p) {
+    results[p].kind = kinds[p];
+    results[p].checkpoint = paths[p];
+  }
+
+  eval::ReportContext ctx;
+  ctx.dataset = root;
+  ctx.options = eo;
+  // Speed on the first sequence of the split, 1 and 2 threads.
+  const std::string speed_id = results[0].sequences[0].id;
+  const dataset::Sequence speed_seq = dataset::read_sequence(manifest.sequence_path(speed_id));
+  ctx.speed_sequence = speed_id;
+  ctx.speed_frames = std::min(o.speed_frames, speed_seq.info.num_frames - 1 - eo.start_frame);
+  for (size_t p = 0; p + 1 < predictors.size(); ++p) {
+    results[p].ms_per_frame_1thread = eval::median_ms_per_frame(*predictors[p], speed_seq, eo.start_frame, ctx.speed_frames, 1);
+    results[p].ms_per_frame_2threads = eval::median_ms_per_frame(*predictors[p], speed_seq, eo.start_frame, ctx.speed_frames, 2);
+  }
+  double blender_sum = 0;
+  int blender_n = 0;
+  for (const auto& s : results[0].sequences) {
+    const double b = eval::blender_seconds_per_frame(manifest.sequence_path(s.id));
+    if (b > 0) {
+      blender_sum += b;
+      ++blender_n;
+    }
+  }
+  ctx.blender_s_per_frame = blender_n ? blender_sum / blender_n : -1;
+
+  const auto written = eval::write_report(o.out, results, ctx);
+  std::printf("\n%s", eval::summary_table(results, ctx).c_str());
+  std::printf("wrote");
+  for (const auto& w : written) std::printf(" %s", w.c_str());
+  std::printf("\n");
+  return 0;
+}
+
+}  // namespace
+
+LAYERSNET_COMMAND(eval, "Roll out checkpoints and baselines over a split; error, collisions, speed, reports",
+                  [](CLI::App& sub) {
+                    auto o = std::make_shared<EvalCliOptions>();
+                    sub.add_option("--checkpoint", o->checkpoints, "checkpoint (repeat for several variants)");
+                    sub.add_option("--name", o->names, "table name of each checkpoint, in order (default: folder/file)");
+                    sub.add_option("--dataset", o->dataset, "data set folder (default: the first checkpoint's data.dataset)");
+                    sub.add_option("--split", o->split, "train | val | test (default: the config's eval.split)");
+                    sub.add_option("--frames", o->frames, "predicted frames per sequence (default: eval.frames)");
+                    sub.add_option("--start-frame", o->start_frame, "input frame t0 of the first prediction (default: data.first_frame)");
+                    sub.add_option("--max-sequences", o->max_sequences, "evaluate only the first N sequences (0 = all)");
+                    sub.add_option("--speed-frames", o->speed_frames, "frames of the 1- and 2-thread speed rollouts");
+                    sub.add_option("--out", o->out, "output folder for eval.json, eval.md and plots");
+                    return [o] {
+                      try {
+                        if (o->checkpoints.empty() && o->dataset.empty()) {
+                          std::fprintf(stderr, "layersnet eval: give --checkpoint (and/or --dataset for baselines only)\n");
+                          return 2;
+                        }
+                        return run_eval(*o);
+                      } catch (const std::exception& e) {
+                        std::fprintf(stderr, "layersnet eval: %s\n", e.what());
+                        return 2;
+                      }
+                    };
+                  });

@@ -1,0 +1,259 @@
+// Evaluation reports (see report.h).
+#include "eval/report.h"
+
+#include <nlohmann/json.hpp>
+
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <set>
+#include <sstream>
+
+namespace layersnet::eval {
+namespace {
+
+using nlohmann::json;
+
+std::string fmt(const char* f, double v) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, f, v);
+  return buf;
+}
+std::string pm(const MeanStd& m, const char* f = "%.1f") {
+  if (m.count == 0) return "–";
+  return fmt(f, m.mean) + " ± " + fmt(f, m.std);
+}
+json ms_json(const MeanStd& m) { return {{"mean", m.mean}, {"std", m.std}, {"sequences", m.count}}; }
+
+// Blender seconds per frame / model seconds per frame: how many times faster the rollout is.
+double speedup(double blender_s, double ms) { return blender_s > 0 && ms > 0 ? blender_s * 1000.0 / ms : -1; }
+
+void write_text(const std::filesystem::path& p, const std::string& text) {
+  std::ofstream out(p);
+  out << text;
+  if (!out) throw std::runtime_error(p.string() + ": cannot be written (check the --out folder's permissions)");
+}
+
+std::string curve_data(const std::vector<MethodResult>& methods) {
+  // Columns: frame, then one per method (mm); blank for methods whose rollout is shorter.
+  std::vector<Summary> sums;
+  size_t n = 0;
+  for (const auto& m : methods) {
+    sums.push_back(summarise(m));
+    n = std::max(n, sums.back().curve_mm.size());
+  }
+  std::ostringstream o;
+  o << "# frame";
+  for (const auto& m : methods) o << "\t\"" << m.name << "\"";
+  o << "\n";
+  for (size_t k = 0; k < n; ++k) {
+    o << k + 1;
+    for (const auto& s : sums) o << "\t" << (k < s.curve_mm.size() ? fmt("%.6g", s.curve_mm[k]) : "NaN");
+    o << "\n";
+  }
+  return o.str();
+}
+
+bool run_gnuplot(const std::filesystem::path& dir, const std::vector<MethodResult>& methods) {
+  if (std::system("command -v gnuplot >/dev/null 2>&1") != 0) return false;
+  write_text(dir / "curve.dat", curve_data(methods));
+  std::ostringstream gp;
+  gp << "set terminal png size 900,520\nset output '" << (dir / "curve.png").string() << "'\n"
+     << "set title 'Euclidean error over the rollout'\nset xlabel 'predicted frame'\nset ylabel 'error (mm)'\n"
+     << "set key left top\nset grid\nset datafile missing 'NaN'\nplot ";
+  for (size_t m = 0; m < methods.size(); ++m) {
+    if (methods[m].kind == "ground truth") continue;
+    gp << (m ? ", " : "") << "'" << (dir / "curve.dat").string() << "' using 1:" << m + 2
+       << " with linespoints title columnhead(" << m + 2 << ")";
+  }
+  gp << "\n";
+  // Error vs speed: one point per method that has a measured speed.
+  std::ostringstream sp;
+  for (const auto& m : methods) {
+    if (m.kind == "ground truth" || m.ms_per_frame_1thread <= 0) continue;
+    sp << fmt("%.6g", m.ms_per_frame_1thread) << "\t" << fmt("%.6g", summarise(m).error_mm.mean) << "\t\"" << m.name
+       << "\"\n";
+  }
+  write_text(dir / "speed.dat", sp.str());
+  gp << "set output '" << (dir / "speed.png").string() << "'\nset title 'Error against speed (1 thread)'\n"
+     << "set xlabel 'ms per frame (median, log scale)'\nset ylabel 'error (mm)'\nset logscale x\nunset key\n"
+     << "plot '" << (dir / "speed.dat").string() << "' using 1:2 with points pt 7 ps 1.5, '' using 1:2:3 with labels "
+     << "offset 1,1 left\n";
+  write_text(dir / "plots.gp", gp.str());
+  const std::string cmd = "gnuplot '" + (dir / "plots.gp").string() + "' > '" + (dir / "gnuplot.log").string() + "' 2>&1";
+  return std::system(cmd.c_str()) == 0;
+}
+
+std::vector<std::string> all_types(const std::vector<MethodResult>& methods) {
+  std::set<std::string> t;
+  for (const auto& m : methods)
+    for (const auto& s : m.sequences) t.insert(s.garment_types.begin(), s.garment_types.end());
+  return {t.begin(), t.end()};
+}
+
+}  // namespace
+
+std::string summary_table(const std::vector<MethodResult>& methods, const ReportContext& c) {
+  std::ostringstream o;
+  char line[512];
+  std::snprintf(line, sizeof line, "%-28s %18s %18s %18s %14s %14s %9s %9s\n", "method", "error mm", "inner mm",
+                "outer mm", "H-coll %", "L-coll %", "ms/f 1t", "ms/f 2t");
+  o << line << std::string(134, '-') << "\n";
+  for (const auto& m : methods) {
+    const Summary s = summarise(m);
+    std::snprintf(line, sizeof line, "%-28s %18s %18s %18s %14s %14s %9s %9s\n", m.name.substr(0, 28).c_str(),
+                  pm(s.error_mm).c_str(), pm(s.inner_mm).c_str(), pm(s.outer_mm).c_str(), pm(s.h_percent, "%.2f").c_str(),
+                  pm(s.l_outer_percent, "%.2f").c_str(),
+                  m.ms_per_frame_1thread > 0 ? fmt("%.2f", m.ms_per_frame_1thread).c_str() : "–",
+                  m.ms_per_frame_2threads > 0 ? fmt("%.2f", m.ms_per_frame_2threads).c_str() : "–");
+    o << line;
+  }
+  o << "(" << (methods.empty() ? 0 : methods[0].sequences.size()) << " " << c.options.split << " sequences, up to "
+    << c.options.frames << " predicted frames from input frame " << c.options.start_frame
+    << "; L-coll = share of outer-layer vertices";
+  if (c.blender_s_per_frame > 0) o << "; Blender " << fmt("%.3f", c.blender_s_per_frame) << " s/frame";
+  o << ")\n";
+  return o.str();
+}
+
+std::string report_json(const std::vector<MethodResult>& methods, const ReportContext& c) {
+  json j;
+  j["dataset"] = c.dataset;
+  j["split"] = c.options.split;
+  j["frames"] = c.options.frames;
+  j["start_frame"] = c.options.start_frame;
+  j["h_collision_max_distance_m"] = c.options.max_body_distance_m;
+  j["blender_s_per_frame"] = c.blender_s_per_frame;
+  j["speed"] = {{"sequence", c.speed_sequence}, {"frames", c.speed_frames}};
+  j["units"] = "error_*_mm: millimetres (scene units / scale * 1000); error_units: scene units; rates in [0, 1], "
+               "*_percent in percent; l_rate_outer = colliding / outer vertices, l_rate_all = colliding / all garment "
+               "vertices (official aggregate)";
+  j["methods"] = json::array();
+  for (const auto& m : methods) {
+    const Summary s = summarise(m);
+    json jm = {{"name", m.name}, {"kind", m.kind}, {"checkpoint", m.checkpoint},
+               {"ms_per_frame_1thread", m.ms_per_frame_1thread}, {"ms_per_frame_2threads", m.ms_per_frame_2threads},
+               {"speedup_vs_blender_1thread", speedup(c.blender_s_per_frame, m.ms_per_frame_1thread)},
+               {"speedup_vs_blender_2threads", speedup(c.blender_s_per_frame, m.ms_per_frame_2threads)},
+               {"median_step_ms_during_eval", s.median_step_ms}};
+    json js = {{"error_mm", ms_json(s.error_mm)}, {"inner_mm", ms_json(s.inner_mm)}, {"outer_mm", ms_json(s.outer_mm)},
+               {"h_collision_percent", ms_json(s.h_percent)},
+               {"l_collision_outer_percent", ms_json(s.l_outer_percent)},
+               {"l_collision_all_percent", ms_json(s.l_all_percent)}, {"curve_mm", s.curve_mm}};
+    for (const auto& [k, v] : s.by_type_mm) js["by_type_mm"][k] = ms_json(v);
+    for (const auto& [k, v] : s.by_subset_mm) js["by_subset_mm"][k] = ms_json(v);
+    jm["summary"] = js;
+    jm["sequences"] = json::array();
+    for (const auto& r : m.sequences) {
+      std::vector<double> curve, garments;
+      for (double e : r.error_curve) curve.push_back(e * r.mm());
+      for (double e : r.garment_error) garments.push_back(e * r.mm());
+      jm["sequences"].push_back({{"id", r.id}, {"subsets", r.subsets}, {"garment_types", r.garment_types},
+                                 {"scale", r.scale}, {"first_frame", r.first_frame}, {"error_units", r.error},
+                                 {"error_mm", r.error * r.mm()}, {"error_curve_mm", curve},
+                                 {"garment_error_mm", garments}, {"inner_mm", r.inner_error * r.mm()},
+                                 {"outer_mm", r.outer_error < 0 ? -1.0 : r.outer_error * r.mm()},
+                                 {"h_rate", r.h_rate}, {"l_rate_outer", r.l_rate_outer}, {"l_rate_all", r.l_rate_all},
+                                 {"step_ms", r.step_ms}});
+    }
+    j["methods"].push_back(jm);
+  }
+  return j.dump(1);
+}
+
+std::string report_markdown(const std::vector<MethodResult>& methods, const ReportContext& c) {
+  std::ostringstream o;
+  const size_t n_seq = methods.empty() ? 0 : methods[0].sequences.size();
+  o << "# Evaluation: " << c.dataset << ", split `" << c.options.split << "`\n\n"
+    << n_seq << " sequences; rollouts from the ground truth at input frame " << c.options.start_frame << " for up to "
+    << c.options.frames << " predicted frames (body and wind from the data every frame). Errors in mm "
+    << "(scene units / `scale` · 1000): mean over a frame's vertices, then over the sequence's frames, then "
+    << "mean ± std over sequences. Collision rates in % aggregated the same way; H-collision over all garment "
+    << "vertices (distance limit " << c.options.max_body_distance_m << " m), L-collision over outer-layer vertices "
+    << "(the official aggregate divides by all garment vertices: column *L ÷ all*). Definitions: eval/README.md.\n\n";
+  o << "## Summary (paper Table 3 layout)\n\n"
+    << "| method | overall mm | inner mm | outer mm | L-coll % (÷ outer) | L-coll % (÷ all) | H-coll % | ms/frame 1 thr "
+       "| ms/frame 2 thr | × Blender speed |\n|---|---|---|---|---|---|---|---|---|---|\n";
+  for (const auto& m : methods) {
+    const Summary s = summarise(m);
+    const double up = speedup(c.blender_s_per_frame, m.ms_per_frame_1thread);
+    o << "| " << m.name << " | " << pm(s.error_mm) << " | " << pm(s.inner_mm) << " | " << pm(s.outer_mm) << " | "
+      << pm(s.l_outer_percent, "%.2f") << " | " << pm(s.l_all_percent, "%.2f") << " | " << pm(s.h_percent, "%.2f")
+      << " | " << (m.ms_per_frame_1thread > 0 ? fmt("%.2f", m.ms_per_frame_1thread) : "–") << " | "
+      << (m.ms_per_frame_2threads > 0 ? fmt("%.2f", m.ms_per_frame_2threads) : "–") << " | "
+      << (up > 0 ? fmt("%.0f", up) : "–") << " |\n";
+  }
+  o << "\nSpeed: median wall time per predicted frame (sample building + forward) over a " << c.speed_frames
+    << "-frame rollout of `" << c.speed_sequence << "`; Blender's own time: "
+    << (c.blender_s_per_frame > 0 ? fmt("%.3f", c.blender_s_per_frame) + " s/frame (mean over the evaluated sequences, "
+                                                                            "recorded at generation)"
+                                  : std::string("not recorded in these files"))
+    << ". The ground-truth row is the floor of the collision rates.\n\n";
+  const auto types = all_types(methods);
+  o << "## Per garment type (paper Table 2 layout), mm\n\n| method |";
+  for (const auto& t : types) o << " " << t << " |";
+  o << " overall |\n|---|";
+  for (size_t i = 0; i <= types.size(); ++i) o << "---|";
+  o << "\n";
+  for (const auto& m : methods) {
+    if (m.kind == "ground truth") continue;
+    const Summary s = summarise(m);
+    o << "| " << m.name << " |";
+    for (const auto& t : types) o << " " << (s.by_type_mm.count(t) ? pm(s.by_type_mm.at(t)) : "–") << " |";
+    o << " " << pm(s.error_mm) << " |\n";
+  }
+  o << "\n## Per split (paper Table 1 layout), mm\n\nT / L: tight / loose inner layer; +W: windy (max strength > "
+       "250); sequences with moderate wind belong to none (dataset.json `subsets`).\n\n| method | T | T+W | L | L+W |\n"
+       "|---|---|---|---|---|\n";
+  for (const auto& m : methods) {
+    if (m.kind == "ground truth") continue;
+    const Summary s = summarise(m);
+    o << "| " << m.name << " |";
+    for (const char* sub : {"T", "T+W", "L", "L+W"})
+      o << " " << (s.by_subset_mm.count(sub) ? pm(s.by_subset_mm.at(sub)) + " (" + std::to_string(s.by_subset_mm.at(sub).count) + ")" : "–") << " |";
+    o << "\n";
+  }
+  o << "\n## Error over the rollout (mm, mean over sequences)\n\n![error over frames](curve.png)\n"
+       "![error vs speed](speed.png)\n\n| frame |";
+  std::vector<Summary> sums;
+  size_t n = 0;
+  for (const auto& m : methods) {
+    if (m.kind == "ground truth") continue;
+    o << " " << m.name << " |";
+    sums.push_back(summarise(m));
+    n = std::max(n, sums.back().curve_mm.size());
+  }
+  o << "\n|---|";
+  for (size_t i = 0; i < sums.size(); ++i) o << "---|";
+  o << "\n";
+  for (size_t k = 0; k < n; ++k) {
+    o << "| " << k + 1 << " |";
+    for (const auto& s : sums) o << " " << (k < s.curve_mm.size() ? fmt("%.1f", s.curve_mm[k]) : "–") << " |";
+    o << "\n";
+  }
+  return o.str();
+}
+
+std::vector<std::string> write_report(const std::string& dir_name, const std::vector<MethodResult>& methods,
+                                      const ReportContext& c) {
+  const std::filesystem::path dir(dir_name);
+  std::filesystem::create_directories(dir);
+  std::vector<std::string> written;
+  write_text(dir / "eval.json", report_json(methods, c));
+  written.push_back((dir / "eval.json").string());
+  const bool plots = run_gnuplot(dir, methods);
+  std::string md = report_markdown(methods, c);
+  if (!plots)
+    md += "\n(No plots: gnuplot is missing or failed — install `gnuplot-nox` (scripts/debian-packages.txt); "
+          "see gnuplot.log.)\n";
+  write_text(dir / "eval.md", md);
+  written.push_back((dir / "eval.md").string());
+  if (plots) {
+    written.push_back((dir / "curve.png").string());
+    written.push_back((dir / "speed.png").string());
+  }
+  return written;
+}
+
+}  // namespace layersnet::eval

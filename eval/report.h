@@ -1,0 +1,35 @@
+#pragma once
+// Reports of an evaluation (issue 7 point 5): written to an output folder
+//   eval.json      every number: settings, per method its summary and per-sequence results
+//   eval.md        Markdown: summary table (paper Table 3 layout), per garment type (Table 2),
+//                  per split T / T+W / L / L+W (Table 1), inner vs outer, error over frames
+//   curve.png      error (mm) over the rollout frame, one line per method   (gnuplot)
+//   speed.png      error (mm) against ms per frame                          (gnuplot)
+// and a plain-text summary table for the terminal.
+#include "eval/evaluate.h"
+
+#include <string>
+#include <vector>
+
+namespace layersnet::eval {
+
+struct ReportContext {
+  std::string dataset;
+  EvalOptions options;
+  double blender_s_per_frame = -1;  // mean over the evaluated sequences; -1 = not recorded
+  int speed_frames = 0;             // frames of the speed rollouts
+  std::string speed_sequence;       // id of the sequence the speed was measured on
+};
+
+// Plain-text table: one row per method (error mm ± std, inner, outer, H %, L %, ms/frame).
+std::string summary_table(const std::vector<MethodResult>& methods, const ReportContext& context);
+
+std::string report_json(const std::vector<MethodResult>& methods, const ReportContext& context);
+std::string report_markdown(const std::vector<MethodResult>& methods, const ReportContext& context);
+
+// Writes eval.json, eval.md and (when gnuplot runs) curve.png, speed.png into `dir`
+// (created). Returns the paths written; a missing gnuplot is reported in eval.md, not thrown.
+std::vector<std::string> write_report(const std::string& dir, const std::vector<MethodResult>& methods,
+                                      const ReportContext& context);
+
+}  // namespace layersnet::eval

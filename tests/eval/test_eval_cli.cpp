@@ -1,0 +1,161 @@
+// `layersnet eval` and `layersnet export` end to end: a freshly initialised tiny model
+// (configs/tiny.toml) in a checkpoint, on a tiny synthetic data set.
+#include "dataset/stats.h"
+#include "dataset/synthetic.h"
+#include "eval/render.h"
+#include "eval/rollout.h"
+#include "model/params_layout.h"
+#include "train/checkpoint.h"
+#include "train/config.h"
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <array>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+namespace layersnet::eval {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string run(const std::string& args, int* code) {
+  const std::string cmd = std::string(LAYERSNET_BINARY) + " " + args + " 2>&1";
+  std::FILE* p = popen(cmd.c_str(), "r");
+  std::string out;
+  std::array<char, 4096> buf;
+  while (std::fgets(buf.data(), buf.size(), p)) out += buf.data();
+  *code = pclose(p);
+  return out;
+}
+
+std::string slurp(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+class EvalCli : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    root_ = fs::temp_directory_path() / ("layersnet_eval_test_" + std::to_string(::getpid()));
+    fs::remove_all(root_);
+    dataset::SyntheticOptions o;
+    o.garments = 2;
+    o.frames = 9;
+    o.rings = 4;
+    o.segments = 8;
+    o.body_rings = 4;
+    o.body_segments = 8;
+    o.wind = true;
+    const auto m = dataset::write_synthetic_dataset((root_ / "data").string(), 2, 0, 2, o);
+    const auto stats = dataset::compute_stats(m);
+    dataset::write_stats(m.stats_path(), stats);
+    Config c = load_config({std::string(LAYERSNET_SOURCE_DIR) + "/configs/tiny.toml"});
+    c.data.dataset = (root_ / "data").string();
+    ad::ParamStore<float> ps;
+    model::register_params(ps, c.model);
+    model::init_params(ps, c.model, 7);
+    Checkpoint cp;
+    cp.config_toml = to_toml(c);
+    cp.stats = stats_to_checkpoint(stats);
+    write_checkpoint((root_ / "tiny.h5").string(), ps, cp);
+    // A second variant without statistics in the checkpoint (falls back to stats.h5).
+    Config v = c;
+    v.model.rotation_equivalent = false;
+    ad::ParamStore<float> pv;
+    model::register_params(pv, v.model);
+    model::init_params(pv, v.model, 8);
+    Checkpoint cv;
+    cv.config_toml = to_toml(v);
+    write_checkpoint((root_ / "vanilla.h5").string(), pv, cv);
+  }
+  static void TearDownTestSuite() { fs::remove_all(root_); }
+  static fs::path root_;
+};
+fs::path EvalCli::root_;
+
+TEST_F(EvalCli, EvalWritesReportsAndPrintsTheSummaryTable) {
+  int code = 0;
+  const fs::path out = root_ / "eval";
+  const std::string text = run("eval --checkpoint " + (root_ / "tiny.h5").string() + " --checkpoint " +
+                                   (root_ / "vanilla.h5").string() + " --frames 3 --speed-frames 2 --out " +
+                                   out.string(),
+                               &code);
+  ASSERT_EQ(code, 0) << text;
+  EXPECT_NE(text.find("constant velocity"), std::string::npos) << text;
+  EXPECT_NE(text.find("follow the body"), std::string::npos) << text;
+  EXPECT_NE(text.find("ms/f 1t"), std::string::npos) << text;
+  const auto j = nlohmann::json::parse(slurp(out / "eval.json"));
+  ASSERT_EQ(j["methods"].size(), 5u);  // 2 models, 2 baselines, ground truth
+  EXPECT_EQ(j["split"], "test");
+  for (const auto& m : j["methods"]) {
+    ASSERT_EQ(m["sequences"].size(), 2u) << m["name"];
+    EXPECT_EQ(m["sequences"][0]["error_curve_mm"].size(), 3u);
+    EXPECT_GE(m["summary"]["h_collision_percent"]["mean"].get<double>(), 0.0);
+  }
+  const auto& gt = j["methods"][4];
+  EXPECT_EQ(gt["kind"], "ground truth");
+  EXPECT_EQ(gt["summary"]["error_mm"]["mean"].get<double>(), 0.0);
+  EXPECT_EQ(j["methods"][0]["kind"], "model");
+  EXPECT_GT(j["methods"][0]["ms_per_frame_1thread"].get<double>(), 0.0);
+  EXPECT_GT(j["methods"][1]["ms_per_frame_2threads"].get<double>(), 0.0);
+  // mm = scene units / scale * 1000 (synthetic scale 10).
+  const auto& s0 = j["methods"][0]["sequences"][0];
+  EXPECT_NEAR(s0["error_mm"].get<double>(), s0["error_units"].get<double>() * 100.0, 1e-9);
+  const std::string md = slurp(out / "eval.md");
+  EXPECT_NE(md.find("Per garment type"), std::string::npos);
+  EXPECT_NE(md.find("| T | T+W | L | L+W |"), std::string::npos);
+  if (std::system("command -v gnuplot >/dev/null 2>&1") == 0) {
+    EXPECT_TRUE(fs::exists(out / "curve.png"));
+    EXPECT_TRUE(fs::exists(out / "speed.png"));
+  }
+}
+
+TEST_F(EvalCli, ExportWritesMeshesAndAStrip) {
+  int code = 0;
+  const fs::path out = root_ / "export";
+  const std::string text = run("export --checkpoint " + (root_ / "tiny.h5").string() +
+                                   " --frames 2 --strip-frames 2 --out " + out.string(),
+                               &code);
+  ASSERT_EQ(code, 0) << text;
+  // 2 frames x (body + 2 garments x pred/gt) = 10 OBJ files.
+  int objs = 0;
+  for (const auto& e : fs::directory_iterator(out)) objs += e.path().extension() == ".obj";
+  EXPECT_EQ(objs, 10) << text;
+  const std::string obj = slurp(out / "body_0003.obj");
+  EXPECT_EQ(obj.rfind("v ", 0), 0u);
+  EXPECT_NE(obj.find("\nf "), std::string::npos);
+  const std::string png = slurp(out / "strip.png");
+  ASSERT_GT(png.size(), 8u);
+  EXPECT_EQ(png.substr(1, 3), "PNG");
+  // PLY through the baseline path.
+  const std::string t2 = run("export --dataset " + (root_ / "data").string() +
+                                 " --baseline constant-velocity --frames 1 --strip-frames 0 --format ply --out " +
+                                 (root_ / "ply").string(),
+                             &code);
+  ASSERT_EQ(code, 0) << t2;
+  EXPECT_EQ(slurp(root_ / "ply" / "body_0003.ply").rfind("ply\nformat binary_little_endian", 0), 0u);
+}
+
+TEST(Render, DrawsATriangleOverTheBackground) {
+  Image im(32, 32);
+  dataset::Points x(3, 3);
+  x << 0, 0, 0, 1, 0, 0, 0, 0, 1;  // in the x-z plane: faces the +y view
+  dataset::Faces f(1, 3);
+  f << 0, 1, 2;
+  View v;
+  v.fit({{&x, &f, {255, 0, 0}}});
+  render(im, v, {{&x, &f, {255, 0, 0}}});
+  int red = 0;
+  for (size_t i = 0; i < im.depth.size(); ++i) red += im.rgb[3 * i] == 255 && im.rgb[3 * i + 1] == 0;
+  EXPECT_GT(red, 32 * 32 / 4);  // about half of the fitted square
+  EXPECT_LT(red, 32 * 32 * 3 / 4);
+}
+
+}  // namespace
+}  // namespace layersnet::eval
