@@ -226,8 +226,12 @@ std::vector<BrokenCase> sequence_cases() {
 
 class BrokenFiles : public ::testing::Test {
  protected:
+  void TearDown() override {
+    std::error_code ec;
+    std::filesystem::remove_all(dir_, ec);
+  }
   void SetUp() override {
-    dir_ = testing::temp_dir("broken");
+    dir_ = testing::temp_path("broken");
     SyntheticOptions o;
     o.frames = kT;
     o.garments = 2;

@@ -11,8 +11,12 @@ namespace {
 
 class Loader : public ::testing::Test {
  protected:
+  void TearDown() override {
+    std::error_code ec;
+    std::filesystem::remove_all(dir_, ec);
+  }
   void SetUp() override {
-    dir_ = testing::temp_dir("loader");
+    dir_ = testing::temp_path("loader");
     SyntheticOptions o;
     o.frames = 12;
     o.garments = 2;

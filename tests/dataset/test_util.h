@@ -11,7 +11,18 @@
 
 namespace layersnet::dataset::testing {
 
-inline std::filesystem::path temp_dir(const std::string& name) {
+// A temporary folder removed when the object goes out of scope.
+struct TempDir : std::filesystem::path {
+  explicit TempDir(std::filesystem::path p) : std::filesystem::path(std::move(p)) {}
+  TempDir(const TempDir&) = delete;
+  TempDir& operator=(const TempDir&) = delete;
+  ~TempDir() {
+    std::error_code ec;
+    std::filesystem::remove_all(*this, ec);
+  }
+};
+
+inline std::filesystem::path temp_path(const std::string& name) {
   const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
   std::filesystem::path p = std::filesystem::temp_directory_path() /
                             ("layersnet_ds_" + std::to_string(::getpid()) + "_" + info->name() + "_" + name);
@@ -19,6 +30,8 @@ inline std::filesystem::path temp_dir(const std::string& name) {
   std::filesystem::create_directories(p);
   return p;
 }
+
+inline TempDir temp_dir(const std::string& name) { return TempDir(temp_path(name)); }
 
 inline std::string validator_path() {
   return std::string(LAYERSNET_SOURCE_DIR) + "/../shared/tools/check_dlayers_h5.py";
