@@ -47,7 +47,7 @@ SequenceResult score_rollout(const dataset::Sequence& seq, const Rollout& r, con
   s.step_ms = r.step_ms;
   s.garment_error.assign(L.num_garments(), 0.0);
   const double n = static_cast<double>(r.frames.size());
-  double inner = 0, outer = 0, h = 0, lo = 0, la = 0;
+  double inner = 0, outer = 0, h = 0, lo = 0, la = 0, ln = 0;
   for (size_t k = 0; k < r.frames.size(); ++k) {
     const int t = r.first_frame + static_cast<int>(k);
     const Points truth = garments_at(seq, t);
@@ -60,6 +60,7 @@ SequenceResult score_rollout(const dataset::Sequence& seq, const Rollout& r, con
     h += m.h_rate / n;
     lo += m.l_rate_outer / n;
     la += m.l_rate_all / n;
+    ln += m.l_rate_outer_near / n;
   }
   s.inner_error = inner;
   s.h_rate = h;
@@ -67,6 +68,7 @@ SequenceResult score_rollout(const dataset::Sequence& seq, const Rollout& r, con
     s.outer_error = outer;
     s.l_rate_outer = lo;
     s.l_rate_all = la;
+    s.l_rate_outer_near = ln;
   }
   return s;
 }
@@ -85,6 +87,7 @@ std::vector<MethodResult> evaluate(const dataset::DatasetManifest& manifest, std
     const dataset::Sequence seq = dataset::read_sequence(manifest.sequence_path(id));
     CollisionOptions co;
     co.max_body_distance = o.max_body_distance_m * seq.info.scale;
+    co.max_layer_distance = o.max_layer_distance_m * seq.info.scale;
     for (size_t p = 0; p < predictors.size(); ++p) {
       const Rollout r = rollout(*predictors[p], seq, o.start_frame, o.frames);
       SequenceResult s = score_rollout(seq, r, co);
@@ -119,7 +122,7 @@ double median_ms_per_frame(Predictor& predictor, const dataset::Sequence& seq, i
 
 Summary summarise(const MethodResult& m) {
   Summary s;
-  std::vector<double> err, inner, outer, h, lo, la, steps;
+  std::vector<double> err, inner, outer, h, lo, la, ln, steps;
   std::map<std::string, std::vector<double>> by_type, by_subset;
   std::vector<std::vector<double>> curve;
   for (const SequenceResult& r : m.sequences) {
@@ -131,6 +134,7 @@ Summary summarise(const MethodResult& m) {
       outer.push_back(r.outer_error * mm);
       lo.push_back(100 * r.l_rate_outer);
       la.push_back(100 * r.l_rate_all);
+      ln.push_back(100 * r.l_rate_outer_near);
     }
     // A type worn twice in one sequence counts once (its garments' vertex-weighted mean is
     // not kept, so the plain mean of the two garments is used).
@@ -150,6 +154,7 @@ Summary summarise(const MethodResult& m) {
   s.h_percent = mean_std(h);
   s.l_outer_percent = mean_std(lo);
   s.l_all_percent = mean_std(la);
+  s.l_near_percent = mean_std(ln);
   for (const auto& [k, v] : by_type) s.by_type_mm[k] = mean_std(v);
   for (const auto& [k, v] : by_subset) s.by_subset_mm[k] = mean_std(v);
   for (const auto& v : curve) s.curve_mm.push_back(mean_std(v).mean);

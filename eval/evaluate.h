@@ -33,7 +33,7 @@ struct SequenceResult {
   std::vector<double> garment_error;  // (G,)
   double inner_error = 0, outer_error = -1;
   // Rates in [0, 1], means over frames (-1: no layers):
-  double h_rate = 0, l_rate_outer = -1, l_rate_all = -1;
+  double h_rate = 0, l_rate_outer = -1, l_rate_all = -1, l_rate_outer_near = -1;
   std::vector<double> step_ms;  // (n,)
   double mm() const { return 1000.0 / scale; }  // millimetres per scene unit
 };
@@ -51,7 +51,8 @@ struct EvalOptions {
   int frames = 36;          // predicted frames per sequence (clamped to the sequence)
   int start_frame = 2;      // input frame t0 of the first prediction (>= 2)
   int max_sequences = 0;    // 0 = every sequence of the split
-  double max_body_distance_m = 0.5;  // H-collision distance limit in metres (official 5.0 units at scale 10)
+  double max_body_distance_m = 0.5;   // H-collision distance limit in metres (official 5.0 units at scale 10)
+  double max_layer_distance_m = 0.05; // "near" L-collision distance limit in metres
 };
 
 // Table-1 subsets of a data set: id -> subset names, from dataset.json "subsets" (written by
@@ -86,7 +87,7 @@ double median_ms_per_frame(Predictor& predictor, const dataset::Sequence& seq, i
 // ---- summaries (millimetres and percent)
 struct Summary {
   MeanStd error_mm, inner_mm, outer_mm;
-  MeanStd h_percent, l_outer_percent, l_all_percent;
+  MeanStd h_percent, l_outer_percent, l_all_percent, l_near_percent;
   std::map<std::string, MeanStd> by_type_mm;    // garment type -> over sequences holding it
   std::map<std::string, MeanStd> by_subset_mm;  // T, T+W, L, L+W
   std::vector<double> curve_mm;                 // mean over sequences per rollout frame

@@ -34,7 +34,7 @@ int64_t count_body_collisions(const Eigen::Ref<const Points>& garments, const Ei
 }
 
 int64_t count_layer_collisions(const Eigen::Ref<const Points>& outer, const Eigen::Ref<const Points>& inner,
-                               const Faces& inner_faces) {
+                               const Faces& inner_faces, double max_distance) {
   if (outer.rows() == 0 || inner.rows() == 0) return 0;
   const Points normals = dataset::vertex_normals(inner, inner_faces);
   const dataset::NearestBody nearest = dataset::nearest_body(outer, inner);
@@ -42,6 +42,7 @@ int64_t count_layer_collisions(const Eigen::Ref<const Points>& outer, const Eige
   for (Eigen::Index v = 0; v < outer.rows(); ++v) {
     const int32_t y = nearest.index[v];
     const Eigen::Vector3d d = (outer.row(v) - inner.row(y)).cast<double>().transpose();
+    if (max_distance >= 0 && d.norm() > max_distance) continue;
     if (d.dot(normals.row(y).cast<double>().transpose()) < 0) ++count;
   }
   return count;
@@ -97,8 +98,12 @@ FrameMetrics frame_metrics(const GarmentLayout& L, const Eigen::Ref<const Points
     m.layer_collisions = count_layer_collisions(pred.bottomRows(n_outer), pred.topRows(n_inner), inner_faces(L));
     m.l_rate_outer = static_cast<double>(m.layer_collisions) / n_outer;
     m.l_rate_all = static_cast<double>(m.layer_collisions) / N;
+    m.layer_collisions_near =
+        count_layer_collisions(pred.bottomRows(n_outer), pred.topRows(n_inner), inner_faces(L), o.max_layer_distance);
+    m.l_rate_outer_near = static_cast<double>(m.layer_collisions_near) / n_outer;
   } else {
     m.layer_collisions = -1;
+    m.layer_collisions_near = -1;
   }
   return m;
 }

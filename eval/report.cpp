@@ -44,7 +44,7 @@ std::string curve_data(const std::vector<MethodResult>& methods) {
     n = std::max(n, sums.back().curve_mm.size());
   }
   std::ostringstream o;
-  o << "# frame";
+  o << "frame";  // header row (gnuplot columnhead), not a comment
   for (const auto& m : methods) o << "\t\"" << m.name << "\"";
   o << "\n";
   for (size_t k = 0; k < n; ++k) {
@@ -62,10 +62,12 @@ bool run_gnuplot(const std::filesystem::path& dir, const std::vector<MethodResul
   gp << "set terminal png size 900,520\nset output '" << (dir / "curve.png").string() << "'\n"
      << "set title 'Euclidean error over the rollout'\nset xlabel 'predicted frame'\nset ylabel 'error (mm)'\n"
      << "set key left top\nset grid\nset datafile missing 'NaN'\nplot ";
+  bool first = true;
   for (size_t m = 0; m < methods.size(); ++m) {
     if (methods[m].kind == "ground truth") continue;
-    gp << (m ? ", " : "") << "'" << (dir / "curve.dat").string() << "' using 1:" << m + 2
+    gp << (first ? "" : ", ") << "'" << (dir / "curve.dat").string() << "' using 1:" << m + 2
        << " with linespoints title columnhead(" << m + 2 << ")";
+    first = false;
   }
   gp << "\n";
   // Error vs speed: one point per method that has a measured speed.
@@ -97,21 +99,22 @@ std::vector<std::string> all_types(const std::vector<MethodResult>& methods) {
 std::string summary_table(const std::vector<MethodResult>& methods, const ReportContext& c) {
   std::ostringstream o;
   char line[512];
-  std::snprintf(line, sizeof line, "%-28s %18s %18s %18s %14s %14s %9s %9s\n", "method", "error mm", "inner mm",
-                "outer mm", "H-coll %", "L-coll %", "ms/f 1t", "ms/f 2t");
-  o << line << std::string(134, '-') << "\n";
+  std::snprintf(line, sizeof line, "%-28s %18s %18s %18s %14s %14s %14s %9s %9s\n", "method", "error mm", "inner mm",
+                "outer mm", "H-coll %", "L-coll %", "L-near %", "ms/f 1t", "ms/f 2t");
+  o << line << std::string(149, '-') << "\n";
   for (const auto& m : methods) {
     const Summary s = summarise(m);
-    std::snprintf(line, sizeof line, "%-28s %18s %18s %18s %14s %14s %9s %9s\n", m.name.substr(0, 28).c_str(),
+    std::snprintf(line, sizeof line, "%-28s %18s %18s %18s %14s %14s %14s %9s %9s\n", m.name.substr(0, 28).c_str(),
                   pm(s.error_mm).c_str(), pm(s.inner_mm).c_str(), pm(s.outer_mm).c_str(), pm(s.h_percent, "%.2f").c_str(),
-                  pm(s.l_outer_percent, "%.2f").c_str(),
-                  m.ms_per_frame_1thread > 0 ? fmt("%.2f", m.ms_per_frame_1thread).c_str() : "–",
-                  m.ms_per_frame_2threads > 0 ? fmt("%.2f", m.ms_per_frame_2threads).c_str() : "–");
+                  pm(s.l_outer_percent, "%.2f").c_str(), pm(s.l_near_percent, "%.2f").c_str(),
+                  m.ms_per_frame_1thread > 0 ? fmt("%.3g", m.ms_per_frame_1thread).c_str() : "–",
+                  m.ms_per_frame_2threads > 0 ? fmt("%.3g", m.ms_per_frame_2threads).c_str() : "–");
     o << line;
   }
   o << "(" << (methods.empty() ? 0 : methods[0].sequences.size()) << " " << c.options.split << " sequences, up to "
     << c.options.frames << " predicted frames from input frame " << c.options.start_frame
-    << "; L-coll = share of outer-layer vertices";
+    << "; L-coll = share of outer-layer vertices, L-near = only those within " << c.options.max_layer_distance_m
+    << " m of the inner layer";
   if (c.blender_s_per_frame > 0) o << "; Blender " << fmt("%.3f", c.blender_s_per_frame) << " s/frame";
   o << ")\n";
   return o.str();
@@ -124,6 +127,7 @@ std::string report_json(const std::vector<MethodResult>& methods, const ReportCo
   j["frames"] = c.options.frames;
   j["start_frame"] = c.options.start_frame;
   j["h_collision_max_distance_m"] = c.options.max_body_distance_m;
+  j["l_collision_near_max_distance_m"] = c.options.max_layer_distance_m;
   j["blender_s_per_frame"] = c.blender_s_per_frame;
   j["speed"] = {{"sequence", c.speed_sequence}, {"frames", c.speed_frames}};
   j["units"] = "error_*_mm: millimetres (scene units / scale * 1000); error_units: scene units; rates in [0, 1], "
@@ -140,7 +144,8 @@ std::string report_json(const std::vector<MethodResult>& methods, const ReportCo
     json js = {{"error_mm", ms_json(s.error_mm)}, {"inner_mm", ms_json(s.inner_mm)}, {"outer_mm", ms_json(s.outer_mm)},
                {"h_collision_percent", ms_json(s.h_percent)},
                {"l_collision_outer_percent", ms_json(s.l_outer_percent)},
-               {"l_collision_all_percent", ms_json(s.l_all_percent)}, {"curve_mm", s.curve_mm}};
+               {"l_collision_all_percent", ms_json(s.l_all_percent)},
+               {"l_collision_near_percent", ms_json(s.l_near_percent)}, {"curve_mm", s.curve_mm}};
     for (const auto& [k, v] : s.by_type_mm) js["by_type_mm"][k] = ms_json(v);
     for (const auto& [k, v] : s.by_subset_mm) js["by_subset_mm"][k] = ms_json(v);
     jm["summary"] = js;
@@ -155,6 +160,7 @@ std::string report_json(const std::vector<MethodResult>& methods, const ReportCo
                                  {"garment_error_mm", garments}, {"inner_mm", r.inner_error * r.mm()},
                                  {"outer_mm", r.outer_error < 0 ? -1.0 : r.outer_error * r.mm()},
                                  {"h_rate", r.h_rate}, {"l_rate_outer", r.l_rate_outer}, {"l_rate_all", r.l_rate_all},
+                                 {"l_rate_outer_near", r.l_rate_outer_near},
                                  {"step_ms", r.step_ms}});
     }
     j["methods"].push_back(jm);
@@ -171,17 +177,19 @@ std::string report_markdown(const std::vector<MethodResult>& methods, const Repo
     << "(scene units / `scale` · 1000): mean over a frame's vertices, then over the sequence's frames, then "
     << "mean ± std over sequences. Collision rates in % aggregated the same way; H-collision over all garment "
     << "vertices (distance limit " << c.options.max_body_distance_m << " m), L-collision over outer-layer vertices "
-    << "(the official aggregate divides by all garment vertices: column *L ÷ all*). Definitions: eval/README.md.\n\n";
+    << "(the official aggregate divides by all garment vertices: column *L ÷ all*; *near*: only outer vertices within "
+    << c.options.max_layer_distance_m << " m of their nearest inner vertex). Definitions: eval/README.md.\n\n";
   o << "## Summary (paper Table 3 layout)\n\n"
-    << "| method | overall mm | inner mm | outer mm | L-coll % (÷ outer) | L-coll % (÷ all) | H-coll % | ms/frame 1 thr "
-       "| ms/frame 2 thr | × Blender speed |\n|---|---|---|---|---|---|---|---|---|---|\n";
+    << "| method | overall mm | inner mm | outer mm | L-coll % (÷ outer) | L-coll % (÷ all) | L-coll % (near) | "
+       "H-coll % | ms/frame 1 thr | ms/frame 2 thr | × Blender speed |\n|---|---|---|---|---|---|---|---|---|---|---|\n";
   for (const auto& m : methods) {
     const Summary s = summarise(m);
     const double up = speedup(c.blender_s_per_frame, m.ms_per_frame_1thread);
     o << "| " << m.name << " | " << pm(s.error_mm) << " | " << pm(s.inner_mm) << " | " << pm(s.outer_mm) << " | "
-      << pm(s.l_outer_percent, "%.2f") << " | " << pm(s.l_all_percent, "%.2f") << " | " << pm(s.h_percent, "%.2f")
-      << " | " << (m.ms_per_frame_1thread > 0 ? fmt("%.2f", m.ms_per_frame_1thread) : "–") << " | "
-      << (m.ms_per_frame_2threads > 0 ? fmt("%.2f", m.ms_per_frame_2threads) : "–") << " | "
+      << pm(s.l_outer_percent, "%.2f") << " | " << pm(s.l_all_percent, "%.2f") << " | " << pm(s.l_near_percent, "%.2f")
+      << " | " << pm(s.h_percent, "%.2f")
+      << " | " << (m.ms_per_frame_1thread > 0 ? fmt("%.3g", m.ms_per_frame_1thread) : "–") << " | "
+      << (m.ms_per_frame_2threads > 0 ? fmt("%.3g", m.ms_per_frame_2threads) : "–") << " | "
       << (up > 0 ? fmt("%.0f", up) : "–") << " |\n";
   }
   o << "\nSpeed: median wall time per predicted frame (sample building + forward) over a " << c.speed_frames

@@ -12,6 +12,7 @@
 #include <nlohmann/json.hpp>
 
 #include <array>
+#include <cstdlib>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -74,7 +75,10 @@ class EvalCli : public ::testing::Test {
     cv.config_toml = to_toml(v);
     write_checkpoint((root_ / "vanilla.h5").string(), pv, cv);
   }
-  static void TearDownTestSuite() { fs::remove_all(root_); }
+  // LAYERSNET_EVAL_TEST_KEEP=1 keeps the folder (data set, checkpoints, reports) to look at.
+  static void TearDownTestSuite() {
+    if (!std::getenv("LAYERSNET_EVAL_TEST_KEEP")) fs::remove_all(root_);
+  }
   static fs::path root_;
 };
 fs::path EvalCli::root_;

@@ -66,6 +66,12 @@ TEST(Metrics, OuterVertexInsideTheInnerLayerCounts) {
       0, 1.9f, 0,       // inside: counts
       0, 0, -2.05f;     // outside: no
   EXPECT_EQ(count_layer_collisions(outer, inner, faces), 1);
+  // 0.7 inside: counts without a distance limit, not within 0.5 ("near").
+  Points far(1, 3);
+  far << 0, 1.3f, 0;
+  EXPECT_EQ(count_layer_collisions(far, inner, faces), 1);
+  EXPECT_EQ(count_layer_collisions(far, inner, faces, 0.5), 0);
+  EXPECT_EQ(count_layer_collisions(far, inner, faces, 0.8), 1);
 }
 
 TEST(Metrics, FrameMetricsDenominators) {
@@ -87,7 +93,11 @@ TEST(Metrics, FrameMetricsDenominators) {
   pred.row(0) << 0.9f, 0, 0;      // inner +x inside the body
   pred.row(6 + 2) << 0, 1.5f, 0;  // outer +y inside the inner layer
   pred.row(6 + 5) << 0, 0, -1.8f; // outer -z inside the inner layer
-  const FrameMetrics m = frame_metrics(L, pred, truth, body, fb);
+  CollisionOptions co;
+  co.max_layer_distance = 0.3;  // the +y vertex is 0.5 inside, the -z one 0.2
+  const FrameMetrics m = frame_metrics(L, pred, truth, body, fb, co);
+  EXPECT_EQ(m.layer_collisions_near, 1);
+  EXPECT_DOUBLE_EQ(m.l_rate_outer_near, 1.0 / 6);
   EXPECT_EQ(m.body_collisions, 1);
   EXPECT_DOUBLE_EQ(m.h_rate, 1.0 / 12);
   EXPECT_EQ(m.layer_collisions, 2);
