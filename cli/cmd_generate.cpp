@@ -244,7 +244,9 @@ int run_generate(const GenerateOptions& opt) {
     json entry = {{"id", id}, {"split", splits[i]}};
     if (fs::exists(h5) && fs::exists(final_report)) {
       json kept = read_json(final_report);
-      if (kept.value("accepted", false) && kept.value("dataset_seed", -1LL) == seed) {
+      // Keep it only if it was made for the same data set seed, split and scene settings.
+      if (kept.value("accepted", false) && kept.value("dataset_seed", -1LL) == seed &&
+          kept.value("split", std::string()) == splits[i] && kept.value("dataset_scene", json()) == scene) {
         entry.update({{"attempts", kept.value("attempts", 1)}, {"status", "kept"}, {"report", kept}});
         s_per_frame_sum += kept.at("timing").at("blender_s_per_frame").get<double>();
         ++accepted;
@@ -286,6 +288,7 @@ int run_generate(const GenerateOptions& opt) {
       }
       rep["attempts"] = attempt + 1;
       rep["dataset_seed"] = seed;
+      rep["dataset_scene"] = scene;
       rep["accepted"] = failed.empty();
       rep["failed_gates"] = failed;
       write_text(rep_path, rep.dump(1));

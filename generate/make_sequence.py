@@ -288,7 +288,7 @@ def main():
     body_v = np.zeros((T, B, 3))
     cloth_v = np.zeros((T, N, 3))
     trans = np.zeros((T, 3))
-    t0 = time.time()
+    t0, c0 = time.time(), time.process_time()
     frame_s = []
     for f in range(T):
         tf = time.time()
@@ -299,6 +299,8 @@ def main():
         trans[f] = np.array(rig.matrix_world @ rig.pose.bones["Hips"].head)
         frame_s.append(time.time() - tf)
     t_sim = time.time() - t0
+    cpu_sim = time.process_time() - c0   # all Blender threads; not inflated by other jobs
+    load = os.getloadavg()[0]
 
     wind_rot, wind_strength = wind_arrays(pivots, T)
     gar = []
@@ -334,7 +336,8 @@ def main():
         "body_vertices": B, "cloth_vertices": int(N), "unweighted_body_vertices": unweighted,
         "finite": finite, "quality": q,
         "timing": {"setup_s": t_setup, "simulate_s": t_sim, "blender_s_per_frame": t_sim / T,
-                   "gates_s": t_gates, "frame_s": frame_s},
+                   "gates_s": t_gates, "frame_s": frame_s,
+                   "blender_cpu_s_per_frame": cpu_sim / T, "load_average_1min": load},
     }
     extra = {"generator": "layersnet generate (Blender cloth, generate/make_sequence.py)",
              "seed": args.seed, "split": args.split, "tag_inner": tags["inner"], "tag_wind": tags["wind"],
