@@ -3,6 +3,7 @@
 // Means share their sum's op (node.s[0] holds the factor 1 or 1/count).
 #define LAYERSNET_DENSE_OPS(X) \
   X(Linear, linear)            \
+  X(LinearRelu, linear_relu)   \
   X(Add, add)                  \
   X(Sub, sub)                  \
   X(Mul, mul)                  \

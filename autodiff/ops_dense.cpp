@@ -137,23 +137,27 @@ void for_linear_chunks(int64_t n, int64_t width, F&& f) {
 }  // namespace
 
 // out = x Wᵀ + b as one GEMM per chunk accumulating into rows pre-filled with the bias
-// (Eigen's `=` product would zero-fill first anyway, so the bias costs nothing).
+// (Eigen's `=` product would zero-fill first anyway, so the bias costs nothing); with
+// `relu`, max(., 0) is applied to each chunk right after its GEMM, while it is in cache.
 // x: (N, Cin); W: (Cout, Cin); b: (Cout) or null; out: (N, Cout).
 template <class T>
-void linear_forward(const ConstMatMap<T>& x, const ConstMatMap<T>& W, const T* b, MatMap<T> out) {
+void linear_forward(const ConstMatMap<T>& x, const ConstMatMap<T>& W, const T* b, bool relu, MatMap<T> out) {
   for_linear_chunks(x.rows(), x.cols() + W.rows(), [&](int64_t, int64_t r0, int64_t n) {
     auto rows = out.middleRows(r0, n);
     if (b) rows.rowwise() = ConstRowVecMap<T>(b, out.cols());
     else rows.setZero();
     rows.noalias() += x.middleRows(r0, n) * W.transpose();
+    if (relu) rows = rows.cwiseMax(T(0));
   });
 }
 
 // dx += dy W (per chunk of rows); dW += Σ_chunks dy_kᵀ x_k; db += Σ_chunks colsum(dy_k).
 // dy: (N, Cout); dx: (N, Cin) or null; dW: (Cout, Cin) or null; db: (Cout) or null.
+// With y (the relu output) and dz (N, Cout scratch) given, dy is first masked per chunk:
+// dz = dy * (y > 0), then used in place of dy.
 template <class T>
 void linear_backward(const ConstMatMap<T>& x, const ConstMatMap<T>& W, const ConstMatMap<T>& dy, T* dx, T* dW,
-                     T* db) {
+                     T* db, const T* y = nullptr, T* dz = nullptr) {
   const int64_t n = x.rows(), cin = x.cols(), cout = W.rows(), chunks = linear_chunks(n);
   // Per-chunk partials [dW_k (cout*cin) | db_k (cout)]; grows once, then reused.
   static thread_local std::vector<T> partial;
@@ -161,7 +165,11 @@ void linear_backward(const ConstMatMap<T>& x, const ConstMatMap<T>& W, const Con
   if (chunks > 1 && (dW || db)) partial.resize(static_cast<std::size_t>(chunks * stride));
   T* const base = partial.data();  // captured: inside the workers `partial` names THEIR buffer
   for_linear_chunks(n, cin + cout, [&](int64_t k, int64_t r0, int64_t rows) {
-    const auto dy_k = dy.middleRows(r0, rows);
+    if (y) {
+      MatMap<T> dz_k(dz + r0 * cout, rows, cout);
+      dz_k = (ConstMatMap<T>(y + r0 * cout, rows, cout).array() > T(0)).select(dy.middleRows(r0, rows), T(0));
+    }
+    const ConstMatMap<T> dy_k((y ? dz : dy.data()) + r0 * cout, rows, cout);
     if (dx) MatMap<T>(dx + r0 * cin, rows, cin).noalias() += dy_k * W;
     if (chunks == 1) {  // no partials: straight into the gradients
       if (dW) MatMap<T>(dW, cout, cin).noalias() += dy_k.transpose() * x.middleRows(r0, rows);
@@ -185,17 +193,29 @@ void linear_backward(const ConstMatMap<T>& x, const ConstMatMap<T>& W, const Con
   });
 }
 
+namespace {
+
 template <class T>
-Var<T> linear(Tape<T>& tape, const Var<T>& x, const Var<T>& W, const Var<T>& b) {
+Var<T> linear_op(Tape<T>& tape, const Var<T>& x, const Var<T>& W, const Var<T>& b, bool relu) {
   LAYERSNET_CHECK(x.cols == W.cols, "linear: x is (" << x.rows << ", " << x.cols << ") but W is (" << W.rows << ", "
                                                      << W.cols << "); W must be (Cout, Cin) in torch layout");
   LAYERSNET_CHECK(absent(b) || (b.rows == 1 && b.cols == W.rows),
                   "linear: bias is (" << b.rows << ", " << b.cols << "), expected (1, " << W.rows << ") or empty");
   const bool grad = tape.wants_grad({x, W, b});
   Var<T> out = tape.new_var(x.rows, W.rows, grad);
-  linear_forward<T>({x.value, x.rows, x.cols}, {W.value, W.rows, W.cols}, b.value, out.val());
-  if (grad) tape.record(OpKind::Linear, out, {x, W, b});
+  linear_forward<T>({x.value, x.rows, x.cols}, {W.value, W.rows, W.cols}, b.value, relu, out.val());
+  if (grad) {
+    Node<T>& node = tape.record(relu ? OpKind::LinearRelu : OpKind::Linear, out, {x, W, b});
+    if (relu) node.saved = tape.scratch(static_cast<std::size_t>(out.size()));  // dz in backward
+  }
   return out;
+}
+
+}  // namespace
+
+template <class T>
+Var<T> linear(Tape<T>& tape, const Var<T>& x, const Var<T>& W, const Var<T>& b) {
+  return linear_op(tape, x, W, b, false);
 }
 
 template <class T>
@@ -203,6 +223,19 @@ void backward_linear(const Node<T>& node) {
   const auto& [x, W, b, unused] = node.in;
   linear_backward<T>({x.value, x.rows, x.cols}, {W.value, W.rows, W.cols},
                      {node.out.grad, node.out.rows, node.out.cols}, x.grad, W.grad, b.grad);
+}
+
+template <class T>
+Var<T> linear_relu(Tape<T>& tape, const Var<T>& x, const Var<T>& W, const Var<T>& b) {
+  return linear_op(tape, x, W, b, true);
+}
+
+template <class T>
+void backward_linear_relu(const Node<T>& node) {
+  const auto& [x, W, b, unused] = node.in;
+  linear_backward<T>({x.value, x.rows, x.cols}, {W.value, W.rows, W.cols},
+                     {node.out.grad, node.out.rows, node.out.cols}, x.grad, W.grad, b.grad, node.out.value,
+                     node.saved);
 }
 
 // ---- add, sub, mul, div ---------------------------------------------------------------------
@@ -609,6 +642,7 @@ void backward_squared_error(const Node<T>& node) {
 
 #define LAYERSNET_INSTANTIATE(T)                                                                   \
   template Var<T> linear<T>(Tape<T>&, const Var<T>&, const Var<T>&, const Var<T>&);                \
+  template Var<T> linear_relu<T>(Tape<T>&, const Var<T>&, const Var<T>&, const Var<T>&);           \
   template Var<T> add<T>(Tape<T>&, const Var<T>&, const Var<T>&);                                  \
   template Var<T> sub<T>(Tape<T>&, const Var<T>&, const Var<T>&);                                  \
   template Var<T> mul<T>(Tape<T>&, const Var<T>&, const Var<T>&);                                  \

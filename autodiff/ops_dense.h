@@ -28,6 +28,13 @@ namespace layersnet::ad {
 template <class T>
 Var<T> linear(Tape<T>& tape, const Var<T>& x, const Var<T>& W, const Var<T>& b = {});
 
+// out = max(x Wᵀ + b, 0): linear followed by ReLU, fused (the FFN/MLP hidden layers).
+// Saves the separate ReLU tensor and its memory passes: the max is taken on each row chunk
+// right after its GEMM, and backward masks dy chunk by chunk just before its GEMMs.
+// Shapes as linear.
+template <class T>
+Var<T> linear_relu(Tape<T>& tape, const Var<T>& x, const Var<T>& W, const Var<T>& b = {});
+
 // ---- elementwise, with broadcasting of b ---------------------------------------------------
 
 // out = a + b. a: (N, C); b: (N, C), (1, C), (N, 1) or (1, 1).

@@ -33,6 +33,7 @@ struct LinearBenchOptions {
   int reps = 7;
   int warmup = 2;
   std::string json;
+  bool relu = false;
 };
 
 struct Shape {
@@ -43,6 +44,7 @@ struct Result {
   Shape shape;
   int threads;
   double gemm_ms, fwd_ms, fwd_norecord_ms, bwd_ms;
+  double relu_separate_ms = 0, relu_fused_ms = 0;  // linear + relu, forward + backward
 };
 
 double median(std::vector<double> t) {
@@ -83,7 +85,7 @@ Result bench_shape(const Shape& s, int threads, const LinearBenchOptions& o) {
     return std::array<Var<float>, 3>{tape.leaf(xs.data(), s.n, s.cin), tape.leaf(ws.data(), s.cout, s.cin),
                                      tape.leaf(bs.data(), 1, s.cout)};
   };
-  std::vector<double> gemm, fwd, fwd0, bwd;
+  std::vector<double> gemm, fwd, fwd0, bwd, relu_separate, relu_fused;
   for (int rep = 0; rep < o.warmup + o.reps; ++rep) {
     const bool keep = rep >= o.warmup;
     const double t_gemm = time_ms([&] { C.noalias() = A * B.transpose(); });
@@ -99,8 +101,20 @@ Result bench_shape(const Shape& s, int threads, const LinearBenchOptions& o) {
     std::memcpy(y.grad, dys.data(), sizeof(float) * dys.size());
     const double t_bwd = time_ms([&] { tape.backward_seeded(); });
     if (keep) gemm.push_back(t_gemm), fwd.push_back(t_fwd), fwd0.push_back(t_fwd0), bwd.push_back(t_bwd);
+    if (o.relu) {  // relu(linear(x)) as two ops, then fused; forward + backward each
+      for (bool fused : {false, true}) {
+        const auto u = setup();
+        const double t = time_ms([&] {
+          const Var<float> h = fused ? linear_relu(tape, u[0], u[1], u[2]) : relu(tape, linear(tape, u[0], u[1], u[2]));
+          std::memcpy(h.grad, dys.data(), sizeof(float) * dys.size());
+          tape.backward_seeded();
+        });
+        if (keep) (fused ? relu_fused : relu_separate).push_back(t);
+      }
+    }
   }
   Result r{s, threads, median(gemm), median(fwd), median(fwd0), median(bwd)};
+  if (o.relu) r.relu_separate_ms = median(relu_separate), r.relu_fused_ms = median(relu_fused);
   // The result must be the GEMM's plus the bias (guards against timing a broken kernel).
   {
     NoRecord<float> off(tape);
@@ -148,6 +162,13 @@ int run_bench(const LinearBenchOptions& o) {
     }
   }
   std::printf("\ngoals: fwd/gemm (rate ratio) >= 0.8, bwd/fwd (time ratio) <= 2.2\n");
+  if (o.relu) {
+    std::printf("\nrelu(linear(x)) forward + backward (the memcpy seeding dy included in both):\n");
+    for (const Result& r : results)
+      std::printf("  %ldx%ld>%ld thr %d: separate %.2f ms, fused linear_relu %.2f ms (%.3fx)\n",
+                  static_cast<long>(r.shape.n), static_cast<long>(r.shape.cin), static_cast<long>(r.shape.cout),
+                  r.threads, r.relu_separate_ms, r.relu_fused_ms, r.relu_separate_ms / r.relu_fused_ms);
+  }
   if (!o.json.empty()) {
     std::ofstream f(o.json);
     if (!f) throw std::runtime_error("bench linear: cannot write --json file '" + o.json + "'");
@@ -159,7 +180,9 @@ int run_bench(const LinearBenchOptions& o) {
         << ", \"forward_norecord_ms\": " << r.fwd_norecord_ms << ", \"backward_ms\": " << r.bwd_ms
         << ", \"forward_rate_vs_gemm\": " << r.gemm_ms / r.fwd_ms
         << ", \"forward_norecord_rate_vs_gemm\": " << r.gemm_ms / r.fwd_norecord_ms
-        << ", \"backward_over_forward\": " << r.bwd_ms / r.fwd_ms << "}" << (k + 1 < results.size() ? "," : "")
+        << ", \"backward_over_forward\": " << r.bwd_ms / r.fwd_ms;
+      if (o.relu) f << ", \"relu_separate_ms\": " << r.relu_separate_ms << ", \"relu_fused_ms\": " << r.relu_fused_ms;
+      f << "}" << (k + 1 < results.size() ? "," : "")
         << "\n";
     }
     f << "  ]\n}\n";
@@ -175,5 +198,6 @@ LAYERSNET_BENCH(linear, "Linear layer forward/backward vs a plain Eigen GEMM (1 
   sub.add_option("--reps", opts->reps, "timed repetitions (median is shown)")->default_val(7)->check(CLI::PositiveNumber);
   sub.add_option("--warmup", opts->warmup, "untimed repetitions first")->default_val(2);
   sub.add_option("--json", opts->json, "also write the figures to this JSON file");
+  sub.add_flag("--relu", opts->relu, "also time relu(linear(x)) as two ops against the fused linear_relu");
   return [opts] { return run_bench(*opts); };
 });

@@ -86,6 +86,31 @@ GRADCHECK_TEST(Linear, LargeMagnitudes) {
                    opt);
 }
 
+GRADCHECK_TEST(LinearRelu, MatchesLinearThenRelu) {
+  const auto f = [](Tape<double>& t, const Vars& v) { return linear_relu(t, v[0], v[1], v[2]); };
+  // Inputs chosen so no pre-activation is within the finite-difference step of 0.
+  const RowMat<double> x = random_matrix(6, 5, 90), w = random_matrix(4, 5, 91), b = random_matrix(1, 4, 92);
+  const GradcheckReport rep = expect_gradcheck(OpKind::LinearRelu, f, {{x}, {w}, {b}});
+  const RowMat<double> z = (x * w.transpose()).rowwise() + b.row(0);
+  ASSERT_GT(z.cwiseAbs().minCoeff(), 1e-4);
+  EXPECT_TRUE(rep.output.isApprox(z.cwiseMax(0.0), 1e-12));
+  EXPECT_GT((z.array() < 0).count(), 0);  // both sides of the kink are exercised
+  EXPECT_GT((z.array() > 0).count(), 0);
+}
+
+GRADCHECK_TEST(LinearRelu, OneRowNoBiasAndChunkedRows) {
+  const auto f = [](Tape<double>& t, const Vars& v) {
+    // 1 row without bias, and 3000 rows (3 chunks with per-chunk masked partials).
+    return add(t, sum_all(t, linear_relu(t, v[0], v[1])), sum_all(t, linear_relu(t, v[2], v[1], v[3])));
+  };
+  GradcheckOptions opt;
+  opt.max_coords = 24;
+  expect_gradcheck(OpKind::LinearRelu, f,
+                   {{random_matrix(1, 3, 93)}, {random_matrix(2, 3, 94)}, {random_matrix(3000, 3, 95)},
+                    {random_matrix(1, 2, 96)}},
+                   opt);
+}
+
 // ---- add, sub, mul, div -----------------------------------------------------------------
 
 GRADCHECK_TEST(Add, SameShapeAndEveryBroadcast) {
