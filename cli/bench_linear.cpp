@@ -16,6 +16,7 @@
 #include <array>
 #include <chrono>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <fstream>
 #include <memory>
@@ -44,6 +45,7 @@ struct Result {
   Shape shape;
   int threads;
   double gemm_ms, fwd_ms, fwd_norecord_ms, bwd_ms;
+  double min_fwd_rate = 0, min_bwd_over_fwd = 0;  // the same ratios from the fastest repetitions
   double relu_separate_ms = 0, relu_fused_ms = 0;  // linear + relu, forward + backward
 };
 
@@ -114,6 +116,9 @@ Result bench_shape(const Shape& s, int threads, const LinearBenchOptions& o) {
     }
   }
   Result r{s, threads, median(gemm), median(fwd), median(fwd0), median(bwd)};
+  const auto min_of = [](const std::vector<double>& v) { return *std::min_element(v.begin(), v.end()); };
+  r.min_fwd_rate = min_of(gemm) / min_of(fwd);
+  r.min_bwd_over_fwd = min_of(bwd) / min_of(fwd);
   if (o.relu) r.relu_separate_ms = median(relu_separate), r.relu_fused_ms = median(relu_fused);
   // The result must be the GEMM's plus the bias (guards against timing a broken kernel).
   {
@@ -137,15 +142,23 @@ std::vector<int> parse_threads(const std::string& list) {
   return out;
 }
 
+// The machine may be shared: say how busy it was (a load above the core count inflates
+// every time, and the ratios get noisy).
+void print_load(const char* when) {
+  double load[3] = {0, 0, 0};
+  if (getloadavg(load, 3) > 0) std::printf("load average %s: %.2f (1 min), %d cores\n", when, load[0], omp_get_num_procs());
+}
+
 int run_bench(const LinearBenchOptions& o) {
+  print_load("before");
   const std::vector<Shape> shapes = {{80000, 268, 268}, {20000, 128, 128}};
   std::vector<Result> results;
   std::printf("bench linear: float, median of %d after %d warm-up; GEMM = Eigen C.noalias() = A * B^T (row-major)\n",
               o.reps, o.warmup);
   std::printf("fwd = linear() recording (incl. zeroing dy's buffer), fwd0 = without recording, bwd = dx + dW + db\n\n");
-  std::printf("%-18s %3s | %8s %8s %8s %8s | %7s %7s %7s %7s | %8s %8s %8s\n", "shape N x Cin>Cout", "thr", "gemm ms",
+  std::printf("%-18s %3s | %8s %8s %8s %8s | %7s %7s %7s %7s | %8s %8s %8s | %5s %5s\n", "shape N x Cin>Cout", "thr", "gemm ms",
               "fwd ms", "fwd0 ms", "bwd ms", "GF gemm", "GF fwd", "GF fwd0", "GF bwd", "fwd/gemm", "fwd0/gem",
-              "bwd/fwd");
+              "bwd/fwd", "min f/g", "b/f");
   for (int threads : parse_threads(o.threads)) {
     for (const Shape& s : shapes) {
       const Result r = bench_shape(s, threads, o);
@@ -154,14 +167,15 @@ int run_bench(const LinearBenchOptions& o) {
       char name[32];
       std::snprintf(name, sizeof name, "%ldx%ld>%ld", static_cast<long>(s.n), static_cast<long>(s.cin),
                     static_cast<long>(s.cout));
-      std::printf("%-18s %3d | %8.2f %8.2f %8.2f %8.2f | %7.1f %7.1f %7.1f %7.1f | %8.3f %8.3f %8.3f\n", name, threads,
+      std::printf("%-18s %3d | %8.2f %8.2f %8.2f %8.2f | %7.1f %7.1f %7.1f %7.1f | %8.3f %8.3f %8.3f | %5.3f %5.3f\n", name, threads,
                   r.gemm_ms, r.fwd_ms, r.fwd_norecord_ms, r.bwd_ms, gf / r.gemm_ms, gf / r.fwd_ms,
                   gf / r.fwd_norecord_ms, 2 * gf / r.bwd_ms, r.gemm_ms / r.fwd_ms, r.gemm_ms / r.fwd_norecord_ms,
-                  r.bwd_ms / r.fwd_ms);
+                  r.bwd_ms / r.fwd_ms, r.min_fwd_rate, r.min_bwd_over_fwd);
       std::fflush(stdout);
     }
   }
   std::printf("\ngoals: fwd/gemm (rate ratio) >= 0.8, bwd/fwd (time ratio) <= 2.2\n");
+  print_load("after");
   if (o.relu) {
     std::printf("\nrelu(linear(x)) forward + backward (the memcpy seeding dy included in both):\n");
     for (const Result& r : results)
@@ -180,7 +194,8 @@ int run_bench(const LinearBenchOptions& o) {
         << ", \"forward_norecord_ms\": " << r.fwd_norecord_ms << ", \"backward_ms\": " << r.bwd_ms
         << ", \"forward_rate_vs_gemm\": " << r.gemm_ms / r.fwd_ms
         << ", \"forward_norecord_rate_vs_gemm\": " << r.gemm_ms / r.fwd_norecord_ms
-        << ", \"backward_over_forward\": " << r.bwd_ms / r.fwd_ms;
+        << ", \"backward_over_forward\": " << r.bwd_ms / r.fwd_ms << ", \"min_forward_rate_vs_gemm\": " << r.min_fwd_rate
+        << ", \"min_backward_over_forward\": " << r.min_bwd_over_fwd;
       if (o.relu) f << ", \"relu_separate_ms\": " << r.relu_separate_ms << ", \"relu_fused_ms\": " << r.relu_fused_ms;
       f << "}" << (k + 1 < results.size() ? "," : "")
         << "\n";
