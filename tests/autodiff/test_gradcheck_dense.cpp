@@ -431,8 +431,8 @@ TEST(DenseForward, BadShapesThrow) {
 }
 
 TEST(DenseDeterminism, ReductionsAreIdenticalForOneAndTwoThreads) {
-  // Large enough to run in parallel; column sums, LayerNorm gradients and linear's bias
-  // gradient must not depend on the thread count.
+  // Large enough to run in parallel; column sums, LayerNorm gradients and linear's weight
+  // and bias gradients must not depend on the thread count.
   const RowMat<double> a = random_matrix(3000, 40, 67), w = random_matrix(8, 40, 68);
   auto run = [&](int threads) {
     omp_set_num_threads(threads);
@@ -446,6 +446,7 @@ TEST(DenseDeterminism, ReductionsAreIdenticalForOneAndTwoThreads) {
     t.backward(loss);
     std::vector<float> out(x.grad, x.grad + x.size());
     out.insert(out.end(), b.grad, b.grad + 8);
+    out.insert(out.end(), W.grad, W.grad + W.size());  // sums of per-chunk partials
     out.push_back(loss.scalar());
     return out;
   };
