@@ -18,6 +18,7 @@ namespace {
 using namespace layersnet;
 
 struct EvalCliOptions {
+  std::vector<std::string> runs;
   std::vector<std::string> checkpoints;
   std::vector<std::string> names;
   std::string dataset;
@@ -29,6 +30,25 @@ struct EvalCliOptions {
   std::string out = "eval_out";
 };
 
+// The checkpoint of a run directory (train/trainer.h): best.h5, else the newest
+// checkpoints/step_*.h5.
+std::string run_checkpoint(const std::string& run) {
+  const std::filesystem::path best = std::filesystem::path(run) / "best.h5";
+  if (std::filesystem::exists(best)) return best.string();
+  std::string newest;
+  const std::filesystem::path dir = std::filesystem::path(run) / "checkpoints";
+  if (std::filesystem::is_directory(dir))
+    for (const auto& e : std::filesystem::directory_iterator(dir)) {
+      const std::string name = e.path().filename().string();
+      if (name.rfind("step_", 0) == 0 && e.path().extension() == ".h5" && e.path().string() > newest)
+        newest = e.path().string();
+    }
+  if (newest.empty())
+    throw std::runtime_error(run + ": no best.h5 and no checkpoints/step_*.h5 — is this a run directory of "
+                             "`layersnet train`? Give --checkpoint FILE instead");
+  return newest;
+}
+
 // "<folder>/<stem> (<attention>[+RET])": distinguishes ablation runs in one table.
 std::string default_name(const std::string& path, const Config& c) {
   const std::filesystem::path p(path);
@@ -37,7 +57,10 @@ std::string default_name(const std::string& path, const Config& c) {
   return name + " (" + c.model.attention + (c.model.rotation_equivalent ? "+RET" : ", vanilla") + ")";
 }
 
-int run_eval(const EvalCliOptions& o) {
+int run_eval(EvalCliOptions o) {
+  std::vector<std::string> from_runs;  // runs first, in order, then --checkpoint files
+  for (const auto& run : o.runs) from_runs.push_back(run_checkpoint(run));
+  o.checkpoints.insert(o.checkpoints.begin(), from_runs.begin(), from_runs.end());
   // Settings: the first checkpoint's config supplies the defaults.
   Config base;
   if (!o.checkpoints.empty()) base = parse_config_text(read_checkpoint_config(o.checkpoints[0]), o.checkpoints[0]);
@@ -117,7 +140,8 @@ LAYERSNET_COMMAND(eval, "Roll out checkpoints and baselines over a split; error,
                   [](CLI::App& sub) {
                     auto o = std::make_shared<EvalCliOptions>();
                     sub.add_option("--checkpoint", o->checkpoints, "checkpoint (repeat for several variants)");
-                    sub.add_option("--name", o->names, "table name of each checkpoint, in order (default: folder/file)");
+                    sub.add_option("--run", o->runs, "run directory of `layersnet train` (its best.h5, else newest checkpoint); repeatable");
+                    sub.add_option("--name", o->names, "table name of each model, in order (runs first; default: folder/file)");
                     sub.add_option("--dataset", o->dataset, "data set folder (default: the first checkpoint's data.dataset)");
                     sub.add_option("--split", o->split, "train | val | test (default: the config's eval.split)");
                     sub.add_option("--frames", o->frames, "predicted frames per sequence (default: eval.frames)");
@@ -127,8 +151,8 @@ LAYERSNET_COMMAND(eval, "Roll out checkpoints and baselines over a split; error,
                     sub.add_option("--out", o->out, "output folder for eval.json, eval.md and plots");
                     return [o] {
                       try {
-                        if (o->checkpoints.empty() && o->dataset.empty()) {
-                          std::fprintf(stderr, "layersnet eval: give --checkpoint (and/or --dataset for baselines only)\n");
+                        if (o->checkpoints.empty() && o->runs.empty() && o->dataset.empty()) {
+                          std::fprintf(stderr, "layersnet eval: give --run or --checkpoint (or --dataset for baselines only)\n");
                           return 2;
                         }
                         return run_eval(*o);

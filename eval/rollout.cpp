@@ -47,13 +47,17 @@ bool stats_from_checkpoint(const std::map<std::string, std::vector<double>>& sto
   dataset::NormalisationStats s;
   for (int q = 0; q < 6; ++q) {
     const std::string base = kStatQuantities[q];
-    const auto mean = stored.find(base + "_mean"), std = stored.find(base + "_std");
+    auto find = [&](const std::string& what) {
+      auto it = stored.find(base + "." + what);
+      return it != stored.end() ? it : stored.find(base + "_" + what);
+    };
+    const auto mean = find("mean"), std = find("std");
     if (mean == stored.end() || std == stored.end() || mean->second.size() != 3 || std->second.size() != 3)
       return false;
     dataset::MeanStd* slot = stat_slot(s, q);
     slot->mean = Eigen::Vector3d(mean->second[0], mean->second[1], mean->second[2]);
     slot->std = Eigen::Vector3d(std->second[0], std->second[1], std->second[2]);
-    if (const auto c = stored.find(base + "_count"); c != stored.end() && !c->second.empty())
+    if (const auto c = find("count"); c != stored.end() && !c->second.empty())
       slot->count = static_cast<int64_t>(c->second[0]);
   }
   out = s;
@@ -66,14 +70,14 @@ std::map<std::string, std::vector<double>> stats_to_checkpoint(const dataset::No
   for (int q = 0; q < 6; ++q) {
     const dataset::MeanStd* slot = stat_slot(s, q);
     const std::string base = kStatQuantities[q];
-    out[base + "_mean"] = {slot->mean[0], slot->mean[1], slot->mean[2]};
-    out[base + "_std"] = {slot->std[0], slot->std[1], slot->std[2]};
-    out[base + "_count"] = {static_cast<double>(slot->count)};
+    out[base + ".mean"] = {slot->mean[0], slot->mean[1], slot->mean[2]};
+    out[base + ".std"] = {slot->std[0], slot->std[1], slot->std[2]};
+    out[base + ".count"] = {static_cast<double>(slot->count)};
   }
   return out;
 }
 
-dataset::SampleOptions sample_options_for(const ModelConfig& c) {
+dataset::SampleOptions eval_sample_options(const ModelConfig& c) {
   dataset::SampleOptions o;
   o.patch_size = static_cast<float>(c.patch_size);
   o.neighbours.world_radius = static_cast<float>(c.world_radius);
@@ -90,7 +94,7 @@ ModelPredictor::ModelPredictor(std::string name, Config config, ad::ParamStore<f
       config_(std::move(config)),
       params_(std::move(params)),
       stats_(std::move(stats)),
-      sample_options_(sample_options_for(config_.model)) {}
+      sample_options_(eval_sample_options(config_.model)) {}
 
 void ModelPredictor::begin(const dataset::Sequence& seq) {
   structure_ = dataset::build_structure(seq.info, sample_options_.patch_size);
@@ -135,7 +139,7 @@ std::unique_ptr<ModelPredictor> load_model_predictor(const std::string& path, co
   dataset::NormalisationStats stats;
   if (!stats_from_checkpoint(m.checkpoint.stats, stats)) {
     if (!fallback_stats)
-      throw std::runtime_error(path + ": the checkpoint holds no normalisation statistics (/stats/position_mean ...) "
+      throw std::runtime_error(path + ": the checkpoint holds no normalisation statistics (/stats/position.mean ...) "
                                "and no data set stats.h5 was given; run `layersnet prepare <dataset>`");
     stats = *fallback_stats;
   }

@@ -57,16 +57,17 @@ class FollowBody : public Predictor {
               const Points& x_now) override;
 };
 
-// Statistics stored in a checkpoint (/stats/<quantity>_{mean,std,count}, quantity one of
-// position, velocity, acceleration, root_position, root_velocity, root_acceleration).
+// Statistics stored in a checkpoint (/stats/<quantity>.{mean,std,count} as the trainer
+// writes them, train/run_dir.h; "<quantity>_mean" is accepted too), quantity one of
+// position, velocity, acceleration, root_position, root_velocity, root_acceleration.
 // Returns false (and leaves `out` untouched) when any mean/std is missing.
 bool stats_from_checkpoint(const std::map<std::string, std::vector<double>>& stored, dataset::NormalisationStats& out);
 // The inverse, for writing checkpoints in tests and tools.
 std::map<std::string, std::vector<double>> stats_to_checkpoint(const dataset::NormalisationStats& stats);
 
-// Sample options matching a model config (patch size, radii, K, body query order;
+// Sample options matching a model config (same as the trainer's sample_options_for) (patch size, radii, K, body query order;
 // no duplicate padding — the model drops duplicates anyway, model/README.md quirk 3).
-dataset::SampleOptions sample_options_for(const ModelConfig& config);
+dataset::SampleOptions eval_sample_options(const ModelConfig& config);
 
 // The learned simulator: builds the dataset sample of the rollout's window, the model input,
 // runs forward without recording; world x_{t+1} = predicted root-relative x + r_{t+1}.

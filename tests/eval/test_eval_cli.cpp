@@ -120,6 +120,27 @@ TEST_F(EvalCli, EvalWritesReportsAndPrintsTheSummaryTable) {
   }
 }
 
+TEST_F(EvalCli, RunDirectoryPicksBestElseTheNewestCheckpoint) {
+  const fs::path run_dir = root_ / "run";
+  fs::create_directories(run_dir / "checkpoints");
+  fs::copy_file(root_ / "tiny.h5", run_dir / "checkpoints" / "step_00000002.h5");
+  fs::copy_file(root_ / "vanilla.h5", run_dir / "checkpoints" / "step_00000010.h5");
+  int code = 0;
+  const auto names = [&] {
+    const std::string text = run("eval --run " + run_dir.string() + " --frames 1 --speed-frames 1 --max-sequences 1 --out " +
+                                     (root_ / "eval_run").string(),
+                                 &code);
+    EXPECT_EQ(code, 0) << text;
+    return nlohmann::json::parse(slurp(root_ / "eval_run" / "eval.json"))["methods"][0]["checkpoint"].get<std::string>();
+  };
+  EXPECT_NE(names().find("step_00000010.h5"), std::string::npos);
+  fs::copy_file(root_ / "tiny.h5", run_dir / "best.h5");
+  EXPECT_NE(names().find("best.h5"), std::string::npos);
+  const std::string bad = run("eval --run " + (root_ / "data").string() + " --out " + (root_ / "x").string(), &code);
+  EXPECT_NE(code, 0);
+  EXPECT_NE(bad.find("no best.h5"), std::string::npos) << bad;
+}
+
 TEST_F(EvalCli, ExportWritesMeshesAndAStrip) {
   int code = 0;
   const fs::path out = root_ / "export";

@@ -120,7 +120,13 @@ TEST(Rollout, StatsRoundTripThroughCheckpointNames) {
   EXPECT_EQ(back.velocity.mean, st.velocity.mean);
   EXPECT_EQ(back.root_acceleration.std, st.root_acceleration.std);
   EXPECT_EQ(back.position.count, 17);
-  EXPECT_FALSE(stats_from_checkpoint({{"position_mean", {0, 0, 0}}}, back));
+  EXPECT_FALSE(stats_from_checkpoint({{"position.mean", {0, 0, 0}}}, back));
+  // The underscore spelling is read too.
+  std::map<std::string, std::vector<double>> underscored;
+  for (const auto& [k, v] : stats_to_checkpoint(st)) underscored[k.substr(0, k.find('.')) + "_" + k.substr(k.find('.') + 1)] = v;
+  dataset::NormalisationStats back2;
+  ASSERT_TRUE(stats_from_checkpoint(underscored, back2));
+  EXPECT_EQ(back2.velocity.mean, st.velocity.mean);
 }
 
 TEST(Rollout, ModelPredictorFirstStepEqualsADirectForward) {
@@ -131,7 +137,7 @@ TEST(Rollout, ModelPredictorFirstStepEqualsADirectForward) {
   model::register_params(ps, c.model);
   model::init_params(ps, c.model, 3);
   // Direct: the dataset sample of the ground truth at t = 2.
-  const auto opt = sample_options_for(c.model);
+  const auto opt = eval_sample_options(c.model);
   const auto sample = dataset::build_sample(seq.info, seq.frames, 2, st, nullptr, opt);
   const auto input = model::model_input_from_sample(sample, st, c.model);
   ad::Tape<float> tape;
