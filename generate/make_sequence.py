@@ -55,6 +55,8 @@ DEFAULTS = {
     "field_seed": 1,
     "distance_body": 0.1,         # cloth-body collision distance, scene units (1 cm)
     "distance_self": 0.06,        # cloth-cloth, scene units
+    "garment_spacing_m": outfits.SPACING,  # rest edge length of the garments (metres)
+    "ring_vertices": outfits.COLS,         # vertices around a ring (multiple of 8)
 }
 SPLIT_CODE = {"train": "t", "val": "v", "test": "e"}
 
@@ -273,7 +275,8 @@ def main():
     body.collision.cloth_friction = body_friction
 
     profile = BodyProfile(body_rest, centre=(0.0, -0.03 * SCENE_SCALE), arm_x=0.35 * SCENE_SCALE)
-    garments = outfits.build_outfit(profile, inner_kind, outer_kind, rng)
+    garments = outfits.build_outfit(profile, inner_kind, outer_kind, rng, cfg["garment_spacing_m"],
+                                    cfg["ring_vertices"])
     cloth, offs = make_cloth(garments, body_w, bone_names, body_rest, layer_attrs, cfg)
     add_wind(pivots, (0.0, 0.0, 1.0 * SCENE_SCALE), cfg["field_seed"])
 

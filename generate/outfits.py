@@ -19,30 +19,30 @@ COLS = 40           # vertices per ring; divisible by 2, 4, 8 panels
 Z_WAIST, Z_CROTCH, Z_HIP, Z_CHEST = 1.00, 0.84, 0.93, 1.22
 
 
-def _inner(profile, kind, rng):
+def _inner(profile, kind, rng, spacing, cols):
     """Returns (garment, offset_fn metres->scene units, z_top) of the inner layer."""
     if kind == "pants_tight":
         off = rng.uniform(0.02, 0.03)
         hem = rng.uniform(0.10, 0.30)
-        g = pants_garment("pants", profile, Z_WAIST * S, Z_CROTCH * S, hem * S, off * S, SPACING * S, COLS)
+        g = pants_garment("pants", profile, Z_WAIST * S, Z_CROTCH * S, hem * S, off * S, spacing * S, cols)
         return g, (lambda z: off * S), Z_WAIST
     if kind == "skirt":
         panels = int(rng.choice([2, 4, 8]))
         hem = rng.uniform(0.42, 0.62)
         base, flare = rng.uniform(0.012, 0.02), rng.uniform(0.05, 0.35)
         fn = lambda z: (base + flare * max(0.0, Z_HIP - z / S)) * S
-        rings = tube_rings(profile, _rows(Z_WAIST * S, hem * S, SPACING * S), fn, COLS, Z_HIP * S)
+        rings = tube_rings(profile, _rows(Z_WAIST * S, hem * S, spacing * S), fn, cols, Z_HIP * S)
         return tube_garment("skirt", f"skirt_{panels}_panels", rings, panels), fn, Z_WAIST
     if kind == "dress_strapless":
         hem = rng.uniform(0.42, 0.62)
         base, flare = rng.uniform(0.012, 0.02), rng.uniform(0.05, 0.3)
         fn = lambda z: (base + flare * max(0.0, Z_HIP - z / S)) * S
-        rings = tube_rings(profile, _rows(Z_CHEST * S, hem * S, SPACING * S), fn, COLS, Z_HIP * S)
+        rings = tube_rings(profile, _rows(Z_CHEST * S, hem * S, spacing * S), fn, cols, Z_HIP * S)
         return tube_garment("dress", "dress_strapless", rings, 2), fn, Z_CHEST
     raise ValueError(f"outfits.py: unknown inner garment kind '{kind}' (use one of {INNER_KINDS})")
 
 
-def _outer(profile, kind, rng, inner_fn, inner_top):
+def _outer(profile, kind, rng, inner_fn, inner_top, spacing, cols):
     """Outer layer: looser than the inner one by GAP plus a sampled ease, longer for coats."""
     ease, flare = rng.uniform(0.0, 0.02), rng.uniform(0.05, 0.3)
     top = Z_CHEST + 0.02
@@ -58,15 +58,19 @@ def _outer(profile, kind, rng, inner_fn, inner_top):
         hem, panels = rng.uniform(0.76, 0.88), int(rng.choice([2, 4]))
     else:
         raise ValueError(f"outfits.py: unknown outer garment kind '{kind}' (use one of {OUTER_KINDS})")
-    rings = tube_rings(profile, _rows(top * S, hem * S, SPACING * S), fn, COLS, Z_HIP * S)
+    rings = tube_rings(profile, _rows(top * S, hem * S, spacing * S), fn, cols, Z_HIP * S)
     name = "coat" if kind == "coat_sleeveless" else "jacket"
     return tube_garment(name, kind, rings, panels)
 
 
-def build_outfit(profile, inner_kind, outer_kind, rng):
-    """[inner, outer] Garments around the rest body described by `profile`."""
-    inner, inner_fn, inner_top = _inner(profile, inner_kind, rng)
-    outer = _outer(profile, outer_kind, rng, inner_fn, inner_top)
+def build_outfit(profile, inner_kind, outer_kind, rng, spacing=SPACING, cols=COLS):
+    """[inner, outer] Garments around the rest body described by `profile`.
+    spacing: metres between rows; cols: vertices per ring (a multiple of 8: 2/4/8 panels
+    and the trousers' four quarter panels). Finer garments cost proportionally more."""
+    if cols % 8 != 0:
+        raise ValueError(f"outfits.py: ring vertex count {cols} must be a multiple of 8")
+    inner, inner_fn, inner_top = _inner(profile, inner_kind, rng, spacing, cols)
+    outer = _outer(profile, outer_kind, rng, inner_fn, inner_top, spacing, cols)
     if outer.name == inner.name:
         outer.name += "_outer"
     return [inner, outer]

@@ -100,6 +100,9 @@ def main():
                     checked += 1
                 assert checked > 0
             kinds += 1
+    # A finer resolution (the recipe keys garment_spacing_m / ring_vertices) keeps the checks.
+    for g in outfits.build_outfit(prof, "pants_tight", "coat_sleeveless", np.random.default_rng(1), 0.025, 64):
+        check(g)
     print(f"ok: {kinds} outfits, {len(outfits.INNER_KINDS) + len(outfits.OUTER_KINDS)} garment kinds")
 
 
