@@ -112,7 +112,8 @@ std::vector<std::string> read_strings(hid_t attr, hid_t ftype, uint64_t n, const
       if (p) H5free_memory(p);
     }
   } else {
-    if (size == 0 || size > (1u << 20)) where.fail("attribute '" + name + "' cannot be read");
+    if (size == 0 || size > (1u << 20) || n * size > (uint64_t{1} << 26))
+      where.fail("attribute '" + name + "' cannot be read (empty or larger than 64 MiB)");
     Handle mt = make_string_type(false, size, cset);
     H5Tset_strpad(mt.get(), H5T_STR_NULLPAD);
     std::vector<char> buf(n * size);

@@ -142,6 +142,12 @@ struct SequenceWriteOptions {
 void write_sequence(const std::string& path, const Sequence& seq,
                     const SequenceWriteOptions& options = {});
 
+// Writes the sequence's groups, datasets and attributes into an already created HDF5 file
+// (e.g. an in-memory core-driver file); `name` is used in messages. write_sequence =
+// validate_sequence + create file + this.
+void write_sequence_contents(hid_t file, const Sequence& seq, const SequenceWriteOptions& options,
+                             const std::string& name);
+
 // Checks the in-memory sequence against the spec (shapes, finiteness, index ranges, unit
 // quaternions, ...). Used by the writer; `file` names it in messages.
 void validate_sequence(const Sequence& seq, const std::string& file);

@@ -73,8 +73,8 @@ void validate_sequence(const Sequence& seq, const std::string& file) {
   }
 }
 
-void write_sequence(const std::string& path, const Sequence& seq, const SequenceWriteOptions& options) {
-  validate_sequence(seq, path);
+void write_sequence_contents(hid_t r, const Sequence& seq, const SequenceWriteOptions& options,
+                             const std::string& path) {
   const SequenceInfo& s = seq.info;
   const uint64_t T = static_cast<uint64_t>(s.num_frames);
   h5::WriteOptions wo;
@@ -83,50 +83,53 @@ void write_sequence(const std::string& path, const Sequence& seq, const Sequence
   wo.gzip = options.gzip;
   h5::WriteOptions plain = wo;
   plain.gzip = 0;
+  h5::write_string_attr(r, "format", kFormatName);
+  h5::write_int_attr(r, "version", kFormatVersion);
+  h5::write_float_attr(r, "fps", s.fps);
+  h5::write_string_attr(r, "up_axis", std::string(1, s.up_axis));
+  h5::write_float_vector_attr(r, "gravity", {s.gravity.x(), s.gravity.y(), s.gravity.z()});
+  h5::write_float_attr(r, "scale", s.scale);
+  const h5::Where wb{path, "/body"};
+  h5::Handle body = h5::create_group(r, "body", wb);
+  h5::write_floats(body.get(), "vertices", seq.frames.body.data(),
+                   {T, static_cast<uint64_t>(s.num_body_vertices), 3}, wo);
+  h5::write_ints(body.get(), "faces", s.body_faces.data(), {static_cast<uint64_t>(s.body_faces.rows()), 3}, plain);
+  if (options.write_translation) h5::write_floats(body.get(), "translation", s.translation.data(), {T, 3}, plain);
+  h5::write_float_attr(body.get(), "friction", s.body_friction);
+  h5::Handle garments = h5::create_group(r, "garments", h5::Where{path, "/garments"});
+  std::vector<std::string> order;
+  for (size_t gi = 0; gi < s.garments.size(); ++gi) {
+    const GarmentMesh& g = s.garments[gi];
+    order.push_back(g.name);
+    h5::Handle gg = h5::create_group(garments.get(), g.name, h5::Where{path, "/garments/" + g.name});
+    const uint64_t F = static_cast<uint64_t>(g.faces.rows()), N = static_cast<uint64_t>(g.num_vertices);
+    h5::write_floats(gg.get(), "vertices", seq.frames.garments[gi].data(), {T, N, 3}, wo);
+    h5::write_ints(gg.get(), "faces", g.faces.data(), {F, 3}, plain);
+    h5::write_floats(gg.get(), "uv", g.uv.data(), {F, 3, 2}, plain);
+    h5::write_ints(gg.get(), "panel", g.panel.data(), {F}, plain);
+    if (g.rest.rows() > 0) h5::write_floats(gg.get(), "rest", g.rest.data(), {N, 3}, plain);
+    h5::write_string_attr(gg.get(), "type", g.type);
+    h5::write_float_attr(gg.get(), "tension_stiffness", g.attributes.tension_stiffness);
+    h5::write_float_attr(gg.get(), "bending_stiffness", g.attributes.bending_stiffness);
+    h5::write_float_attr(gg.get(), "mass", g.attributes.mass);
+    h5::write_float_attr(gg.get(), "self_friction", g.attributes.self_friction);
+  }
+  h5::write_string_array_attr(garments.get(), "order", order);
+  if (s.has_wind) {
+    h5::Handle w = h5::create_group(r, "wind", h5::Where{path, "/wind"});
+    h5::write_floats(w.get(), "rotation", s.wind_rotation.data(), {T, 4}, plain);
+    h5::write_floats(w.get(), "strength", s.wind_strength.data(), {T}, plain);
+  }
+}
+
+void write_sequence(const std::string& path, const Sequence& seq, const SequenceWriteOptions& options) {
+  validate_sequence(seq, path);
   // Write to a temporary name, then rename: a crash never leaves a half-written sequence.
   const std::string tmp = path + ".tmp";
   {
     h5::Handle f = h5::create_file(tmp);
-    const hid_t r = f.get();
-    h5::write_string_attr(r, "format", kFormatName);
-    h5::write_int_attr(r, "version", kFormatVersion);
-    h5::write_float_attr(r, "fps", s.fps);
-    h5::write_string_attr(r, "up_axis", std::string(1, s.up_axis));
-    h5::write_float_vector_attr(r, "gravity", {s.gravity.x(), s.gravity.y(), s.gravity.z()});
-    h5::write_float_attr(r, "scale", s.scale);
-    const h5::Where wb{path, "/body"};
-    h5::Handle body = h5::create_group(r, "body", wb);
-    h5::write_floats(body.get(), "vertices", seq.frames.body.data(),
-                     {T, static_cast<uint64_t>(s.num_body_vertices), 3}, wo);
-    h5::write_ints(body.get(), "faces", s.body_faces.data(), {static_cast<uint64_t>(s.body_faces.rows()), 3}, plain);
-    if (options.write_translation)
-      h5::write_floats(body.get(), "translation", s.translation.data(), {T, 3}, plain);
-    h5::write_float_attr(body.get(), "friction", s.body_friction);
-    h5::Handle garments = h5::create_group(r, "garments", h5::Where{path, "/garments"});
-    std::vector<std::string> order;
-    for (size_t gi = 0; gi < s.garments.size(); ++gi) {
-      const GarmentMesh& g = s.garments[gi];
-      order.push_back(g.name);
-      h5::Handle gg = h5::create_group(garments.get(), g.name, h5::Where{path, "/garments/" + g.name});
-      const uint64_t F = static_cast<uint64_t>(g.faces.rows()), N = static_cast<uint64_t>(g.num_vertices);
-      h5::write_floats(gg.get(), "vertices", seq.frames.garments[gi].data(), {T, N, 3}, wo);
-      h5::write_ints(gg.get(), "faces", g.faces.data(), {F, 3}, plain);
-      h5::write_floats(gg.get(), "uv", g.uv.data(), {F, 3, 2}, plain);
-      h5::write_ints(gg.get(), "panel", g.panel.data(), {F}, plain);
-      if (g.rest.rows() > 0) h5::write_floats(gg.get(), "rest", g.rest.data(), {N, 3}, plain);
-      h5::write_string_attr(gg.get(), "type", g.type);
-      h5::write_float_attr(gg.get(), "tension_stiffness", g.attributes.tension_stiffness);
-      h5::write_float_attr(gg.get(), "bending_stiffness", g.attributes.bending_stiffness);
-      h5::write_float_attr(gg.get(), "mass", g.attributes.mass);
-      h5::write_float_attr(gg.get(), "self_friction", g.attributes.self_friction);
-    }
-    h5::write_string_array_attr(garments.get(), "order", order);
-    if (s.has_wind) {
-      h5::Handle w = h5::create_group(r, "wind", h5::Where{path, "/wind"});
-      h5::write_floats(w.get(), "rotation", s.wind_rotation.data(), {T, 4}, plain);
-      h5::write_floats(w.get(), "strength", s.wind_strength.data(), {T}, plain);
-    }
-    if (H5Fflush(r, H5F_SCOPE_GLOBAL) < 0) throw DatasetError(tmp, "/", "cannot flush to disk");
+    write_sequence_contents(f.get(), seq, options, path);
+    if (H5Fflush(f.get(), H5F_SCOPE_GLOBAL) < 0) throw DatasetError(tmp, "/", "cannot flush to disk");
   }
   std::error_code ec;
   std::filesystem::rename(tmp, path, ec);
