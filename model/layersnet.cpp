@@ -163,7 +163,7 @@ Var<T> inter_messages(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
       W = rotation_map_impl(tape, p, cfg, prefix + "rot_mapping." + gs + ".weight");
       y = ad::rot_map_apply(tape, W, rot, y);
     }
-    y = ad::relu(tape, ad::linear(tape, y, p(prefix + "rs_mlp." + gs + ".weight"), p(prefix + "rs_mlp." + gs + ".bias")));
+    y = ad::linear_relu(tape, y, p(prefix + "rs_mlp." + gs + ".weight"), p(prefix + "rs_mlp." + gs + ".bias"));
     if (cfg.rotation_equivalent) y = ad::rot_map_apply(tape, W, rot, y, /*transpose=*/true);
     parts.push_back(y);
   }
@@ -332,8 +332,8 @@ Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
     const Var<T> ze_v = ad::rotate3(tape, constant(tape, Re, Ec, 9), ad::gather_rows(tape, z_p, in.cand_patches));
     const Var<T> feat_v = ad::concat_cols(tape, {rel_v, ze_v, ad::gather_rows(tape, zh_v, cand_vertex)});
     auto rest = [&](const Var<T>& f) {
-      const Var<T> h = ad::relu(tape, ad::linear(tape, f, M, b1));
-      const Var<T> h2 = ad::relu(tape, ad::linear(tape, h, p("decoder.proj.1.weight"), p("decoder.proj.1.bias")));
+      const Var<T> h = ad::linear_relu(tape, f, M, b1);
+      const Var<T> h2 = ad::linear_relu(tape, h, p("decoder.proj.1.weight"), p("decoder.proj.1.bias"));
       return ad::linear(tape, h2, p("decoder.proj.2.weight"), p("decoder.proj.2.bias"));
     };
     a_p = rest(feat_p);

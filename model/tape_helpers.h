@@ -84,8 +84,8 @@ Var<T> mlp(ad::Tape<T>& tape, const ParamView<T>& p, const std::string& prefix, 
            bool bias = true) {
   for (int i = 0; i < n; ++i) {
     const std::string k = prefix + "." + std::to_string(i);
-    x = ad::linear(tape, x, p(k + ".weight"), bias ? p(k + ".bias") : Var<T>{});
-    if (i + 1 < n || final_relu) x = ad::relu(tape, x);
+    const Var<T> W = p(k + ".weight"), b = bias ? p(k + ".bias") : Var<T>{};
+    x = (i + 1 < n || final_relu) ? ad::linear_relu(tape, x, W, b) : ad::linear(tape, x, W, b);
   }
   return x;
 }
