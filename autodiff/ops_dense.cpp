@@ -316,7 +316,7 @@ void backward_div(const Node<T>& node) {
 // ---- scale, relu, hinge_sq ------------------------------------------------------------------
 
 template <class T>
-Var<T> scale(Tape<T>& tape, const Var<T>& x, T c) {
+Var<T> scale(Tape<T>& tape, const Var<T>& x, std::type_identity_t<T> c) {
   const bool grad = tape.wants_grad({x});
   Var<T> out = tape.new_var(x.rows, x.cols, grad);
   unary_forward(x, out, [c](const auto& v) { return v * c; });
@@ -345,7 +345,7 @@ void backward_relu(const Node<T>& node) {
 }
 
 template <class T>
-Var<T> hinge_sq(Tape<T>& tape, const Var<T>& x, T thr) {
+Var<T> hinge_sq(Tape<T>& tape, const Var<T>& x, std::type_identity_t<T> thr) {
   const bool grad = tape.wants_grad({x});
   Var<T> out = tape.new_var(x.rows, x.cols, grad);
   unary_forward(x, out, [thr](const auto& v) { return (v - thr).min(T(0)).square(); });
@@ -432,7 +432,8 @@ void layer_norm_backward(const T* x, const T* gamma, const T* mean, const T* rst
 }
 
 template <class T>
-Var<T> layer_norm(Tape<T>& tape, const Var<T>& x, const Var<T>& gamma, const Var<T>& beta, T eps) {
+Var<T> layer_norm(Tape<T>& tape, const Var<T>& x, const Var<T>& gamma, const Var<T>& beta,
+                  std::type_identity_t<T> eps) {
   for (const Var<T>* p : {&gamma, &beta})
     LAYERSNET_CHECK(absent(*p) || (p->rows == 1 && p->cols == x.cols),
                     "layer_norm: gamma/beta is (" << p->rows << ", " << p->cols << "), expected (1, " << x.cols

@@ -16,8 +16,12 @@
 
 #include <initializer_list>
 #include <span>
+#include <type_traits>
 
 namespace layersnet::ad {
+
+// Scalar parameters are std::type_identity_t<T>, so `scale(tape, x, 0.5)` works on a
+// float tape.
 
 // ---- linear algebra ----------------------------------------------------------------------
 
@@ -52,7 +56,7 @@ Var<T> div(Tape<T>& tape, const Var<T>& a, const Var<T>& b);
 
 // out = c * x for a constant c (not differentiated). x, out: (N, C).
 template <class T>
-Var<T> scale(Tape<T>& tape, const Var<T>& x, T c);
+Var<T> scale(Tape<T>& tape, const Var<T>& x, std::type_identity_t<T> c);
 
 // out = max(x, 0). x, out: (N, C). The derivative at exactly 0 is taken as 0.
 template <class T>
@@ -61,7 +65,7 @@ Var<T> relu(Tape<T>& tape, const Var<T>& x);
 // out = min(x - thr, 0)² elementwise (one-sided quadratic penalty, e.g. the collision
 // loss's min(d - eps, 0)²). x, out: (N, C); thr a constant. C¹ at x = thr (gradient 0).
 template <class T>
-Var<T> hinge_sq(Tape<T>& tape, const Var<T>& x, T thr);
+Var<T> hinge_sq(Tape<T>& tape, const Var<T>& x, std::type_identity_t<T> thr);
 
 // ---- normalisation -----------------------------------------------------------------------
 
@@ -71,7 +75,8 @@ Var<T> hinge_sq(Tape<T>& tape, const Var<T>& x, T thr);
 // Saves mean and rstd per row for backward. A constant row gives out = beta and a
 // finite gradient (rstd = 1/sqrt(eps)).
 template <class T>
-Var<T> layer_norm(Tape<T>& tape, const Var<T>& x, const Var<T>& gamma, const Var<T>& beta, T eps = T(1e-5));
+Var<T> layer_norm(Tape<T>& tape, const Var<T>& x, const Var<T>& gamma, const Var<T>& beta,
+                  std::type_identity_t<T> eps = T(1e-5));
 
 // ---- columns -----------------------------------------------------------------------------
 
