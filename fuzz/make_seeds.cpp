@@ -38,5 +38,11 @@ int main(int argc, char** argv) {
   std::ofstream(dir / "manifest0") << '\1'
                                    << R"({"format":"dlayers-h5","version":1,"source":"s","splits":{"train":["a","b"],"val":["c"],"test":[]}})";
   std::ofstream(dir / "manifest1") << '\1' << R"({"format":"dlayers-h5","version":1,"source":"s","splits":{}})";
+  // Structured mode (byte 0 = 2): a few arbitrary edit programs to start from.
+  for (int k = 0; k < 8; ++k) {
+    std::string prog(1, '\2');
+    for (int i = 0; i < 48; ++i) prog += static_cast<char>((k * 37 + i * 11) & 0xff);
+    std::ofstream(dir / ("structured" + std::to_string(k)), std::ios::binary) << prog;
+  }
   return 0;
 }

@@ -8,8 +8,8 @@
 # Timeouts are ignored (-ignore_timeouts=1) because libhdf5 1.10.8 itself can loop forever
 # on a corrupted global heap while reading a variable-length string attribute (an input is
 # kept in fuzz/known_hdf5_issues/; the stack is inside H5HG_read, not in our code); they are
-# counted in the final summary instead. Leaks allocated inside a failing H5Fopen (libhdf5's
-# own error path) are suppressed by fuzz/lsan.supp; every other leak is reported.
+# counted in the final summary instead. Leaks of memory allocated inside libhdf5 on the error
+# paths of corrupt files are suppressed by fuzz/lsan.supp; every other leak is reported.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 SECONDS_TO_RUN="${1:-120}"
