@@ -10,8 +10,11 @@
 #include "eval/report.h"
 #include "train/checkpoint.h"
 
+#include <omp.h>
+
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <memory>
 
 namespace {
@@ -27,6 +30,7 @@ struct EvalCliOptions {
   int start_frame = -1;
   int max_sequences = 0;
   int speed_frames = 10;
+  int threads = 0;
   std::string out = "eval_out";
 };
 
@@ -95,8 +99,9 @@ int run_eval(EvalCliOptions o) {
   std::vector<eval::Predictor*> predictors;
   for (auto& p : owned) predictors.push_back(p.get());
 
-  std::printf("eval: %s split '%s', %zu method(s) + 2 baselines, up to %d frames from input frame %d\n", root.c_str(),
-              eo.split.c_str(), o.checkpoints.size(), eo.frames, eo.start_frame);
+  if (o.threads > 0) omp_set_num_threads(o.threads);  // the evaluation rollouts (speed sets its own)
+  std::printf("eval: %s split '%s', %zu method(s) + 2 baselines, up to %d frames from input frame %d, %d thread(s)\n",
+              root.c_str(), eo.split.c_str(), o.checkpoints.size(), eo.frames, eo.start_frame, omp_get_max_threads());
   std::vector<eval::MethodResult> results = eval::evaluate(manifest, predictors, eo, true);
   for (size_t p = 0; p < results.size(); ++p) {
     results[p].kind = kinds[p];
@@ -125,6 +130,8 @@ int run_eval(EvalCliOptions o) {
     }
   }
   ctx.blender_s_per_frame = blender_n ? blender_sum / blender_n : -1;
+  std::ifstream loadavg("/proc/loadavg");  // context for the speed figures on a shared machine
+  loadavg >> ctx.load_average;
 
   const auto written = eval::write_report(o.out, results, ctx);
   std::printf("\n%s", eval::summary_table(results, ctx).c_str());
@@ -148,6 +155,7 @@ LAYERSNET_COMMAND(eval, "Roll out checkpoints and baselines over a split; error,
                     sub.add_option("--start-frame", o->start_frame, "input frame t0 of the first prediction (default: data.first_frame)");
                     sub.add_option("--max-sequences", o->max_sequences, "evaluate only the first N sequences (0 = all)");
                     sub.add_option("--speed-frames", o->speed_frames, "frames of the 1- and 2-thread speed rollouts");
+                    sub.add_option("--threads", o->threads, "OpenMP threads of the evaluation rollouts (0 = all; speed is measured at 1 and 2)");
                     sub.add_option("--out", o->out, "output folder for eval.json, eval.md and plots");
                     return [o] {
                       try {

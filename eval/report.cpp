@@ -129,7 +129,7 @@ std::string report_json(const std::vector<MethodResult>& methods, const ReportCo
   j["h_collision_max_distance_m"] = c.options.max_body_distance_m;
   j["l_collision_near_max_distance_m"] = c.options.max_layer_distance_m;
   j["blender_s_per_frame"] = c.blender_s_per_frame;
-  j["speed"] = {{"sequence", c.speed_sequence}, {"frames", c.speed_frames}};
+  j["speed"] = {{"sequence", c.speed_sequence}, {"frames", c.speed_frames}, {"load_average_1min", c.load_average}};
   j["units"] = "error_*_mm: millimetres (scene units / scale * 1000); error_units: scene units; rates in [0, 1], "
                "*_percent in percent; l_rate_outer = colliding / outer vertices, l_rate_all = colliding / all garment "
                "vertices (official aggregate)";
@@ -197,7 +197,9 @@ std::string report_markdown(const std::vector<MethodResult>& methods, const Repo
     << (c.blender_s_per_frame > 0 ? fmt("%.3f", c.blender_s_per_frame) + " s/frame (mean over the evaluated sequences, "
                                                                             "recorded at generation)"
                                   : std::string("not recorded in these files"))
-    << ". The ground-truth row is the floor of the collision rates.\n\n";
+    << ". Machine load (1-minute average) after the run: " << fmt("%.1f", c.load_average)
+    << " — on a loaded machine 2 threads can be slower than 1. The ground-truth row is the floor of the "
+       "collision rates.\n\n";
   const auto types = all_types(methods);
   o << "## Per garment type (paper Table 2 layout), mm\n\n| method |";
   for (const auto& t : types) o << " " << t << " |";

@@ -19,6 +19,7 @@ struct ReportContext {
   double blender_s_per_frame = -1;  // mean over the evaluated sequences; -1 = not recorded
   int speed_frames = 0;             // frames of the speed rollouts
   std::string speed_sequence;       // id of the sequence the speed was measured on
+  double load_average = -1;         // 1-minute load average after the run (/proc/loadavg), -1 = unknown
 };
 
 // Plain-text table: one row per method (error mm ± std, inner, outer, H %, L %, ms/frame).

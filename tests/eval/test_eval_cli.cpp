@@ -184,3 +184,26 @@ TEST(Render, DrawsATriangleOverTheBackground) {
 
 }  // namespace
 }  // namespace layersnet::eval
+
+namespace layersnet::eval {
+namespace {
+
+// Not a test: writes a freshly initialised checkpoint for a config, for measuring speed
+// before a trained model exists. Run with
+//   LAYERSNET_FRESH_CONFIG=configs/default.toml LAYERSNET_FRESH_OUT=/tmp/fresh.h5
+//   build/tests/test_eval --gtest_also_run_disabled_tests --gtest_filter='*WriteFreshCheckpoint'
+TEST(Tool, DISABLED_WriteFreshCheckpoint) {
+  const char* config = std::getenv("LAYERSNET_FRESH_CONFIG");
+  const char* out = std::getenv("LAYERSNET_FRESH_OUT");
+  ASSERT_TRUE(config && out) << "set LAYERSNET_FRESH_CONFIG and LAYERSNET_FRESH_OUT";
+  const Config c = load_config({config});
+  ad::ParamStore<float> ps;
+  model::register_params(ps, c.model);
+  model::init_params(ps, c.model, 1);
+  Checkpoint cp;
+  cp.config_toml = to_toml(c);
+  write_checkpoint(out, ps, cp);
+}
+
+}  // namespace
+}  // namespace layersnet::eval
