@@ -196,6 +196,11 @@ std::string markdown_report(const json& rep) {
     }
     md << e.at("status").get<std::string>() << " |\n";
   }
+  std::ostringstream failed;
+  for (const json& e : rep.at("sequences"))
+    for (const json& r : e.value("reasons", json::array())) failed << "- " << e.at("id").get<std::string>() << ": " << r.get<std::string>() << "\n";
+  md << "\n## Failed attempts (regenerated with the next seed, or dropped after max_attempts)\n\n"
+     << (failed.str().empty() ? std::string("none\n") : failed.str());
   return md.str();
 }
 
