@@ -270,8 +270,7 @@ def main():
     ramp_start = 1 + cfg["rest_frames"]
     body_rig.retime_mocap(mocap, rig, bvh_start, speed, ramp_start, yaw, abduction)
     body_rig.drive_rig(rig, mocap, ramp_start, cfg["ramp_frames"])
-    coll = body.modifiers.new("collision", "COLLISION")
-    del coll
+    body.modifiers.new("collision", "COLLISION")
     body.collision.cloth_friction = body_friction
 
     profile = BodyProfile(body_rest, centre=(0.0, -0.03 * SCENE_SCALE), arm_x=0.35 * SCENE_SCALE)

@@ -6,8 +6,8 @@
   surface, counted only within 0.5 scene units (5 cm) of it: farther than that the
   nearest inner face says nothing about which side the vertex is on (e.g. a coat
   between two trouser legs).
-- max_edge_stretch / p99_edge_stretch: edge length over rest length minus 1, over all
-  garment edges and frames (max, and the 99th percentile of per-frame maxima... of edges).
+- max_edge_stretch / p99_edge_stretch: edge length over rest length minus 1; the maximum
+  and the 99th percentile over all (edge, frame) pairs of a garment, worst garment.
 """
 import numpy as np
 from mathutils import Vector
