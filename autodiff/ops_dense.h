@@ -10,8 +10,10 @@
 // An "empty" Var (value == nullptr, 0 x 0, e.g. `Var<T>{}`) stands for an absent optional
 // input (linear without bias, layer_norm without affine parameters).
 //
-// Large tensors are processed by OpenMP over blocks of rows; reductions over rows sum
-// fixed-size blocks in a fixed order, so results do not depend on the thread count.
+// Large tensors are processed by OpenMP over blocks of rows (autodiff/row_blocks.h);
+// reductions over rows sum fixed-size blocks in a fixed order, so results do not depend
+// on the thread count. Ops must not be called from inside an OpenMP parallel region
+// expecting parallelism: they then run serially (never nested).
 #include "autodiff/tape.h"
 
 #include <initializer_list>
@@ -27,8 +29,11 @@ namespace layersnet::ad {
 
 // out = x Wᵀ + b (torch.nn.Linear). x: (N, Cin); W: (Cout, Cin) [torch layout];
 // b: (1, Cout) or empty (no bias). out: (N, Cout).
-// One GEMM into the output, which is pre-filled with the bias (so the bias costs no
-// extra pass). Backward: dx += dy W, dW += dyᵀ x, db += column sums of dy.
+// Rows are cut into up to 16 chunks (a count fixed by N), one single-threaded Eigen GEMM
+// per chunk into output rows pre-filled with the bias (so the bias costs no extra pass),
+// chunks spread over the OpenMP threads. Backward: dx += dy W per chunk; dW += dyᵀ x and
+// db += column sums of dy as per-chunk partials added in chunk order, so every gradient
+// is bit-identical for any thread count.
 template <class T>
 Var<T> linear(Tape<T>& tape, const Var<T>& x, const Var<T>& W, const Var<T>& b = {});
 
