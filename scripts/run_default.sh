@@ -11,7 +11,7 @@ data=data/default
 has() { "$bin" --help | grep -qE "^  $1( |$)"; }
 
 if has generate; then
-  "$bin" generate --out "$data" --preset default
+  "$bin" generate --out "$data"   # resumes: existing valid sequences are kept
 fi
 if [ -f "$data/dataset.json" ]; then
   has prepare && "$bin" prepare "$data"
