@@ -190,7 +190,7 @@ std::string report_markdown(const std::vector<MethodResult>& methods, const Repo
       << " | " << pm(s.h_percent, "%.2f")
       << " | " << (m.ms_per_frame_1thread > 0 ? fmt("%.3g", m.ms_per_frame_1thread) : "–") << " | "
       << (m.ms_per_frame_2threads > 0 ? fmt("%.3g", m.ms_per_frame_2threads) : "–") << " | "
-      << (up > 0 ? fmt("%.0f", up) : "–") << " |\n";
+      << (up > 0 ? fmt("%.3g", up) : "–") << " |\n";
   }
   o << "\nSpeed: median wall time per predicted frame (sample building + forward) over a " << c.speed_frames
     << "-frame rollout of `" << c.speed_sequence << "`; Blender's own time: "
@@ -201,7 +201,7 @@ std::string report_markdown(const std::vector<MethodResult>& methods, const Repo
     << " — on a loaded machine 2 threads can be slower than 1. The ground-truth row is the floor of the "
        "collision rates.\n\n";
   const auto types = all_types(methods);
-  o << "## Per garment type (paper Table 2 layout), mm\n\n| method |";
+  o << "## Per garment type (paper Table 2 layout), mm (sequences)\n\n| method |";
   for (const auto& t : types) o << " " << t << " |";
   o << " overall |\n|---|";
   for (size_t i = 0; i <= types.size(); ++i) o << "---|";
@@ -210,10 +210,13 @@ std::string report_markdown(const std::vector<MethodResult>& methods, const Repo
     if (m.kind == "ground truth") continue;
     const Summary s = summarise(m);
     o << "| " << m.name << " |";
-    for (const auto& t : types) o << " " << (s.by_type_mm.count(t) ? pm(s.by_type_mm.at(t)) : "–") << " |";
+    for (const auto& t : types)
+      o << " "
+        << (s.by_type_mm.count(t) ? pm(s.by_type_mm.at(t)) + " (" + std::to_string(s.by_type_mm.at(t).count) + ")" : "–")
+        << " |";
     o << " " << pm(s.error_mm) << " |\n";
   }
-  o << "\n## Per split (paper Table 1 layout), mm\n\nT / L: tight / loose inner layer; +W: windy (max strength > "
+  o << "\n## Per split (paper Table 1 layout), mm (sequences)\n\nT / L: tight / loose inner layer; +W: windy (max strength > "
        "250); sequences with moderate wind belong to none (dataset.json `subsets`).\n\n| method | T | T+W | L | L+W |\n"
        "|---|---|---|---|---|\n";
   for (const auto& m : methods) {
