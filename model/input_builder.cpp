@@ -1,6 +1,7 @@
 #include "model/input_builder.h"
 
 #include "autodiff/check.h"
+#include "dataset/neighbours.h"
 
 #include <algorithm>
 #include <array>
@@ -57,6 +58,13 @@ std::vector<double> relative(const std::vector<double>& x, const double root[3])
   return r;
 }
 
+// Float (P, 3) copy for the data layer's spatial structures (grid, k-d tree).
+dataset::Points to_points(const std::vector<double>& x) {
+  dataset::Points p(static_cast<Eigen::Index>(x.size() / 3), 3);
+  for (std::size_t i = 0; i < x.size(); ++i) p(static_cast<Eigen::Index>(i / 3), static_cast<Eigen::Index>(i % 3)) = static_cast<float>(x[i]);
+  return p;
+}
+
 // CSR from per-row lists.
 void to_csr(const std::vector<std::vector<int32_t>>& rows, std::vector<int32_t>& offsets, std::vector<int32_t>& items) {
   offsets.assign(1, 0);
@@ -103,20 +111,11 @@ void nearest_points(const std::vector<double>& query, const std::vector<double>&
                     std::vector<double>& distance) {
   const int64_t Q = static_cast<int64_t>(query.size() / 3), M = static_cast<int64_t>(ref.size() / 3);
   LAYERSNET_CHECK(M > 0, "nearest_points: the reference point set is empty");
-  index.assign(Q, 0);
+  // k-d tree of the data layer (float search); the distance is recomputed in double.
+  const auto nn = dataset::nearest_body(to_points(query), to_points(ref));
+  index = nn.index;
   distance.assign(Q, 0.0);
-#pragma omp parallel for schedule(static) if (Q * M > 200000)
-  for (int64_t q = 0; q < Q; ++q) {
-    Vec3 p = row3(query, q);
-    double best = std::numeric_limits<double>::infinity();
-    int32_t bi = 0;
-    for (int64_t m = 0; m < M; ++m) {
-      double d = dist2(p, row3(ref, m));
-      if (d < best) best = d, bi = static_cast<int32_t>(m);
-    }
-    index[q] = bi;
-    distance[q] = std::sqrt(best);
-  }
+  for (int64_t q = 0; q < Q; ++q) distance[q] = std::sqrt(dist2(row3(query, q), row3(ref, index[q])));
 }
 
 void decoder_candidates(const std::vector<double>& xt, const std::vector<double>& centre,
@@ -215,39 +214,35 @@ ModelInput<double> build_model_input(const SceneWindow& s, const ModelConfig& cf
   in.patch_attr.resize(P);
   for (int64_t p = 0; p < P; ++p) in.patch_attr[p] = garment_token[s.patch_garment[p]];
 
-  // ---- world edges -------------------------------------------------------------------------------
-  const double R2 = cfg.world_radius * cfg.world_radius;
-  std::vector<std::vector<int32_t>> world(P);
-#pragma omp parallel for schedule(static) if (P > 256)
-  for (int64_t i = 0; i < P; ++i) {
-    const int32_t* ab = s.adj_patches.data() + s.adj_offsets[i];
-    const int32_t* ae = s.adj_patches.data() + s.adj_offsets[i + 1];
-    for (int64_t j = 0; j < P; ++j) {
-      if (j == i || dist2(row3(centre, i), row3(centre, j)) >= R2) continue;
-      if (std::find(ab, ae, static_cast<int32_t>(j)) != ae) continue;
-      world[i].push_back(static_cast<int32_t>(j));
-    }
+  // ---- world edges (hash grid of the data layer, cell = R) ------------------------------------------
+  const auto centre_pts = to_points(centre);
+  dataset::Csr adjacency;
+  adjacency.offsets = s.adj_offsets;
+  adjacency.items = s.adj_patches;
+  for (int64_t p = 0; p < P; ++p)  // world_edges binary-searches the adjacency rows
+    std::sort(adjacency.items.begin() + adjacency.offsets[p], adjacency.items.begin() + adjacency.offsets[p + 1]);
+  {
+    const auto w = dataset::world_edges(centre_pts, adjacency, static_cast<float>(cfg.world_radius));
+    in.world_offsets = w.offsets, in.world_senders = w.items;
   }
-  to_csr(world, in.world_offsets, in.world_senders);
 
   // ---- body: root-relative states, neighbours, nearest -----------------------------------------------
   const auto b1 = relative(s.body_tp1, s.root[3]), b0 = relative(s.body_t, s.root[2]),
              bm = relative(s.body_tm1, s.root[1]);
-  const double Rb2 = cfg.body_radius * cfg.body_radius;
   const bool first_k = cfg.body_query == "first";
   LAYERSNET_CHECK(first_k || cfg.body_query == "nearest",
                   "model.body_query = '" << cfg.body_query << "': use \"nearest\" or \"first\"");
+  const auto b1_pts = to_points(b1);
   std::vector<std::vector<int32_t>> body_nb(P);
-#pragma omp parallel for schedule(static) if (P * B > 200000)
-  for (int64_t p = 0; p < P; ++p) {
-    std::vector<std::pair<double, int32_t>> hits;
-    for (int64_t b = 0; b < B; ++b) {
-      double d = dist2(row3(centre, p), row3(b1, b));
-      if (d < Rb2) hits.emplace_back(first_k ? static_cast<double>(b) : d, static_cast<int32_t>(b));
-    }
-    const std::size_t k = std::min<std::size_t>(hits.size(), static_cast<std::size_t>(cfg.body_neighbors));
-    std::partial_sort(hits.begin(), hits.begin() + k, hits.end());
-    for (std::size_t j = 0; j < k; ++j) body_nb[p].push_back(hits[j].second);
+  {
+    dataset::NeighbourOptions o;
+    o.body_radius = static_cast<float>(cfg.body_radius);
+    o.body_k = cfg.body_neighbors;
+    o.body_query = first_k ? dataset::BodyQuery::kFirstInIndexOrder : dataset::BodyQuery::kNearest;
+    o.official_padding = false;  // unfilled slots are absent (README quirk 3)
+    const auto nb = dataset::body_neighbours(centre_pts, b1_pts, o);
+    for (int64_t p = 0; p < P; ++p)
+      for (int32_t k = 0; k < nb.hits[p]; ++k) body_nb[p].push_back(nb.index(p, k));
   }
   std::vector<int32_t> p_nn, v_nn;
   std::vector<double> p_nn_d, v_nn_d;
@@ -272,7 +267,10 @@ ModelInput<double> build_model_input(const SceneWindow& s, const ModelConfig& cf
   in.vertex_body.resize(N);
   for (int64_t p = 0; p < P; ++p) in.patch_body[p] = p_nn_d[p] < cfg.body_radius ? remap[p_nn[p]] : -1;
   for (int64_t v = 0; v < N; ++v) in.vertex_body[v] = v_nn_d[v] < cfg.body_radius ? remap[v_nn[v]] : -1;
-  const auto body_n = vertex_normals(b1, s.body_faces);
+  dataset::Faces body_faces(static_cast<Eigen::Index>(s.body_faces.size() / 3), 3);
+  for (std::size_t i = 0; i < s.body_faces.size(); ++i)
+    body_faces(static_cast<Eigen::Index>(i / 3), static_cast<Eigen::Index>(i % 3)) = s.body_faces[i];
+  const dataset::Points body_n = dataset::vertex_normals(b1_pts, body_faces);  // same as the dataset path
   in.body_norm.resize(in.U * 12);
   in.body_rot.resize(in.U * 9);
   for (int64_t u = 0; u < in.U; ++u) {
@@ -285,7 +283,8 @@ ModelInput<double> build_model_input(const SceneWindow& s, const ModelConfig& cf
       r[9 + c] = b0[3 * b + c] - bm[3 * b + c];
     }
     for (int c = 0; c < 12; ++c) r[c] = (r[c] - in.mean12[c]) / in.std12[c];
-    normal_frame(&body_n[3 * b], &in.body_rot[9 * u]);
+    const double nb[3] = {body_n(b, 0), body_n(b, 1), body_n(b, 2)};
+    normal_frame(nb, &in.body_rot[9 * u]);
   }
 
   // ---- wind and gravity ----------------------------------------------------------------------------------

@@ -16,8 +16,9 @@
 //                  official validity test.
 //   wind, gravity  wind token only when the scene has wind; gravity token always, carrying
 //                  the root motion too.
-// Brute force O(P² + (P + N)·B) distance loops (OpenMP): fine for the test and benchmark
-// sizes; the dataset layer has grid/k-d tree versions for big scenes.
+// Neighbourhoods use the data layer's structures (dataset/neighbours.h: hash grid for world
+// and body edges, k-d tree for nearest body vertices, its vertex normals), the same code as
+// the dataset path, never all-pairs loops; the searches run on float copies.
 #include "model/model_config.h"
 #include "model/model_input.h"
 #include "model/scene.h"
@@ -47,7 +48,8 @@ void quaternion_to_rotation(const double q[4], double R[9]);
 // x: (V, 3), faces: (F, 3) -> (V, 3). A vertex without a usable face gets (0, 0, 1).
 std::vector<double> vertex_normals(const std::vector<double>& x, const std::vector<int32_t>& faces);
 
-// Index of the nearest row of `ref` (M, 3) for every row of `query` (Q, 3), and its distance.
+// Index of the nearest row of `ref` (M, 3) for every row of `query` (Q, 3), and its distance
+// (k-d tree search in float, distance recomputed in double).
 void nearest_points(const std::vector<double>& query, const std::vector<double>& ref, std::vector<int32_t>& index,
                     std::vector<double>& distance);
 
