@@ -7,6 +7,7 @@
 #include <omp.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -45,6 +46,7 @@ SequenceResult score_rollout(const dataset::Sequence& seq, const Rollout& r, con
   s.scale = seq.info.scale;
   s.first_frame = r.first_frame;
   s.step_ms = r.step_ms;
+  s.diverged_at = r.diverged_at;
   s.garment_error.assign(L.num_garments(), 0.0);
   const double n = static_cast<double>(r.frames.size());
   double inner = 0, outer = 0, h = 0, lo = 0, la = 0, ln = 0;
@@ -126,6 +128,10 @@ Summary summarise(const MethodResult& m) {
   std::map<std::string, std::vector<double>> by_type, by_subset;
   std::vector<std::vector<double>> curve;
   for (const SequenceResult& r : m.sequences) {
+    if (r.diverged_at >= 0 || !std::isfinite(r.error)) {
+      ++s.diverged;
+      continue;
+    }
     const double mm = r.mm();
     err.push_back(r.error * mm);
     inner.push_back(r.inner_error * mm);

@@ -35,6 +35,7 @@ struct SequenceResult {
   // Rates in [0, 1], means over frames (-1: no layers):
   double h_rate = 0, l_rate_outer = -1, l_rate_all = -1, l_rate_outer_near = -1;
   std::vector<double> step_ms;  // (n,)
+  int diverged_at = -1;         // first rollout frame with a non-finite prediction, -1 = none
   double mm() const { return 1000.0 / scale; }  // millimetres per scene unit
 };
 
@@ -92,6 +93,7 @@ struct Summary {
   std::map<std::string, MeanStd> by_subset_mm;  // T, T+W, L, L+W
   std::vector<double> curve_mm;                 // mean over sequences per rollout frame
   double median_step_ms = 0;                    // over every step of every sequence
+  int diverged = 0;  // sequences with a non-finite prediction: left out of every number above
 };
 Summary summarise(const MethodResult& method);
 

@@ -8,6 +8,21 @@
 
 namespace layersnet::eval {
 
+namespace {
+// Rows of x that are finite (nearest-neighbour queries with NaN are undefined).
+std::vector<Eigen::Index> finite_rows(const Eigen::Ref<const Points>& x) {
+  std::vector<Eigen::Index> rows;
+  for (Eigen::Index v = 0; v < x.rows(); ++v)
+    if (x.row(v).allFinite()) rows.push_back(v);
+  return rows;
+}
+Points take_rows(const Eigen::Ref<const Points>& x, const std::vector<Eigen::Index>& rows) {
+  Points out(static_cast<Eigen::Index>(rows.size()), 3);
+  for (size_t i = 0; i < rows.size(); ++i) out.row(static_cast<Eigen::Index>(i)) = x.row(rows[i]);
+  return out;
+}
+}  // namespace
+
 double mean_vertex_error(const Eigen::Ref<const Points>& pred, const Eigen::Ref<const Points>& truth) {
   if (pred.rows() != truth.rows() || pred.rows() == 0)
     throw std::invalid_argument("mean_vertex_error: prediction has " + std::to_string(pred.rows()) +
@@ -20,13 +35,14 @@ double mean_vertex_error(const Eigen::Ref<const Points>& pred, const Eigen::Ref<
 
 int64_t count_body_collisions(const Eigen::Ref<const Points>& garments, const Eigen::Ref<const Points>& body,
                               const Faces& body_faces, double max_distance) {
-  if (garments.rows() == 0 || body.rows() == 0) return 0;
+  const Points q = take_rows(garments, finite_rows(garments));
+  if (q.rows() == 0 || body.rows() == 0) return 0;
   const Points normals = dataset::vertex_normals(body, body_faces);
-  const dataset::NearestBody nearest = dataset::nearest_body(garments, body);
+  const dataset::NearestBody nearest = dataset::nearest_body(q, body);
   int64_t count = 0;
-  for (Eigen::Index v = 0; v < garments.rows(); ++v) {
+  for (Eigen::Index v = 0; v < q.rows(); ++v) {
     const int32_t h = nearest.index[v];
-    const Eigen::Vector3d d = (garments.row(v) - body.row(h)).cast<double>().transpose();
+    const Eigen::Vector3d d = (q.row(v) - body.row(h)).cast<double>().transpose();
     if (max_distance >= 0 && d.norm() > max_distance) continue;
     if (d.dot(normals.row(h).cast<double>().transpose()) < 0) ++count;
   }
@@ -35,13 +51,18 @@ int64_t count_body_collisions(const Eigen::Ref<const Points>& garments, const Ei
 
 int64_t count_layer_collisions(const Eigen::Ref<const Points>& outer, const Eigen::Ref<const Points>& inner,
                                const Faces& inner_faces, double max_distance) {
-  if (outer.rows() == 0 || inner.rows() == 0) return 0;
+  const Points q = take_rows(outer, finite_rows(outer));
+  // Only finite inner vertices can be "nearest"; normals from the full mesh
+  // (vertex_normals skips faces with a non-finite corner).
+  const std::vector<Eigen::Index> inner_rows = finite_rows(inner);
+  const Points targets = take_rows(inner, inner_rows);
+  if (q.rows() == 0 || targets.rows() == 0) return 0;
   const Points normals = dataset::vertex_normals(inner, inner_faces);
-  const dataset::NearestBody nearest = dataset::nearest_body(outer, inner);
+  const dataset::NearestBody nearest = dataset::nearest_body(q, targets);
   int64_t count = 0;
-  for (Eigen::Index v = 0; v < outer.rows(); ++v) {
-    const int32_t y = nearest.index[v];
-    const Eigen::Vector3d d = (outer.row(v) - inner.row(y)).cast<double>().transpose();
+  for (Eigen::Index v = 0; v < q.rows(); ++v) {
+    const Eigen::Index y = inner_rows[nearest.index[v]];
+    const Eigen::Vector3d d = (q.row(v) - inner.row(y)).cast<double>().transpose();
     if (max_distance >= 0 && d.norm() > max_distance) continue;
     if (d.dot(normals.row(y).cast<double>().transpose()) < 0) ++count;
   }

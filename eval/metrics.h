@@ -26,7 +26,9 @@
 //                     outer-layer vertices; our headline number) and rate_all = colliding / N
 //                     (what the official per-frame aggregate divides by, reference §4 and
 //                     model/README.md quirk 9).
-// All comparisons are strict (< 0), no epsilon, as the official code.
+// All comparisons are strict (< 0), no epsilon, as the official code. Non-finite rows (a
+// diverged prediction) never count as collisions but stay in the denominators; the error
+// of such a frame is NaN.
 #include "dataset/sequence.h"
 
 #include <Eigen/Core>

@@ -110,6 +110,7 @@ std::string summary_table(const std::vector<MethodResult>& methods, const Report
                   m.ms_per_frame_1thread > 0 ? fmt("%.3g", m.ms_per_frame_1thread).c_str() : "–",
                   m.ms_per_frame_2threads > 0 ? fmt("%.3g", m.ms_per_frame_2threads).c_str() : "–");
     o << line;
+    if (s.diverged) o << "    (" << s.diverged << " diverged sequence(s) left out: non-finite prediction)\n";
   }
   o << "(" << (methods.empty() ? 0 : methods[0].sequences.size()) << " " << c.options.split << " sequences, up to "
     << c.options.frames << " predicted frames from input frame " << c.options.start_frame
@@ -140,7 +141,7 @@ std::string report_json(const std::vector<MethodResult>& methods, const ReportCo
                {"ms_per_frame_1thread", m.ms_per_frame_1thread}, {"ms_per_frame_2threads", m.ms_per_frame_2threads},
                {"speedup_vs_blender_1thread", speedup(c.blender_s_per_frame, m.ms_per_frame_1thread)},
                {"speedup_vs_blender_2threads", speedup(c.blender_s_per_frame, m.ms_per_frame_2threads)},
-               {"median_step_ms_during_eval", s.median_step_ms}};
+               {"median_step_ms_during_eval", s.median_step_ms}, {"diverged_sequences", s.diverged}};
     json js = {{"error_mm", ms_json(s.error_mm)}, {"inner_mm", ms_json(s.inner_mm)}, {"outer_mm", ms_json(s.outer_mm)},
                {"h_collision_percent", ms_json(s.h_percent)},
                {"l_collision_outer_percent", ms_json(s.l_outer_percent)},
@@ -161,7 +162,7 @@ std::string report_json(const std::vector<MethodResult>& methods, const ReportCo
                                  {"outer_mm", r.outer_error < 0 ? -1.0 : r.outer_error * r.mm()},
                                  {"h_rate", r.h_rate}, {"l_rate_outer", r.l_rate_outer}, {"l_rate_all", r.l_rate_all},
                                  {"l_rate_outer_near", r.l_rate_outer_near},
-                                 {"step_ms", r.step_ms}});
+                                 {"step_ms", r.step_ms}, {"diverged_at", r.diverged_at}});
     }
     j["methods"].push_back(jm);
   }
@@ -181,7 +182,8 @@ std::string report_markdown(const std::vector<MethodResult>& methods, const Repo
     << c.options.max_layer_distance_m << " m of their nearest inner vertex). Definitions: eval/README.md.\n\n";
   o << "## Summary (paper Table 3 layout)\n\n"
     << "| method | overall mm | inner mm | outer mm | L-coll % (÷ outer) | L-coll % (÷ all) | L-coll % (near) | "
-       "H-coll % | ms/frame 1 thr | ms/frame 2 thr | × Blender speed |\n|---|---|---|---|---|---|---|---|---|---|---|\n";
+       "H-coll % | ms/frame 1 thr | ms/frame 2 thr | × Blender speed | diverged |\n"
+       "|---|---|---|---|---|---|---|---|---|---|---|---|\n";
   for (const auto& m : methods) {
     const Summary s = summarise(m);
     const double up = speedup(c.blender_s_per_frame, m.ms_per_frame_1thread);
@@ -190,7 +192,7 @@ std::string report_markdown(const std::vector<MethodResult>& methods, const Repo
       << " | " << pm(s.h_percent, "%.2f")
       << " | " << (m.ms_per_frame_1thread > 0 ? fmt("%.3g", m.ms_per_frame_1thread) : "–") << " | "
       << (m.ms_per_frame_2threads > 0 ? fmt("%.3g", m.ms_per_frame_2threads) : "–") << " | "
-      << (up > 0 ? fmt("%.3g", up) : "–") << " |\n";
+      << (up > 0 ? fmt("%.3g", up) : "–") << " | " << s.diverged << " |\n";
   }
   o << "\nSpeed: median wall time per predicted frame (sample building + forward) over a " << c.speed_frames
     << "-frame rollout of `" << c.speed_sequence << "`; Blender's own time: "

@@ -6,6 +6,7 @@
 #include "train/checkpoint.h"
 
 #include <chrono>
+#include <limits>
 #include <stdexcept>
 
 namespace layersnet::eval {
@@ -159,12 +160,18 @@ Rollout rollout(Predictor& predictor, const dataset::Sequence& seq, int t0, int 
   Points a = garments_at(seq, t0 - 2), b = garments_at(seq, t0 - 1), c = garments_at(seq, t0);
   for (int k = 0; k < n; ++k) {
     const int t = t0 + k;
+    if (r.diverged_at >= 0) {  // nothing sensible to feed back
+      r.frames.push_back(Points::Constant(c.rows(), 3, std::numeric_limits<float>::quiet_NaN()));
+      r.step_ms.push_back(0);
+      continue;
+    }
     const auto start = std::chrono::steady_clock::now();
     Points next = predictor.step(seq, t, a, b, c);
     r.step_ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
     if (next.rows() != c.rows())
       throw std::runtime_error(predictor.name() + " returned " + std::to_string(next.rows()) + " rows for " +
                                std::to_string(c.rows()) + " garment vertices");
+    if (!next.allFinite()) r.diverged_at = k;
     r.frames.push_back(next);
     a = std::move(b);
     b = std::move(c);

@@ -99,6 +99,9 @@ struct Rollout {
   int first_frame = 0;          // t0 + 1: the first predicted frame
   std::vector<Points> frames;   // (n,) predicted garment positions (N, 3), world
   std::vector<double> step_ms;  // (n,) wall time of each prediction, milliseconds
+  // First rollout index whose prediction has a non-finite value, -1 if none. From there on
+  // the predictor is not called again; the remaining frames are all NaN (step_ms 0).
+  int diverged_at = -1;
 };
 
 // Rolls `predictor` over seq from input frame t0 (2 <= t0) for n frames, clamped so that

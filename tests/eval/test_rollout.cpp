@@ -9,6 +9,10 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <limits>
+#include <memory>
+
 namespace layersnet::eval {
 namespace {
 
@@ -87,6 +91,41 @@ TEST(Rollout, FeedsItsOwnPredictionsBackAndStartsFromGroundTruth) {
   EXPECT_THROW(rollout(rec, seq, 1, 3), std::invalid_argument);
   EXPECT_EQ(rollout(rec, seq, 8, 3).frames.size(), 1u);
   EXPECT_THROW(rollout(rec, seq, 9, 3), std::invalid_argument);
+}
+
+// Predicts the ground truth, then NaN from rollout frame 1 on.
+struct Diverging : Predictor {
+  int calls = 0;
+  std::string name() const override { return "diverging"; }
+  Points step(const dataset::Sequence& seq, int t, const Points&, const Points&, const Points&) override {
+    Points x = garments_at(seq, t + 1);
+    if (calls++ >= 1) x(0, 0) = std::numeric_limits<float>::quiet_NaN();
+    return x;
+  }
+};
+
+TEST(Rollout, ADivergedRolloutIsMarkedAndLeftOutOfTheSummary) {
+  const dataset::Sequence seq = sequence(2);
+  Diverging d;
+  const Rollout r = rollout(d, seq, 2, 5);
+  EXPECT_EQ(r.diverged_at, 1);
+  EXPECT_EQ(d.calls, 2);  // not called again after the NaN
+  ASSERT_EQ(r.frames.size(), 5u);
+  EXPECT_TRUE(r.frames[4].array().isNaN().all());
+  const SequenceResult s = score_rollout(seq, r, {});  // no crash on NaN queries
+  EXPECT_EQ(s.error_curve[0], 0.0);
+  EXPECT_TRUE(std::isnan(s.error_curve[1]));
+  MethodResult m;
+  m.sequences = {s, score_rollout(seq, rollout(*std::make_unique<GroundTruth>(), seq, 2, 5), {})};
+  m.sequences[0].diverged_at = s.diverged_at;
+  const Summary sum = summarise(m);
+  EXPECT_EQ(sum.diverged, 1);
+  EXPECT_EQ(sum.error_mm.count, 1);
+  EXPECT_EQ(sum.error_mm.mean, 0.0);
+  // NaN rows never count as collisions.
+  Points nan_rows = Points::Constant(3, 3, std::numeric_limits<float>::quiet_NaN());
+  EXPECT_EQ(count_body_collisions(nan_rows, seq.body_at(2), seq.info.body_faces, 5.0), 0);
+  EXPECT_EQ(count_layer_collisions(nan_rows, garments_at(seq, 2), seq.info.garments[0].faces), 0);
 }
 
 TEST(Rollout, GroundTruthHasZeroErrorAndTheDataCollisionRates) {
