@@ -41,11 +41,12 @@ SceneWindow make_synthetic_scene(const SyntheticSceneOptions& o) {
   int32_t p_base = 0;
   for (std::size_t gi = 0; gi < o.garments.size(); ++gi) {
     const int nu = o.garments[gi][0], nv = o.garments[gi][1];
-    const double r_nom = 1.05 + 0.05 * static_cast<double>(gi);
+    const double r_nom = gi < o.garment_radius.size() ? o.garment_radius[gi] : 1.05 + 0.05 * static_cast<double>(gi);
+    const double z0 = gi < o.garment_z0.size() ? o.garment_z0[gi] : -0.05 * static_cast<double>(gi);
     const int off = s.garment_offsets.back();
     for (int i = 0; i < nu; ++i)
       for (int j = 0; j < nv; ++j) {
-        const double th = i * o.spacing / r_nom, z = j * o.spacing - 0.05 * static_cast<double>(gi);
+        const double th = i * o.spacing / r_nom, z = z0 + j * o.spacing;
         const double rr = r_nom + 0.03 * std::sin(5 * th + 0.5 + static_cast<double>(gi)) * std::sin(4 * z + 0.3);
         rest.insert(rest.end(), {rr * std::cos(th), rr * std::sin(th), z});
       }
@@ -103,8 +104,8 @@ SceneWindow make_synthetic_scene(const SyntheticSceneOptions& o) {
   std::vector<double> body_rest;
   for (int i = 0; i < nth; ++i)
     for (int j = 0; j < nz; ++j) {
-      const double th = 2 * pi * i / nth, z = -0.3 + 1.4 * j / std::max(1, nz - 1);
-      const double rb = 1.0 + 0.02 * std::sin(3 * th) * std::cos(2 * z);
+      const double th = 2 * pi * i / nth, z = o.body_z[0] + (o.body_z[1] - o.body_z[0]) * j / std::max(1, nz - 1);
+      const double rb = o.body_radius + 0.02 * std::sin(3 * th) * std::cos(2 * z);
       body_rest.insert(body_rest.end(), {rb * std::cos(th), rb * std::sin(th), z});
     }
   grid_faces(nth, nz, 0, true, s.body_faces, nullptr);

@@ -17,6 +17,11 @@ struct SyntheticSceneOptions {
   std::array<int, 2> body = {16, 10};  // body grid (around, along), closed around
   std::array<int, 2> cell = {3, 3};    // patch = cell of quads (around, along)
   double spacing = 0.1;                // garment vertex spacing, scene units
+  // Geometry (scene units). Empty radius / z0 lists: defaults 1.05 + 0.05 g and -0.05 g.
+  std::vector<double> garment_radius;  // nominal radius of garment g (its grid wraps by spacing / radius)
+  std::vector<double> garment_z0;      // height of garment g's first row
+  double body_radius = 1.0;            // body cylinder radius
+  std::array<double, 2> body_z = {-0.3, 1.1};  // body height range
   bool wind = true;
   double root_offset[3] = {0, 0, 0};   // added to every world position (and the root)
   uint64_t seed = 1;

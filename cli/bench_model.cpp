@@ -1,0 +1,325 @@
+// `layersnet bench model`: our training step (forward + losses + backward + Adam) and inference
+// step against the PyTorch reference (../shared/bench/layersnet_torch.py) on a synthetic scene
+// of the same sizes and neighbour counts, in the same run, at each thread count (issue 5 point 9).
+//
+// Interleaving: for each pass and thread count we time our steps, then run the reference as a
+// subprocess; the figure per side is the best (lowest) of the pass medians, as the reference's
+// README advises on a shared machine. The load average is printed beside every row.
+// GFLOP/s use the reference's FLOP count (`flops_forward.total`, train step = 3x forward), so
+// FLOPs our formulation skips (e.g. the factored decoder) show up as a higher rate.
+#include "autodiff/optim.h"
+#include "cli/command_registry.h"
+#include "losses/losses.h"
+#include "model/input_builder.h"
+#include "model/layersnet.h"
+#include "model/params_layout.h"
+#include "model/synthetic_scene.h"
+
+#include <Eigen/Core>
+#include <nlohmann/json.hpp>
+#include <omp.h>
+#include <sys/resource.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <stdexcept>
+
+namespace {
+
+using namespace layersnet;
+namespace fs = std::filesystem;
+
+struct BenchModelOptions {
+  std::string size = "small";
+  std::string threads = "1,2";
+  int passes = 2;
+  int iters = 5;
+  int warmup = 2;
+  std::string reference;  // default: <repo>/../shared/bench/layersnet_torch.py
+  std::string python = "/usr/bin/python3";
+  double max_wait = 5;    // reference's quiet-machine wait per timing block, s
+  bool no_reference = false;
+  std::string json;
+};
+
+// The reference's SIZES (layersnet_torch.py): same grids, cell, spacing, radii, heights.
+model::SyntheticSceneOptions reference_scene(const std::string& size) {
+  model::SyntheticSceneOptions o;
+  if (size == "small") {
+    o.garments = {{40, 25}, {40, 25}};
+    o.body = {100, 40};
+  } else if (size == "dlayers") {
+    o.garments = {{100, 80}, {125, 96}};
+    o.body = {106, 65};
+  } else {
+    throw std::runtime_error("bench model: --size '" + size + "' is unknown; use small or dlayers");
+  }
+  o.cell = {3, 4};
+  o.spacing = 0.05;
+  o.garment_radius = {1.235, 1.26};
+  o.garment_z0 = {0.0, -0.2};
+  double zmax = 0;
+  for (std::size_t g = 0; g < o.garments.size(); ++g)
+    zmax = std::max(zmax, o.garment_z0[g] + (o.garments[g][1] - 1) * o.spacing);
+  o.body_radius = 1.2;
+  o.body_z = {-0.6, zmax + 0.6};
+  o.wind = true;
+  o.seed = 0;
+  return o;
+}
+
+double now_ms() {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+double median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  const std::size_t n = v.size();
+  return n == 0 ? 0 : n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+double load_average() {
+  std::ifstream f("/proc/loadavg");
+  double l = 0;
+  f >> l;
+  return l;
+}
+double vm_hwm_mib() {
+  std::ifstream f("/proc/self/status");
+  std::string line;
+  while (std::getline(f, line))
+    if (line.rfind("VmHWM:", 0) == 0) return std::stod(line.substr(6)) / 1024.0;
+  rusage ru{};
+  getrusage(RUSAGE_SELF, &ru);
+  return ru.ru_maxrss / 1024.0;
+}
+std::vector<int> parse_threads(const std::string& list) {
+  std::vector<int> out;
+  std::stringstream ss(list);
+  std::string item;
+  while (std::getline(ss, item, ',')) {
+    const int t = std::stoi(item);
+    if (t < 1) throw std::runtime_error("bench model: --threads '" + list + "' needs positive counts, e.g. 1,2");
+    out.push_back(t);
+  }
+  return out;
+}
+fs::path default_reference() {
+  // build/bin/layersnet -> <repo>/../shared/bench
+  const fs::path exe = fs::read_symlink("/proc/self/exe");
+  return exe.parent_path().parent_path().parent_path().parent_path() / "shared" / "bench" / "layersnet_torch.py";
+}
+
+struct Ours {
+  std::vector<double> train_ms, infer_ms, gemm_gflops;
+};
+
+// Plain Eigen GEMM of the decoder's shape (rows x 268 by 268 x 268), GFLOP/s.
+double gemm_rate(Eigen::Index rows) {
+  const Eigen::Index k = 268;
+  Eigen::MatrixXf a = Eigen::MatrixXf::Random(rows, k), b = Eigen::MatrixXf::Random(k, k), c(rows, k);
+  std::vector<double> ts;
+  for (int r = 0; r < 5; ++r) {
+    const double t0 = now_ms();
+    c.noalias() = a * b;
+    ts.push_back(now_ms() - t0);
+  }
+  return 2.0 * rows * k * k / (median(ts) * 1e-3) / 1e9;
+}
+
+struct Reference {
+  bool ok = false;
+  double train_ms = 0, infer_ms = 0, flops = 0, peak_mib = 0;
+  nlohmann::json scene, raw;
+};
+
+Reference run_reference(const BenchModelOptions& o, const fs::path& script, int threads) {
+  Reference r;
+  const fs::path out = fs::temp_directory_path() / ("layersnet_bench_model_" + std::to_string(::getpid()) + ".json");
+  std::ostringstream cmd;
+  cmd << o.python << " '" << script.string() << "' --size " << o.size << " --threads " << threads << " --iters "
+      << o.iters << " --warmup " << o.warmup << " --max-wait " << o.max_wait << " --json '" << out.string()
+      << "' > /dev/null 2>&1";
+  const int rc = std::system(cmd.str().c_str());
+  std::ifstream f(out);
+  if (rc != 0 || !f) {
+    std::fprintf(stderr, "bench model: the reference failed (exit %d): %s\n", rc, cmd.str().c_str());
+    return r;
+  }
+  f >> r.raw;
+  fs::remove(out);
+  r.ok = true;
+  r.train_ms = r.raw["timing"]["train_step"]["median_ms"].get<double>();
+  r.infer_ms = r.raw["timing"]["rollout_step"]["median_ms"].get<double>();
+  r.flops = r.raw["flops_forward"]["total"].get<double>();
+  r.peak_mib = r.raw["peak_rss_mib"].get<double>();
+  r.scene = r.raw["scene"];
+  return r;
+}
+
+int run_bench_model(const BenchModelOptions& o) {
+  const auto scene = model::make_synthetic_scene(reference_scene(o.size));
+  ModelConfig mc;  // official sizes
+  LossConfig lc;
+  const double t_build0 = now_ms();
+  const auto in64 = model::build_model_input(scene, mc);
+  const double build_ms = now_ms() - t_build0;
+  const auto in = model::cast_input<float>(in64);
+  const auto target = losses::cast_loss_input<float>(losses::build_loss_input(scene, in64));
+  ad::ParamStore<float> ps;
+  model::register_params(ps, mc);
+  model::init_params(ps, mc, 1);
+  ad::Adam<float> adam(ps, {.lr = 1e-3});
+  ad::Tape<float> tape;
+
+  const int64_t tokens_extra = 1 + (in.has_wind ? 1 : 0);  // gravity (+ wind) per patch
+  nlohmann::json ours_scene = {{"N", in.N},
+                               {"P", in.P},
+                               {"A", in.A},
+                               {"Nb", scene.B},
+                               {"U", in.U},
+                               {"E_world", in.world_senders.size()},
+                               {"E_mesh", in.mesh_senders.size()},
+                               {"E_inter", static_cast<int64_t>(in.body_tokens.size()) + tokens_extra * in.P},
+                               {"cand_valid_mean", static_cast<double>(in.cand_patches.size()) / in.N}};
+  const fs::path script = o.reference.empty() ? default_reference() : fs::path(o.reference);
+  const bool with_ref = !o.no_reference;
+  if (with_ref && !fs::exists(script))
+    throw std::runtime_error("bench model: reference script " + script.string() +
+                             " not found; pass --reference <path to layersnet_torch.py> or --no-reference");
+
+  auto train_step = [&] {
+    tape.reset();
+    ps.zero_grads();
+    const auto pred = model::forward(tape, ps, mc, in);
+    const auto t = losses::compute_losses(tape, ps, mc, lc, target, pred);
+    tape.backward(t.total);
+    adam.step();
+  };
+  auto infer_step = [&] {
+    tape.reset();
+    ad::NoRecord<float> off(tape);
+    model::forward(tape, ps, mc, in);
+  };
+
+  const auto threads = parse_threads(o.threads);
+  std::map<int, Ours> ours;
+  std::map<int, std::vector<Reference>> refs;
+  std::printf("bench model --size %s: %d passes x (ours %d iters, reference %d iters) per thread count, "
+              "input build %.1f ms\n",
+              o.size.c_str(), o.passes, o.iters, o.iters, build_ms);
+  for (int pass = 0; pass < o.passes; ++pass)
+    for (int t : threads) {
+      omp_set_num_threads(t);
+      Eigen::setNbThreads(t);
+      Ours& u = ours[t];
+      std::vector<double> tr, inf;
+      for (int i = 0; i < o.warmup; ++i) train_step();
+      for (int i = 0; i < o.iters; ++i) {
+        const double t0 = now_ms();
+        train_step();
+        tr.push_back(now_ms() - t0);
+      }
+      for (int i = 0; i < o.warmup; ++i) infer_step();
+      for (int i = 0; i < o.iters; ++i) {
+        const double t0 = now_ms();
+        infer_step();
+        inf.push_back(now_ms() - t0);
+      }
+      u.train_ms.push_back(median(tr));
+      u.infer_ms.push_back(median(inf));
+      u.gemm_gflops.push_back(gemm_rate(std::max<Eigen::Index>(8000, 4 * in.N)));
+      std::printf("  pass %d threads %d: ours train %.1f ms infer %.1f ms (load %.2f)", pass + 1, t,
+                  u.train_ms.back(), u.infer_ms.back(), load_average());
+      if (with_ref) {
+        refs[t].push_back(run_reference(o, script, t));
+        const auto& r = refs[t].back();
+        if (r.ok) std::printf(" | torch train %.1f ms infer %.1f ms (load %.2f)", r.train_ms, r.infer_ms, load_average());
+      }
+      std::printf("\n");
+      std::fflush(stdout);
+    }
+
+  // ---- scene side by side
+  nlohmann::json ref_scene;
+  for (const auto& [t, v] : refs)
+    for (const auto& r : v)
+      if (r.ok) ref_scene = r.scene;
+  std::printf("\nscene          %10s %10s\n", "ours", "torch");
+  for (const char* k : {"N", "P", "A", "Nb", "U", "E_world", "E_mesh", "E_inter", "cand_valid_mean"}) {
+    auto num = [](const nlohmann::json& j, const char* key) {
+      return j.contains(key) ? j[key].get<double>() : -1.0;
+    };
+    std::printf("%-14s %10.6g %10.6g\n", k, num(ours_scene, k), num(ref_scene, k));
+  }
+
+  // ---- summary: best-of-pass medians
+  const double peak = vm_hwm_mib();
+  nlohmann::json out = {{"size", o.size}, {"scene_ours", ours_scene}, {"scene_torch", ref_scene},
+                        {"input_build_ms", build_ms}, {"peak_rss_mib_ours", peak}, {"rows", nlohmann::json::array()}};
+  std::printf("\n%7s %10s %10s %7s %10s %10s %7s %9s %9s %9s %8s %9s %9s %6s\n", "threads", "train_ms", "torch_ms",
+              "ratio", "infer_ms", "torch_ms", "ratio", "GF/s_trn", "GF/s_inf", "GEMM_GF/s", "trn/GEMM",
+              "peak_MiB", "torch_MiB", "load");
+  for (int t : threads) {
+    const Ours& u = ours[t];
+    const double tr = *std::min_element(u.train_ms.begin(), u.train_ms.end());
+    const double inf = *std::min_element(u.infer_ms.begin(), u.infer_ms.end());
+    const double gemm = *std::max_element(u.gemm_gflops.begin(), u.gemm_gflops.end());
+    double rtr = 0, rinf = 0, flops = 0, rpeak = 0;
+    for (const auto& r : refs[t])
+      if (r.ok) {
+        rtr = rtr == 0 ? r.train_ms : std::min(rtr, r.train_ms);
+        rinf = rinf == 0 ? r.infer_ms : std::min(rinf, r.infer_ms);
+        flops = r.flops, rpeak = std::max(rpeak, r.peak_mib);
+      }
+    const double gf_tr = flops > 0 ? 3 * flops / (tr * 1e-3) / 1e9 : 0, gf_inf = flops > 0 ? flops / (inf * 1e-3) / 1e9 : 0;
+    // ratio > 1: we are faster
+    const double s_tr = rtr > 0 ? rtr / tr : 0, s_inf = rinf > 0 ? rinf / inf : 0;
+    std::printf("%7d %10.1f %10.1f %7.2f %10.1f %10.1f %7.2f %9.1f %9.1f %9.1f %8.2f %9.0f %9.0f %6.2f\n", t, tr, rtr,
+                s_tr, inf, rinf, s_inf, gf_tr, gf_inf, gemm, gemm > 0 ? gf_tr / gemm : 0, peak, rpeak, load_average());
+    out["rows"].push_back({{"threads", t},
+                           {"train_ms", tr},
+                           {"torch_train_ms", rtr},
+                           {"train_speedup", s_tr},
+                           {"infer_ms", inf},
+                           {"torch_infer_ms", rinf},
+                           {"infer_speedup", s_inf},
+                           {"train_gflops", gf_tr},
+                           {"infer_gflops", gf_inf},
+                           {"gemm_gflops", gemm},
+                           {"train_over_gemm", gemm > 0 ? gf_tr / gemm : 0},
+                           {"infer_over_gemm", gemm > 0 ? gf_inf / gemm : 0},
+                           {"torch_peak_rss_mib", rpeak},
+                           {"passes_train_ms", u.train_ms},
+                           {"passes_infer_ms", u.infer_ms},
+                           {"load_average", load_average()}});
+  }
+  std::printf("ratio = torch time / our time (> 1: we are faster); best-of-pass medians; GFLOP/s from the "
+              "reference's FLOP count (train = 3 x forward); peak_MiB = our VmHWM (whole run)\n");
+  if (!o.json.empty()) {
+    std::ofstream f(o.json);
+    if (!f) throw std::runtime_error("bench model: cannot write --json " + o.json + "; check the folder exists");
+    f << out.dump(1) << "\n";
+  }
+  return 0;
+}
+
+}  // namespace
+
+LAYERSNET_BENCH(model, "Training and inference step vs the PyTorch reference (issue 5 point 9)", [](CLI::App& sub) {
+  auto o = std::make_shared<BenchModelOptions>();
+  sub.add_option("--size", o->size, "reference scene: small or dlayers")->capture_default_str();
+  sub.add_option("--threads", o->threads, "comma-separated thread counts")->capture_default_str();
+  sub.add_option("--passes", o->passes, "interleaved passes (best-of-pass medians)")->capture_default_str();
+  sub.add_option("--iters", o->iters, "timed iterations per pass and side")->capture_default_str();
+  sub.add_option("--warmup", o->warmup, "warm-up iterations per pass and side")->capture_default_str();
+  sub.add_option("--reference", o->reference, "layersnet_torch.py (default <repo>/../shared/bench/layersnet_torch.py)");
+  sub.add_option("--python", o->python, "python with torch")->capture_default_str();
+  sub.add_option("--max-wait", o->max_wait, "reference's quiet-machine wait per block, s")->capture_default_str();
+  sub.add_flag("--no-reference", o->no_reference, "time ours only");
+  sub.add_option("--json", o->json, "write the figures as JSON");
+  return [o] { return run_bench_model(*o); };
+});
