@@ -192,6 +192,11 @@ const Schema& schema() {
     k.add("train.seed", [](Config& c) -> int64_t& { return c.train.seed; }, "random seed", {0, 9.0e15, {}});
     k.add("train.threads", [](Config& c) -> int& { return c.train.threads; }, "OpenMP threads (0 = all)", {0, 1024, {}});
     k.add("train.keep_checkpoints", [](Config& c) -> int& { return c.train.keep_checkpoints; }, "last N checkpoints kept", positive);
+    k.add("train.checkpoint_every", [](Config& c) -> int& { return c.train.checkpoint_every; }, "updates between checkpoints (0 = epoch ends only)", {0, 1e9, {}});
+    k.add("train.epoch_checkpoints", [](Config& c) -> bool& { return c.train.epoch_checkpoints; }, "checkpoint at each epoch end (false: only the last epoch)");
+    k.add("train.validate", [](Config& c) -> bool& { return c.train.validate; }, "one-step validation error after each epoch");
+    k.add("train.val_samples", [](Config& c) -> int& { return c.train.val_samples; }, "validation samples, evenly spaced (0 = all)", {0, 1e9, {}});
+    k.add("train.max_steps", [](Config& c) -> int& { return c.train.max_steps; }, "stop after this many updates (0 = no limit)", {0, 1e9, {}});
     k.add("train.max_nonfinite_in_row", [](Config& c) -> int& { return c.train.max_nonfinite_in_row; }, "stop after this many non-finite steps in a row", positive);
     k.add("train.log_every", [](Config& c) -> int& { return c.train.log_every; }, "steps between progress lines", positive);
     // [eval]

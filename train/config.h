@@ -36,6 +36,11 @@ struct TrainConfig {
   int64_t seed = 0;
   int threads = 0;                      // 0 = all cores
   int keep_checkpoints = 3;             // last N kept, plus the best by validation error
+  int checkpoint_every = 200;           // batches between checkpoints; 0 = epoch ends only
+  bool epoch_checkpoints = true;        // a checkpoint at each epoch end (else only at the run's end)
+  bool validate = true;                 // one-step error on the val split after each epoch
+  int val_samples = 0;                  // val samples used (evenly spaced); 0 = all
+  int max_steps = 0;                    // stop after this many updates in total (benchmarks); 0 = no limit
   int max_nonfinite_in_row = 10;        // stop after this many skipped updates in a row
   int log_every = 10;                   // steps between progress lines
 };

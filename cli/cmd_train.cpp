@@ -1,0 +1,63 @@
+// `layersnet train --config F [--set k=v ...] [--run DIR]` and `layersnet train --resume DIR`.
+#include "cli/command_registry.h"
+#include "train/trainer.h"
+
+#include <filesystem>
+#include <iostream>
+#include <memory>
+
+namespace {
+
+struct TrainCliOptions {
+  std::vector<std::string> files;
+  std::vector<std::string> overrides;
+  std::string run;
+  std::string resume;
+};
+
+int run_train(const TrainCliOptions& o) {
+  layersnet::TrainOptions options;
+  layersnet::Config config;
+  if (!o.resume.empty()) {
+    if (!o.files.empty()) {
+      std::cerr << "error: --resume " << o.resume << " continues with the run's own config.toml; drop --config "
+                << "(use --set key=value to change e.g. train.epochs)\n";
+      return 2;
+    }
+    if (!o.run.empty() && std::filesystem::path(o.run) != std::filesystem::path(o.resume)) {
+      std::cerr << "error: --run and --resume name different directories\n";
+      return 2;
+    }
+    config = layersnet::run_config(o.resume, o.overrides);
+    options.run_dir = o.resume;
+    options.resume = true;
+  } else {
+    if (o.files.empty()) {
+      std::cerr << "error: give --config FILE (e.g. configs/default.toml) or --resume DIR\n";
+      return 2;
+    }
+    config = layersnet::load_config(o.files, o.overrides);
+    options.run_dir = o.run.empty() ? "runs/" + std::filesystem::path(o.files.back()).stem().string() : o.run;
+  }
+  try {
+    const auto s = layersnet::train(config, options);
+    std::cout << "done: " << s.updates << " updates";
+    if (s.best_val_error >= 0) std::cout << ", best validation one-step error " << s.best_val_error;
+    std::cout << "; last checkpoint " << s.last_checkpoint << "\n";
+    return 0;
+  } catch (const layersnet::TrainingStopped& e) {
+    std::cerr << "training stopped: " << e.what() << "\n";
+    return 3;
+  }
+}
+
+}  // namespace
+
+LAYERSNET_COMMAND(train, "Train a model from a config file (checkpoints, exact --resume)", [](CLI::App& sub) {
+  auto o = std::make_shared<TrainCliOptions>();
+  sub.add_option("--config,-c", o->files, "TOML config file(s), applied in order");
+  sub.add_option("--set", o->overrides, "override one key: --set train.epochs=2");
+  sub.add_option("--run", o->run, "run directory (default runs/<config name>); must not hold a run yet");
+  sub.add_option("--resume", o->resume, "continue the run in this directory from its newest checkpoint");
+  return [o] { return run_train(*o); };
+});

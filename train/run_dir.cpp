@@ -1,0 +1,117 @@
+#include "train/run_dir.h"
+
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <stdexcept>
+
+namespace layersnet {
+
+namespace fs = std::filesystem;
+
+std::string checkpoint_path(const std::string& run_dir, int64_t batches) {
+  char name[64];
+  std::snprintf(name, sizeof name, "step_%08lld.h5", static_cast<long long>(batches));
+  return (fs::path(run_dir) / "checkpoints" / name).string();
+}
+
+std::vector<std::string> list_checkpoints(const std::string& run_dir) {
+  std::vector<std::string> out;
+  const fs::path dir = fs::path(run_dir) / "checkpoints";
+  if (!fs::is_directory(dir)) return out;
+  for (const auto& e : fs::directory_iterator(dir)) {
+    const std::string name = e.path().filename().string();
+    if (name.rfind("step_", 0) == 0 && e.path().extension() == ".h5") out.push_back(e.path().string());
+  }
+  std::sort(out.begin(), out.end());  // zero-padded numbers sort as text
+  return out;
+}
+
+void prune_checkpoints(const std::string& run_dir, int keep) {
+  const auto all = list_checkpoints(run_dir);
+  for (std::size_t i = 0; i + static_cast<std::size_t>(std::max(keep, 1)) < all.size(); ++i) fs::remove(all[i]);
+  const fs::path dir = fs::path(run_dir) / "checkpoints";
+  if (fs::is_directory(dir))
+    for (const auto& e : fs::directory_iterator(dir))
+      if (e.path().extension() == ".tmp") fs::remove(e.path());
+}
+
+bool holds_run(const std::string& run_dir) {
+  const fs::path d(run_dir);
+  return fs::exists(d / "config.toml") || fs::exists(d / "metrics.jsonl") || !list_checkpoints(run_dir).empty() ||
+         fs::exists(d / "best.h5");
+}
+
+void write_text_atomic(const std::string& path, const std::string& text) {
+  const std::string tmp = path + ".tmp";
+  {
+    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+    out << text;
+    out.flush();
+    if (!out) throw std::runtime_error(tmp + ": cannot write (disk full or no permission?)");
+  }
+  if (const int fd = ::open(tmp.c_str(), O_RDONLY); fd >= 0) {
+    ::fsync(fd);
+    ::close(fd);
+  }
+  fs::rename(tmp, path);
+}
+
+void append_line(const std::string& path, const std::string& line) {
+  std::ofstream out(path, std::ios::app);
+  out << line << "\n";
+  if (!out) throw std::runtime_error(path + ": cannot append (disk full or no permission?)");
+}
+
+namespace {
+
+const std::vector<std::pair<std::string, dataset::MeanStd dataset::NormalisationStats::*>>& stat_fields() {
+  static const std::vector<std::pair<std::string, dataset::MeanStd dataset::NormalisationStats::*>> f = {
+      {"position", &dataset::NormalisationStats::position},
+      {"velocity", &dataset::NormalisationStats::velocity},
+      {"acceleration", &dataset::NormalisationStats::acceleration},
+      {"root_position", &dataset::NormalisationStats::root_position},
+      {"root_velocity", &dataset::NormalisationStats::root_velocity},
+      {"root_acceleration", &dataset::NormalisationStats::root_acceleration}};
+  return f;
+}
+
+}  // namespace
+
+std::map<std::string, std::vector<double>> stats_to_arrays(const dataset::NormalisationStats& s) {
+  std::map<std::string, std::vector<double>> out;
+  for (const auto& [name, field] : stat_fields()) {
+    const dataset::MeanStd& m = s.*field;
+    out[name + ".mean"] = {m.mean[0], m.mean[1], m.mean[2]};
+    out[name + ".std"] = {m.std[0], m.std[1], m.std[2]};
+    out[name + ".count"] = {static_cast<double>(m.count)};
+  }
+  return out;
+}
+
+dataset::NormalisationStats stats_from_arrays(const std::map<std::string, std::vector<double>>& a,
+                                              const std::string& origin) {
+  dataset::NormalisationStats s;
+  auto get = [&](const std::string& key, std::size_t n) -> const std::vector<double>& {
+    const auto it = a.find(key);
+    if (it == a.end() || it->second.size() != n)
+      throw std::runtime_error(origin + ": /stats/" + key + " is missing or not " + std::to_string(n) +
+                               " values (checkpoint written by another program version?)");
+    return it->second;
+  };
+  for (const auto& [name, field] : stat_fields()) {
+    dataset::MeanStd& m = s.*field;
+    const auto& mean = get(name + ".mean", 3);
+    const auto& std = get(name + ".std", 3);
+    m.mean = {mean[0], mean[1], mean[2]};
+    m.std = {std[0], std[1], std[2]};
+    m.count = static_cast<int64_t>(get(name + ".count", 1)[0]);
+  }
+  return s;
+}
+
+}  // namespace layersnet

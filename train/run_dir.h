@@ -1,0 +1,31 @@
+#pragma once
+// Files of a run directory (see trainer.h): checkpoint names, listing and pruning, atomic
+// text writes, and the statistics as they are stored inside a checkpoint.
+#include "dataset/stats.h"
+
+#include <cstdint>
+#include <map>
+#include <string>
+#include <vector>
+
+namespace layersnet {
+
+// <run>/checkpoints/step_<batches, 8 digits>.h5
+std::string checkpoint_path(const std::string& run_dir, int64_t batches);
+// Existing checkpoints, oldest first (ignores *.tmp left by a kill).
+std::vector<std::string> list_checkpoints(const std::string& run_dir);
+// Deletes all but the newest `keep`, and stale *.tmp files.
+void prune_checkpoints(const std::string& run_dir, int keep);
+// True when run_dir has a config.toml, metrics or checkpoints (a run was started there).
+bool holds_run(const std::string& run_dir);
+// Writes text to path via path.tmp + fsync + rename.
+void write_text_atomic(const std::string& path, const std::string& text);
+void append_line(const std::string& path, const std::string& line);
+
+// NormalisationStats <-> checkpoint /stats arrays ("position.mean", "position.std", ...).
+std::map<std::string, std::vector<double>> stats_to_arrays(const dataset::NormalisationStats& stats);
+// Throws std::runtime_error naming `origin` and the missing array.
+dataset::NormalisationStats stats_from_arrays(const std::map<std::string, std::vector<double>>& arrays,
+                                              const std::string& origin);
+
+}  // namespace layersnet

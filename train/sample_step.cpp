@@ -1,0 +1,103 @@
+#include "train/sample_step.h"
+
+#include "losses/losses.h"
+#include "losses/sample_loss_input.h"
+#include "model/layersnet.h"
+#include "model/sample_input.h"
+
+#include <chrono>
+#include <cmath>
+
+namespace layersnet {
+
+namespace {
+
+double seconds_since(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+}  // namespace
+
+LossParts& LossParts::operator+=(const LossParts& o) {
+  total += o.total, vertex += o.vertex, patch += o.patch, normal += o.normal;
+  collision_body += o.collision_body, collision_layer += o.collision_layer, orthogonality += o.orthogonality;
+  return *this;
+}
+
+LossParts LossParts::scaled(double s) const {
+  LossParts p = *this;
+  p.total *= s, p.vertex *= s, p.patch *= s, p.normal *= s;
+  p.collision_body *= s, p.collision_layer *= s, p.orthogonality *= s;
+  return p;
+}
+
+SampleOutcome train_sample(const TrainData& data, Window& window, int t, int self_fed, const Config& config,
+                           ad::Tape<float>& tape, ad::ParamStore<float>& params) {
+  using clock = std::chrono::steady_clock;
+  SampleOutcome out;
+  std::vector<float> predicted;
+  for (int f = t - self_fed; f < t; ++f) {
+    auto start = clock::now();
+    const dataset::TrainingSample s = data.build(window, f);
+    const model::ModelInput<float> input = model::model_input_from_sample(s, data.stats(), config.model);
+    out.build_seconds += seconds_since(start);
+    start = clock::now();
+    tape.reset();
+    {
+      ad::NoRecord<float> off(tape);
+      const auto pred = model::forward(tape, params, config.model, input);
+      predicted.resize(static_cast<std::size_t>(pred.vertex.rows) * 3);
+      for (int64_t v = 0; v < pred.vertex.rows; ++v)
+        for (int c = 0; c < 3; ++c) predicted[static_cast<std::size_t>(v * 3 + c)] = pred.vertex.value[v * 9 + c];
+    }
+    out.model_seconds += seconds_since(start);
+    window.set_garments_relative(f + 1, predicted.data());
+  }
+  auto start = clock::now();
+  const dataset::TrainingSample s = data.build(window, t);
+  const model::ModelInput<float> input = model::model_input_from_sample(s, data.stats(), config.model);
+  const losses::LossInput<float> target = losses::loss_input_from_sample(s, *window.info);
+  out.build_seconds += seconds_since(start);
+  start = clock::now();
+  tape.reset();
+  params.zero_grads();
+  const auto pred = model::forward(tape, params, config.model, input);
+  const auto terms = losses::compute_losses(tape, params, config.model, config.loss, target, pred);
+  out.loss = {terms.total.scalar(), terms.vertex,          terms.patch,        terms.normal,
+              terms.collision_body, terms.collision_layer, terms.orthogonality};
+  out.loss_finite = std::isfinite(out.loss.total);
+  if (out.loss_finite) {
+    tape.backward(terms.total);
+    for (const float g : params.grads())
+      if (!std::isfinite(g)) {
+        out.grad_finite = false;
+        break;
+      }
+  }
+  tape.reset();
+  out.model_seconds += seconds_since(start);
+  return out;
+}
+
+double one_step_error(const TrainData& data, const Window& window, int t, const Config& config, ad::Tape<float>& tape,
+                      ad::ParamStore<float>& params) {
+  const dataset::TrainingSample s = data.build(window, t);
+  const model::ModelInput<float> input = model::model_input_from_sample(s, data.stats(), config.model);
+  tape.reset();
+  ad::NoRecord<float> off(tape);
+  const auto pred = model::forward(tape, params, config.model, input);
+  double sum = 0;
+  const int64_t n = pred.vertex.rows;
+  for (int64_t v = 0; v < n; ++v) {
+    double d2 = 0;
+    for (int c = 0; c < 3; ++c) {
+      const double d = static_cast<double>(pred.vertex.value[v * 9 + c]) - s.target(v, c);
+      d2 += d * d;
+    }
+    sum += std::sqrt(d2);
+  }
+  tape.reset();
+  return n > 0 ? sum / static_cast<double>(n) : 0.0;
+}
+
+}  // namespace layersnet

@@ -1,0 +1,44 @@
+#pragma once
+// One sample of the noisy-rollout curriculum (paper §3.2; official EncoderDecoder.
+// forward_train, reference §3), and the one-step validation error.
+//
+// Curriculum. The official loop draws k ~ U{0..ngs}, runs ngs steps without gradient of
+// which steps 0..k-1 take the ground-truth state (their predictions are dropped) and steps
+// k..ngs-1 feed the model's own prediction back, then one step with gradient. Steps before
+// k influence nothing, so we skip them: with T_n = ngs − k self-fed steps the rollout
+// starts from ground truth at t − T_n, feeds back T_n predictions (positions; velocities
+// and history follow from them) and takes the recorded step at t. Body, wind and gravity
+// always come from the ground truth.
+#include "autodiff/params.h"
+#include "autodiff/tape.h"
+#include "train/config.h"
+#include "train/train_data.h"
+
+namespace layersnet {
+
+struct LossParts {
+  double total = 0, vertex = 0, patch = 0, normal = 0, collision_body = 0, collision_layer = 0, orthogonality = 0;
+  LossParts& operator+=(const LossParts& o);
+  LossParts scaled(double s) const;
+};
+
+struct SampleOutcome {
+  bool loss_finite = true;
+  bool grad_finite = true;
+  LossParts loss;
+  double build_seconds = 0;  // building samples (neighbour search, normalisation) — outside the model
+  double model_seconds = 0;  // forward + losses + backward
+};
+
+// Runs the self-fed rollout (T_n = self_fed steps from t − self_fed, no recording), then the
+// recorded step at t: params.grads() is zeroed and receives d loss / d params. `window`
+// must hold frames t − self_fed − 2 .. t + 1; its garment frames are overwritten.
+SampleOutcome train_sample(const TrainData& data, Window& window, int t, int self_fed, const Config& config,
+                           ad::Tape<float>& tape, ad::ParamStore<float>& params);
+
+// Mean per-vertex Euclidean error ‖x̂_{t+1} − x_{t+1}‖ (scene units) of one step from the
+// ground-truth state at t, without recording (params are only read).
+double one_step_error(const TrainData& data, const Window& window, int t, const Config& config, ad::Tape<float>& tape,
+                      ad::ParamStore<float>& params);
+
+}  // namespace layersnet

@@ -1,0 +1,87 @@
+#include "train/train_data.h"
+
+#include <algorithm>
+
+namespace layersnet {
+
+void Window::set_garments_relative(int f, const float* relative) {
+  const Eigen::Vector3f r = info->translation.row(f).transpose();
+  int64_t row = 0;
+  for (int g = 0; g < info->num_garments(); ++g) {
+    const int n = info->garments[static_cast<std::size_t>(g)].num_vertices;
+    auto rows = frames.garments[static_cast<std::size_t>(g)].middleRows(
+        static_cast<Eigen::Index>(f - frames.first) * n, n);
+    for (int v = 0; v < n; ++v, ++row)
+      for (int c = 0; c < 3; ++c) rows(v, c) = relative[row * 3 + c] + r[c];
+  }
+}
+
+dataset::SampleOptions sample_options_for(const ModelConfig& m) {
+  dataset::SampleOptions o;
+  o.patch_size = static_cast<float>(m.patch_size);
+  o.neighbours.world_radius = static_cast<float>(m.world_radius);
+  o.neighbours.body_radius = static_cast<float>(m.body_radius);
+  o.neighbours.body_k = m.body_neighbors;
+  o.neighbours.body_query =
+      m.body_query == "first" ? dataset::BodyQuery::kFirstInIndexOrder : dataset::BodyQuery::kNearest;
+  // The model keeps valid slots only (model/README.md quirk 3), so no duplicate padding.
+  o.neighbours.official_padding = false;
+  return o;
+}
+
+dataset::FrameSelection frame_selection_for(const DataConfig& d) {
+  dataset::FrameSelection s;
+  s.start_frame = d.first_frame - 2;  // sample_frames starts at start_frame + 2
+  s.first_offset = 2;
+  s.max_frames = d.max_frames > 0 ? d.max_frames + 2 : -1;
+  return s;
+}
+
+TrainData::TrainData(const dataset::DatasetManifest& manifest, const std::string& split,
+                     const dataset::NormalisationStats& stats, const Config& config)
+    : manifest_(manifest),
+      split_(split),
+      stats_(stats),
+      sample_options_(sample_options_for(config.model)),
+      max_open_files_(std::max(config.data.cache_sequences, 1)),
+      ids_(manifest.split(split)),
+      structures_(static_cast<float>(config.model.patch_size), static_cast<std::size_t>(std::max(config.data.cache_sequences, 1))) {
+  const dataset::FrameSelection selection = frame_selection_for(config.data);
+  for (int s = 0; s < static_cast<int>(ids_.size()); ++s) {
+    const dataset::SequenceFile f(manifest_.sequence_path(ids_[static_cast<std::size_t>(s)]));
+    const std::vector<int> ts = dataset::sample_frames(f.info().num_frames, selection);
+    first_t_.push_back(ts.empty() ? 0 : ts.front());
+    for (int t : ts) samples_.push_back({s, t});
+  }
+}
+
+TrainData::OpenFile& TrainData::open(int sequence) {
+  for (auto it = files_.begin(); it != files_.end(); ++it)
+    if (it->sequence == sequence) {
+      files_.splice(files_.begin(), files_, it);
+      return files_.front();
+    }
+  auto file = std::make_shared<dataset::SequenceFile>(manifest_.sequence_path(ids_.at(static_cast<std::size_t>(sequence))));
+  auto info = std::make_shared<const dataset::SequenceInfo>(file->info());
+  files_.push_front({sequence, std::move(file), std::move(info)});
+  while (static_cast<int>(files_.size()) > max_open_files_) files_.pop_back();
+  return files_.front();
+}
+
+Window TrainData::read_window(int sequence, int t_first, int t_last) {
+  OpenFile& f = open(sequence);
+  Window w;
+  w.sequence_id = ids_.at(static_cast<std::size_t>(sequence));
+  w.info = f.info;
+  w.structure = structures_.get(w.sequence_id, *f.info);
+  w.frames = f.file->read_frames(t_first - 2, t_last - t_first + 4);
+  return w;
+}
+
+dataset::TrainingSample TrainData::build(const Window& w, int t) const {
+  dataset::TrainingSample s = dataset::build_sample(*w.info, w.frames, t, stats_, w.structure, sample_options_);
+  s.sequence_id = w.sequence_id;
+  return s;
+}
+
+}  // namespace layersnet

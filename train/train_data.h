@@ -1,0 +1,86 @@
+#pragma once
+// The samples of one data-set split as the training loop needs them: a fixed list of
+// (sequence, t) that the loop shuffles itself (GSL generator, checkpointed), frame windows
+// read on demand, and samples built from a window whose garment frames may have been
+// replaced by the model's own predictions (the noisy-rollout curriculum, paper §3.2).
+//
+// Thread use: everything that touches files (read_window: HDF5 is not thread-safe, LRU of
+// open files, structure cache) runs on the calling thread; build() is pure and may run on
+// any thread with its own Window.
+#include "dataset/manifest.h"
+#include "dataset/sample.h"
+#include "dataset/sequence.h"
+#include "dataset/stats.h"
+#include "train/config.h"
+
+#include <cstdint>
+#include <list>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace layersnet {
+
+struct SampleRef {
+  int32_t sequence = 0;  // index into TrainData::ids()
+  int32_t t = 0;         // input frame (predicts t+1)
+};
+
+// Frames [first, first+count) of one sequence with its static parts; garments may be
+// overwritten (world coordinates) by predictions.
+struct Window {
+  std::string sequence_id;
+  std::shared_ptr<const dataset::SequenceInfo> info;
+  std::shared_ptr<const dataset::SequenceStructure> structure;
+  dataset::FrameWindow frames;
+  // Sets garment positions of frame f (world, scene units) from root-relative predictions
+  // x̃ (N, 3) row-major: x = x̃ + r_f.
+  void set_garments_relative(int f, const float* relative);
+};
+
+class TrainData {
+ public:
+  // Opens each sequence of `split` once for its frame count. Sample frames follow
+  // config.data (first_frame .. first_frame + max_frames - 2).
+  TrainData(const dataset::DatasetManifest& manifest, const std::string& split, const dataset::NormalisationStats& stats,
+            const Config& config);
+
+  const std::vector<SampleRef>& samples() const { return samples_; }
+  int64_t num_samples() const { return static_cast<int64_t>(samples_.size()); }
+  const std::vector<std::string>& ids() const { return ids_; }
+  const std::string& split() const { return split_; }
+  // First sample frame of a sequence: a rollout may start no earlier.
+  int first_t(int sequence) const { return first_t_.at(static_cast<std::size_t>(sequence)); }
+
+  // Frames [t_first - 2, t_last + 1] of a sequence (calling thread only).
+  Window read_window(int sequence, int t_first, int t_last);
+  // The training sample at t from the window (any thread).
+  dataset::TrainingSample build(const Window& window, int t) const;
+  const dataset::NormalisationStats& stats() const { return stats_; }
+
+ private:
+  struct OpenFile {
+    int sequence;
+    std::shared_ptr<dataset::SequenceFile> file;
+    std::shared_ptr<const dataset::SequenceInfo> info;
+  };
+  OpenFile& open(int sequence);
+
+  dataset::DatasetManifest manifest_;
+  std::string split_;
+  dataset::NormalisationStats stats_;
+  dataset::SampleOptions sample_options_;
+  int max_open_files_;
+  std::vector<std::string> ids_;
+  std::vector<int> first_t_;
+  std::vector<SampleRef> samples_;
+  std::list<OpenFile> files_;  // LRU, front = most recent
+  dataset::StructureCache structures_;
+};
+
+// Sample options matching the model config (patch size, radii, body query).
+dataset::SampleOptions sample_options_for(const ModelConfig& model);
+// FrameSelection for config.data: inputs t = first_frame .. (first_frame + max_frames - 2).
+dataset::FrameSelection frame_selection_for(const DataConfig& data);
+
+}  // namespace layersnet

@@ -1,0 +1,501 @@
+#include "train/trainer.h"
+
+#include "autodiff/optim.h"
+#include "autodiff/tape.h"
+#include "dataset/manifest.h"
+#include "dataset/stats.h"
+#include "model/params_layout.h"
+#include "train/checkpoint.h"
+#include "train/gsl_random.h"
+#include "train/run_dir.h"
+#include "train/sample_step.h"
+#include "train/train_data.h"
+
+#include <omp.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+#include <memory>
+#include <optional>
+#include <sstream>
+
+namespace layersnet {
+
+extern int aligned_new_anchor;  // train/aligned_new.cpp: 64-byte aligned heap (bit-exact resume)
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+double learning_rate_at(const TrainConfig& train, int epoch) {
+  // lr_decay_epochs are 1-based epochs after which the rate drops (official step policy).
+  double lr = train.learning_rate;
+  for (int d : train.lr_decay_epochs)
+    if (d <= epoch) lr *= train.lr_gamma;
+  return lr;
+}
+
+int rollout_steps_at(const TrainConfig& train, int epoch) {
+  if (train.rollout_steps.empty()) return 0;
+  return train.rollout_steps[static_cast<std::size_t>(std::min<int>(epoch, static_cast<int>(train.rollout_steps.size()) - 1))];
+}
+
+Config run_config(const std::string& run_dir, const std::vector<std::string>& overrides) {
+  const std::string path = (fs::path(run_dir) / "config.toml").string();
+  if (!fs::exists(path))
+    throw ConfigError(path + ": not found; " + run_dir +
+                      " does not hold a run to resume (start one with `layersnet train --config F --run " + run_dir + "`)");
+  return load_config({path}, overrides);
+}
+
+namespace {
+
+double seconds(Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double>(b - a).count(); }
+
+std::string json_number(double x) {
+  if (!std::isfinite(x)) return "null";
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.9g", x);
+  return buf;
+}
+
+std::string json_string(const std::string& s) {
+  std::string out = "\"";
+  for (char c : s) {
+    if (c == '"' || c == '\\') out += '\\';
+    if (static_cast<unsigned char>(c) < 0x20) continue;
+    out += c;
+  }
+  return out + "\"";
+}
+
+std::string json_parts(const LossParts& p) {
+  return "{\"total\":" + json_number(p.total) + ",\"vertex\":" + json_number(p.vertex) + ",\"patch\":" +
+         json_number(p.patch) + ",\"normal\":" + json_number(p.normal) + ",\"collision_body\":" +
+         json_number(p.collision_body) + ",\"collision_layer\":" + json_number(p.collision_layer) +
+         ",\"orthogonality\":" + json_number(p.orthogonality) + "}";
+}
+
+std::string duration_text(double s) {
+  if (!std::isfinite(s) || s < 0) return "?";
+  char buf[32];
+  const long long t = static_cast<long long>(s + 0.5);
+  if (t >= 3600) std::snprintf(buf, sizeof buf, "%lldh%02lldm", t / 3600, (t / 60) % 60);
+  else std::snprintf(buf, sizeof buf, "%lldm%02llds", t / 60, t % 60);
+  return buf;
+}
+
+bool all_finite(std::span<const float> values) {
+  for (float v : values)
+    if (!std::isfinite(v)) return false;
+  return true;
+}
+
+// Everything of one run that lives across epochs.
+class Run {
+ public:
+  Run(const Config& config, const TrainOptions& options);
+  TrainSummary execute();
+
+ private:
+  void open_data();
+  void restore(const std::string& path);
+  void run_epoch(int epoch);
+  bool run_batch(int epoch, int ngs, const std::vector<int64_t>& order);  // false: max_steps reached
+  double validate();
+  void save(const std::string& path);
+  void save_step_checkpoint();
+  void log_progress(int epoch);
+  void metric(const std::string& json) { append_line(metrics_path_, json); }
+
+  Config config_;
+  TrainOptions options_;
+  std::ostream& out_;
+  std::string metrics_path_;
+  int threads_ = 1;
+  dataset::NormalisationStats stats_;
+  std::unique_ptr<TrainData> train_, val_;
+  ad::ParamStore<float> params_;
+  std::unique_ptr<ad::Adam<float>> adam_;
+  std::vector<std::unique_ptr<ad::ParamStore<float>>> slots_;  // one gradient buffer per batch slot
+  std::vector<std::unique_ptr<ad::Tape<float>>> tapes_;        // one per thread
+  GslRandom shuffle_rng_, rollout_rng_;
+  std::vector<uint8_t> shuffle_at_epoch_start_;
+  TrainingState state_;
+  int64_t batches_per_epoch_ = 0;
+  TrainSummary summary_;
+  // Progress window (since the last log line).
+  LossParts window_loss_;
+  int64_t window_batches_ = 0, window_samples_ = 0;
+  double window_grad_norm_ = 0;
+  double window_data_s_ = 0, window_build_s_ = 0, window_model_s_ = 0, window_optim_s_ = 0, window_wall_s_ = 0;
+  double total_wall_s_ = 0;
+  int64_t total_samples_ = 0;
+  Clock::time_point window_start_ = Clock::now();
+};
+
+Run::Run(const Config& config, const TrainOptions& options)
+    : config_(config),
+      options_(options),
+      out_(options.log ? *options.log : std::cout),
+      metrics_path_((fs::path(options.run_dir) / "metrics.jsonl").string()),
+      shuffle_rng_(static_cast<uint64_t>(config.train.seed) * 2 + 1),
+      rollout_rng_(static_cast<uint64_t>(config.train.seed) * 2 + 2) {}
+
+void Run::open_data() {
+  const dataset::DatasetManifest manifest = dataset::read_manifest(config_.data.dataset);
+  train_ = std::make_unique<TrainData>(manifest, "train", stats_, config_);
+  if (train_->num_samples() == 0)
+    throw std::runtime_error(config_.data.dataset + ": the train split has no samples for data.first_frame = " +
+                             std::to_string(config_.data.first_frame) + " and data.max_frames = " +
+                             std::to_string(config_.data.max_frames) + " (sequences too short?)");
+  if (config_.train.validate && !manifest.val.empty()) val_ = std::make_unique<TrainData>(manifest, "val", stats_, config_);
+}
+
+void Run::restore(const std::string& path) {
+  Checkpoint cp = read_checkpoint(path, params_);
+  if (!all_finite(params_.values()))
+    throw CheckpointError(path + ": holds non-finite weights; delete it to resume from the previous checkpoint");
+  Config saved = parse_config_text(cp.config_toml, path + ":/config");
+  saved.train = config_.train;
+  saved.eval = config_.eval;
+  if (to_toml(saved) != to_toml(config_))
+    out_ << "warning: " << path << " was written with a different [model], [loss] or [data] config than "
+         << options_.run_dir << "/config.toml; continuing with config.toml\n";
+  state_ = cp.state;
+  adam_->set_step_count(cp.state.global_step);
+  for (const auto& [name, rng] : {std::pair<std::string, GslRandom*>{"shuffle", &shuffle_rng_}, {"rollout", &rollout_rng_}}) {
+    const auto it = cp.state.rng.find(name);
+    if (it == cp.state.rng.end()) throw CheckpointError(path + ": /state/rng/" + name + " is missing");
+    rng->set_state(it->second, path + ":/state/rng/" + name);
+  }
+  const dataset::NormalisationStats saved_stats = stats_from_arrays(cp.stats, path);
+  if (stats_to_arrays(saved_stats) != stats_to_arrays(stats_))
+    out_ << "warning: " << config_.data.dataset << "/stats.h5 differs from the statistics in " << path
+         << "; continuing with the checkpoint's (the run's own) statistics\n";
+  stats_ = saved_stats;
+  summary_.best_val_error = state_.best_val_error;
+  summary_.updates = state_.global_step;
+}
+
+void Run::save(const std::string& path) {
+  if (!all_finite(params_.values()) || !all_finite(params_.moment1()) || !all_finite(params_.moment2()))
+    throw TrainingStopped(path + ": not written: the parameters or Adam moments hold non-finite values");
+  Checkpoint cp;
+  cp.config_toml = to_toml(config_);
+  cp.state = state_;
+  cp.state.global_step = adam_->step_count();
+  // Mid-epoch the shuffle generator is saved as of the epoch's start (the order is
+  // regenerated on resume); at an epoch boundary as it is now.
+  cp.state.rng["shuffle"] = state_.position == 0 ? shuffle_rng_.state() : shuffle_at_epoch_start_;
+  cp.state.rng["rollout"] = rollout_rng_.state();
+  cp.stats = stats_to_arrays(stats_);
+  write_checkpoint(path, params_, cp);
+  summary_.last_checkpoint = path;
+}
+
+void Run::save_step_checkpoint() {
+  fs::create_directories(fs::path(options_.run_dir) / "checkpoints");
+  const int64_t batches = state_.epoch * batches_per_epoch_ +
+                          (state_.position + config_.train.batch_size - 1) / config_.train.batch_size;
+  save(checkpoint_path(options_.run_dir, batches));
+  prune_checkpoints(options_.run_dir, config_.train.keep_checkpoints);
+}
+
+TrainSummary Run::execute() {
+  const TrainConfig& tc = config_.train;
+  if (tc.threads > 0) omp_set_num_threads(tc.threads);
+  threads_ = std::max(1, omp_get_max_threads());
+  fs::create_directories(options_.run_dir);
+  if (!options_.resume && holds_run(options_.run_dir))
+    throw std::runtime_error(options_.run_dir + " already holds a run; continue it with `layersnet train --resume " +
+                             options_.run_dir + "` or choose another --run directory");
+  // Refuses to start without stats.h5 and says that `layersnet prepare DATASET` makes it.
+  stats_ = dataset::load_stats_or_explain(dataset::read_manifest(config_.data.dataset));
+  write_text_atomic((fs::path(options_.run_dir) / "config.toml").string(), to_toml(config_));
+
+  model::register_params(params_, config_.model);
+  model::init_params(params_, config_.model, static_cast<uint64_t>(tc.seed));
+  adam_ = std::make_unique<ad::Adam<float>>(
+      params_, ad::AdamOptions{tc.learning_rate, tc.adam_beta1, tc.adam_beta2, tc.adam_eps, 0.0});
+  std::string resumed_from;
+  if (options_.resume) {
+    const auto checkpoints = list_checkpoints(options_.run_dir);
+    if (checkpoints.empty()) {
+      out_ << options_.run_dir << ": no checkpoint yet; the run starts from its beginning\n";
+      metric("{\"event\":\"resume\",\"checkpoint\":null}");
+    } else {
+      restore(checkpoints.back());
+      resumed_from = checkpoints.back();
+    }
+  }
+  open_data();  // after restore: samples are built with the run's own statistics
+  batches_per_epoch_ = (train_->num_samples() + tc.batch_size - 1) / tc.batch_size;
+  if (!resumed_from.empty()) {
+    if (state_.position > train_->num_samples())
+      throw CheckpointError(resumed_from + ": position " + std::to_string(state_.position) + " is beyond the " +
+                            std::to_string(train_->num_samples()) + " samples of the train split (data set changed?)");
+    out_ << "resuming " << resumed_from << ": epoch " << state_.epoch + 1 << ", sample " << state_.position << " of "
+         << train_->num_samples() << ", " << state_.global_step << " updates\n";
+    metric("{\"event\":\"resume\",\"checkpoint\":" + json_string(resumed_from) + ",\"epoch\":" +
+           std::to_string(state_.epoch + 1) + ",\"position\":" + std::to_string(state_.position) + "}");
+  }
+  for (int s = 0; s < tc.batch_size; ++s) {
+    slots_.push_back(std::make_unique<ad::ParamStore<float>>());
+    model::register_params(*slots_.back(), config_.model);
+  }
+  for (int t = 0; t < threads_; ++t) tapes_.push_back(std::make_unique<ad::Tape<float>>());
+  out_ << "training " << train_->num_samples() << " samples/epoch (" << train_->ids().size() << " sequences), "
+       << batches_per_epoch_ << " batches of " << tc.batch_size << ", " << tc.epochs << " epochs, " << threads_
+       << " threads, " << params_.total_size() << " parameter slots -> " << options_.run_dir << "\n";
+
+  window_start_ = Clock::now();
+  while (state_.epoch < tc.epochs) {
+    if (tc.max_steps > 0 && summary_.batches >= tc.max_steps) break;
+    run_epoch(static_cast<int>(state_.epoch));
+  }
+  summary_.updates = adam_->step_count();
+  summary_.samples_per_second = total_wall_s_ > 0 ? static_cast<double>(total_samples_) / total_wall_s_ : 0;
+  metric("{\"event\":\"stop\",\"updates\":" + std::to_string(summary_.updates) + ",\"epoch\":" +
+         std::to_string(state_.epoch) + ",\"samples_per_s\":" + json_number(summary_.samples_per_second) + "}");
+  return summary_;
+}
+
+void Run::run_epoch(int epoch) {
+  const TrainConfig& tc = config_.train;
+  adam_->set_lr(learning_rate_at(tc, epoch));
+  const int ngs = rollout_steps_at(tc, epoch);
+  // The order of the epoch: regenerated from the saved generator state on resume.
+  shuffle_at_epoch_start_ = shuffle_rng_.state();
+  std::vector<int64_t> order(static_cast<std::size_t>(train_->num_samples()));
+  for (std::size_t i = 0; i < order.size(); ++i) order[i] = static_cast<int64_t>(i);
+  shuffle_rng_.shuffle(order);
+  while (state_.position < train_->num_samples()) {
+    if (!run_batch(epoch, ngs, order)) return;
+    const int64_t done = state_.epoch * batches_per_epoch_ +
+                         (state_.position + tc.batch_size - 1) / tc.batch_size;
+    if (state_.position < train_->num_samples() && tc.checkpoint_every > 0 && done % tc.checkpoint_every == 0)
+      save_step_checkpoint();
+  }
+  const double val = validate();
+  state_.epoch = epoch + 1;
+  state_.position = 0;
+  bool best = false;
+  if (val >= 0) {
+    summary_.last_val_error = val;
+    best = state_.best_val_error < 0 || val < state_.best_val_error;
+    if (best) state_.best_val_error = val;
+    summary_.best_val_error = state_.best_val_error;
+    out_ << "epoch " << epoch + 1 << " validation: one-step error " << val << " (best " << state_.best_val_error
+         << ")\n";
+    metric("{\"event\":\"val\",\"epoch\":" + std::to_string(epoch + 1) + ",\"step\":" +
+           std::to_string(adam_->step_count()) + ",\"one_step_error\":" + json_number(val) + ",\"best\":" +
+           (best ? "true" : "false") + "}");
+  }
+  // best.h5 first: a kill between the two writes resumes from the previous checkpoint and
+  // writes both again.
+  if (best) save((fs::path(options_.run_dir) / "best.h5").string());
+  if (config_.train.epoch_checkpoints || state_.epoch == config_.train.epochs) save_step_checkpoint();
+}
+
+bool Run::run_batch(int epoch, int ngs, const std::vector<int64_t>& order) {
+  const TrainConfig& tc = config_.train;
+  if (tc.max_steps > 0 && summary_.batches >= tc.max_steps) return false;
+  const auto t0 = Clock::now();
+  const int64_t begin = state_.position;
+  const int nb = static_cast<int>(std::min<int64_t>(tc.batch_size, train_->num_samples() - begin));
+  // Draws and file reads on this thread, in sample order (deterministic, HDF5 not thread-safe).
+  std::vector<SampleRef> refs(static_cast<std::size_t>(nb));
+  std::vector<int> self_fed(static_cast<std::size_t>(nb));
+  std::vector<Window> windows;
+  windows.reserve(static_cast<std::size_t>(nb));
+  for (int i = 0; i < nb; ++i) {
+    const SampleRef r = train_->samples()[static_cast<std::size_t>(order[static_cast<std::size_t>(begin + i)])];
+    refs[static_cast<std::size_t>(i)] = r;
+    const int drawn = rollout_rng_.uniform_int_inclusive(ngs);
+    const int n = std::min(drawn, r.t - train_->first_t(r.sequence));  // no rollout before the first sample frame
+    self_fed[static_cast<std::size_t>(i)] = n;
+    windows.push_back(train_->read_window(r.sequence, r.t - n, r.t));
+  }
+  for (int i = 0; i < nb; ++i) {
+    auto dst = slots_[static_cast<std::size_t>(i)]->values();
+    std::copy(params_.values().begin(), params_.values().end(), dst.begin());
+  }
+  const auto t1 = Clock::now();
+  std::vector<SampleOutcome> outcomes(static_cast<std::size_t>(nb));
+  std::vector<std::string> errors(static_cast<std::size_t>(nb));
+  // One sample per iteration; kernels inside run single-threaded (no nested parallelism),
+  // a lone sample keeps the threads for its kernels.
+#pragma omp parallel for schedule(dynamic, 1) if (nb > 1)
+  for (int i = 0; i < nb; ++i) {
+    try {
+      const auto k = static_cast<std::size_t>(i);
+      outcomes[k] = train_sample(*train_, windows[k], refs[k].t, self_fed[k], config_,
+                                 *tapes_[static_cast<std::size_t>(omp_get_thread_num())], *slots_[k]);
+    } catch (const std::exception& e) {
+      errors[static_cast<std::size_t>(i)] = e.what();
+    }
+  }
+  for (const auto& e : errors)
+    if (!e.empty()) throw std::runtime_error(e);
+  const auto t2 = Clock::now();
+  // Mean gradient, summed in sample order.
+  auto g = params_.grads();
+  std::fill(g.begin(), g.end(), 0.0f);
+  const float inv = 1.0f / static_cast<float>(nb);
+  for (int i = 0; i < nb; ++i) {
+    const auto src = slots_[static_cast<std::size_t>(i)]->grads();
+    for (std::size_t k = 0; k < g.size(); ++k) g[k] += src[k] * inv;
+  }
+  if (options_.after_gradients) options_.after_gradients(summary_.batches, params_);
+  LossParts mean;
+  bool finite = true;
+  for (const auto& o : outcomes) {
+    mean += o.loss.scaled(1.0 / nb);
+    finite = finite && o.loss_finite && o.grad_finite;
+  }
+  const double norm = ad::grad_norm(params_);
+  finite = finite && std::isfinite(norm);
+  ++summary_.batches;
+  state_.position = begin + nb;
+  if (!finite) {
+    ++summary_.skipped;
+    ++state_.nonfinite_in_row;
+    std::ostringstream samples, json;
+    for (int i = 0; i < nb; ++i) {
+      const auto k = static_cast<std::size_t>(i);
+      const auto& id = train_->ids()[static_cast<std::size_t>(refs[k].sequence)];
+      samples << (i ? ", " : "") << id << " t=" << refs[k].t << " self-fed " << self_fed[k] << " loss "
+              << outcomes[k].loss.total << (outcomes[k].grad_finite ? "" : " (non-finite gradient)");
+      json << (i ? "," : "") << "{\"sequence\":" << json_string(id) << ",\"t\":" << refs[k].t << ",\"self_fed\":"
+           << self_fed[k] << ",\"loss\":" << json_number(outcomes[k].loss.total)
+           << ",\"grad_finite\":" << (outcomes[k].grad_finite ? "true" : "false") << "}";
+    }
+    out_ << "epoch " << epoch + 1 << " batch " << summary_.batches << ": non-finite loss or gradient, update skipped ("
+         << state_.nonfinite_in_row << " in a row); samples: " << samples.str() << "\n";
+    metric("{\"event\":\"nonfinite\",\"epoch\":" + std::to_string(epoch + 1) + ",\"in_row\":" +
+           std::to_string(state_.nonfinite_in_row) + ",\"grad_norm\":" + json_number(norm) + ",\"samples\":[" +
+           json.str() + "]}");
+    if (state_.nonfinite_in_row >= tc.max_nonfinite_in_row) {
+      const auto kept = list_checkpoints(options_.run_dir);
+      throw TrainingStopped(std::to_string(state_.nonfinite_in_row) +
+                            " updates in a row had a non-finite loss or gradient (train.max_nonfinite_in_row = " +
+                            std::to_string(tc.max_nonfinite_in_row) + "); stopped. The last valid checkpoint is " +
+                            (kept.empty() ? std::string("none (no checkpoint was written yet)") : kept.back()) +
+                            ". Lower train.learning_rate or set train.grad_clip, then resume or restart.");
+    }
+  } else {
+    state_.nonfinite_in_row = 0;
+    if (tc.grad_clip > 0 && norm > tc.grad_clip) {
+      const float s = static_cast<float>(tc.grad_clip / norm);
+      for (float& x : g) x *= s;
+    }
+    adam_->step();
+    if (summary_.first_loss < 0) summary_.first_loss = mean.total;
+    summary_.last_loss = mean.total;
+    window_loss_ += mean;
+    window_grad_norm_ += norm;
+    ++window_batches_;
+  }
+  const auto t3 = Clock::now();
+  window_samples_ += nb;
+  window_data_s_ += seconds(t0, t1);
+  window_optim_s_ += seconds(t2, t3);
+  window_wall_s_ += seconds(t0, t3);
+  for (const auto& o : outcomes) window_build_s_ += o.build_seconds, window_model_s_ += o.model_seconds;
+  total_wall_s_ += seconds(t0, t3);
+  total_samples_ += nb;
+  summary_.wall_seconds += seconds(t0, t3);
+  summary_.read_seconds += seconds(t0, t1);
+  summary_.optimizer_seconds += seconds(t2, t3);
+  for (const auto& o : outcomes) summary_.build_seconds += o.build_seconds, summary_.model_seconds += o.model_seconds;
+  if (summary_.batches % tc.log_every == 0 || state_.position >= train_->num_samples()) log_progress(epoch);
+  return true;
+}
+
+void Run::log_progress(int epoch) {
+  const TrainConfig& tc = config_.train;
+  const double rate = window_wall_s_ > 0 ? static_cast<double>(window_samples_) / window_wall_s_ : 0;
+  // Remaining samples of the run (later epochs are slower with longer rollouts: a lower bound).
+  const int64_t remaining = (tc.epochs - epoch) * train_->num_samples() - state_.position;
+  const double eta = rate > 0 ? static_cast<double>(remaining) / rate : -1;
+  const LossParts loss = window_batches_ > 0 ? window_loss_.scaled(1.0 / static_cast<double>(window_batches_)) : LossParts{};
+  // Thread-seconds outside the model (reading, sample building, optimizer) over all.
+  const double outside = window_data_s_ + window_build_s_ + window_optim_s_;
+  const double share = outside + window_model_s_ > 0 ? outside / (outside + window_model_s_) : 0;
+  char line[512];
+  std::snprintf(line, sizeof line,
+                "epoch %d/%d  step %lld  sample %lld/%lld  %.2f samples/s  ETA %s  lr %.3g  loss %.5g "
+                "(vertex %.4g patch %.4g normal %.4g body %.4g layer %.4g orth %.4g)  outside model %.0f%%",
+                epoch + 1, tc.epochs, static_cast<long long>(adam_->step_count()), static_cast<long long>(state_.position),
+                static_cast<long long>(train_->num_samples()), rate, duration_text(eta).c_str(),
+                learning_rate_at(tc, epoch), loss.total, loss.vertex, loss.patch, loss.normal, loss.collision_body,
+                loss.collision_layer, loss.orthogonality, 100 * share);
+  out_ << line << std::endl;
+  metric("{\"event\":\"train\",\"epoch\":" + std::to_string(epoch + 1) + ",\"step\":" +
+         std::to_string(adam_->step_count()) + ",\"batch\":" + std::to_string(summary_.batches) + ",\"position\":" +
+         std::to_string(state_.position) + ",\"lr\":" + json_number(learning_rate_at(tc, epoch)) +
+         ",\"rollout_max\":" + std::to_string(rollout_steps_at(tc, epoch)) + ",\"loss\":" + json_parts(loss) +
+         ",\"grad_norm\":" + json_number(window_batches_ > 0 ? window_grad_norm_ / static_cast<double>(window_batches_) : 0) +
+         ",\"samples_per_s\":" + json_number(rate) + ",\"eta_s\":" + json_number(eta) + ",\"threads\":" +
+         std::to_string(threads_) + ",\"seconds\":{\"wall\":" + json_number(window_wall_s_) + ",\"read\":" +
+         json_number(window_data_s_) + ",\"build\":" + json_number(window_build_s_) + ",\"model\":" +
+         json_number(window_model_s_) + ",\"optimizer\":" + json_number(window_optim_s_) +
+         "},\"share_outside_model\":" + json_number(share) + "}");
+  window_loss_ = {};
+  window_batches_ = window_samples_ = 0;
+  window_grad_norm_ = window_data_s_ = window_build_s_ = window_model_s_ = window_optim_s_ = window_wall_s_ = 0;
+}
+
+double Run::validate() {
+  if (!val_ || val_->num_samples() == 0) return -1;
+  const auto start = Clock::now();
+  // Evenly spaced subset when val_samples limits it (deterministic, no generator).
+  const int64_t total = val_->num_samples();
+  const int64_t n = config_.train.val_samples > 0 ? std::min<int64_t>(config_.train.val_samples, total) : total;
+  std::vector<int64_t> picks(static_cast<std::size_t>(n));
+  for (int64_t i = 0; i < n; ++i) picks[static_cast<std::size_t>(i)] = i * total / n;
+  double sum = 0;
+  const int64_t chunk = 4 * threads_;
+  for (int64_t b = 0; b < n; b += chunk) {
+    const int m = static_cast<int>(std::min(chunk, n - b));
+    std::vector<Window> windows;
+    std::vector<int> ts;
+    for (int i = 0; i < m; ++i) {
+      const SampleRef r = val_->samples()[static_cast<std::size_t>(picks[static_cast<std::size_t>(b + i)])];
+      windows.push_back(val_->read_window(r.sequence, r.t, r.t));
+      ts.push_back(r.t);
+    }
+    std::vector<double> errs(static_cast<std::size_t>(m));
+    std::vector<std::string> errors(static_cast<std::size_t>(m));
+#pragma omp parallel for schedule(dynamic, 1) if (m > 1)
+    for (int i = 0; i < m; ++i) {
+      try {
+        const auto k = static_cast<std::size_t>(i);
+        errs[k] = one_step_error(*val_, windows[k], ts[k], config_, *tapes_[static_cast<std::size_t>(omp_get_thread_num())],
+                                 params_);
+      } catch (const std::exception& e) {
+        errors[static_cast<std::size_t>(i)] = e.what();
+      }
+    }
+    for (const auto& e : errors)
+      if (!e.empty()) throw std::runtime_error(e);
+    for (double e : errs) sum += e;
+  }
+  out_ << "validation on " << n << " samples took " << duration_text(seconds(start, Clock::now())) << "\n";
+  return sum / static_cast<double>(n);
+}
+
+}  // namespace
+
+TrainSummary train(const Config& config, const TrainOptions& options) {
+  aligned_new_anchor = 1;
+  if (options.run_dir.empty()) throw std::runtime_error("train: no run directory given (--run DIR)");
+  Run run(config, options);
+  return run.execute();
+}
+
+}  // namespace layersnet
