@@ -136,7 +136,7 @@ TEST_F(TrainerTest, OverfitsOneBatchThroughTheTrainingLoop) {
   // One sequence of 4 frames: the single sample t = 2 is the batch of every epoch. The
   // model is the tiny one with the model tests' 4 heads and 2 layers.
   const std::string data = make_dataset(1, 0, 4);
-  const Config c = tiny_config(data, {"train.batch_size=1", "train.epochs=400", "train.rollout_steps=[0]",
+  const Config c = tiny_config(data, {"train.batch_size=1", "train.threads=1", "train.epochs=400", "train.rollout_steps=[0]",
                                       "train.lr_decay_epochs=[]", "train.validate=false", "train.log_every=100",
                                       "train.epoch_checkpoints=false", "train.learning_rate=1e-2", "model.heads=4",
                                       "model.layers=2",
