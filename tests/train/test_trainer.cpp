@@ -134,22 +134,20 @@ TEST_F(TrainerTest, RefusesToOverwriteAnExistingRun) {
 
 TEST_F(TrainerTest, OverfitsOneBatchThroughTheTrainingLoop) {
   // One sequence of 4 frames: the single sample t = 2 is the batch of every epoch. The
-  // model is the tiny one with the model tests' 4 heads and 2 layers.
+  // model is the tiny one with the model tests' 4 heads and 2 layers. Loss: positions,
+  // patch centres and normals. Left out: the W_R orthogonality penalty (a floor, model/
+  // README.md quirk 7) and the collision terms — the synthetic tubes are not collision-free
+  // for the loss's nearest-normal test (at the ground truth the body term is > 0), so with
+  // them the data loss stalls at x2.6 while every term fights the others.
   const std::string data = make_dataset(1, 0, 4);
-  const Config c = tiny_config(data, {"train.batch_size=1", "train.threads=1", "train.epochs=400", "train.rollout_steps=[0]",
-                                      "train.lr_decay_epochs=[]", "train.validate=false", "train.log_every=100",
-                                      "train.epoch_checkpoints=false", "train.learning_rate=1e-2", "model.heads=4",
-                                      "model.layers=2",
-                                      // The W_R orthogonality penalty has a floor (model/README.md
-                                      // quirk 7): overfitting is about the data terms.
-                                      "loss.orthogonality=0"});
+  const Config c = tiny_config(data, {"train.batch_size=1", "train.threads=1", "train.epochs=300",
+                                      "train.rollout_steps=[0]", "train.lr_decay_epochs=[]", "train.validate=false",
+                                      "train.log_every=100", "train.epoch_checkpoints=false",
+                                      "train.learning_rate=1e-2", "model.heads=4", "model.layers=2",
+                                      "loss.orthogonality=0", "loss.collision_body=0", "loss.collision_layer=0"});
   const TrainSummary s = train(c, options("run"));
-  EXPECT_EQ(s.updates, 400);
-  // Measured: 0.0146 -> 0.0057 (x2.6) and flat from ~step 250, for lr 1e-3..2e-2, with or
-  // without root motion. The model test (SceneWindow input) reaches x19; through dataset
-  // samples the data loss plateaus — an open question for the sample/model path, so this
-  // asserts the loop's real behaviour (x2) instead of the x10 goal.
-  EXPECT_LT(s.last_loss, s.first_loss / 2) << "first " << s.first_loss << " last " << s.last_loss;
+  EXPECT_EQ(s.updates, 300);
+  EXPECT_LT(s.last_loss, s.first_loss / 10) << "first " << s.first_loss << " last " << s.last_loss;
 }
 
 TEST_F(TrainerTest, SameSeedAndThreadsGiveIdenticalParameters) {
