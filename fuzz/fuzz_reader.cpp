@@ -33,6 +33,7 @@ const char* const kPaths[] = {"/body", "/body/vertices", "/body/faces", "/body/t
                               "/garments/g1_jacket/uv", "/garments/g1_jacket/panel", "/wind", "/wind/rotation",
                               "/wind/strength", "/garments/extra", "/body/extra"};
 const char* const kObjects[] = {"/", "/body", "/garments", "/garments/g0_tee", "/garments/g1_jacket", "/wind"};
+const char* const kGarmentNames[] = {"g0_tee", "g1_jacket", "extra", ""};
 const char* const kAttrs[] = {"format", "version", "fps", "up_axis", "gravity", "scale", "friction", "order",
                               "type", "tension_stiffness", "bending_stiffness", "mass", "self_friction"};
 
@@ -84,7 +85,7 @@ void set_attribute(hid_t f, FuzzedDataProvider& p) {
     case 4: {
       std::vector<std::string> v;
       for (int i = p.ConsumeIntegralInRange(0, 3); i > 0; --i)
-        v.push_back(p.ConsumeBool() ? std::string(pick(p, kPaths)).substr(10) : p.ConsumeRandomLengthString(8));
+        v.push_back(p.ConsumeBool() ? std::string(pick(p, kGarmentNames)) : p.ConsumeRandomLengthString(8));
       layersnet::dataset::h5::write_string_array_attr(obj, name, v);
       break;
     }
