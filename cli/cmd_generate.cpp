@@ -228,7 +228,11 @@ int run_generate(const GenerateOptions& opt) {
     gates.max_p99_edge_stretch = g.value("max_p99_edge_stretch", gates.max_p99_edge_stretch);
   }
   std::string checker = opt.checker;
-  if (checker.empty() && fs::exists("/work/shared/tools/check_dlayers_h5.py")) checker = "/work/shared/tools/check_dlayers_h5.py";
+  if (checker.empty()) {
+    // The shared validator lives beside the repository: <repo>/../shared/tools.
+    const fs::path beside = find_script("").parent_path() / "../../shared/tools/check_dlayers_h5.py";
+    if (fs::exists(beside)) checker = fs::weakly_canonical(beside).string();
+  }
 
   const fs::path out = opt.out;
   fs::create_directories(out / "reports");

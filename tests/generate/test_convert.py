@@ -14,7 +14,7 @@ import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 CONVERTER = os.path.join(HERE, "../../generate/convert_dlayers.py")
-CHECKER = "/work/shared/tools/check_dlayers_h5.py"
+CHECKER = os.path.join(HERE, "../../../shared/tools/check_dlayers_h5.py")  # shared/ beside the repo
 T = 4
 
 

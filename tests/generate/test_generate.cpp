@@ -16,7 +16,8 @@ namespace {
 
 const std::string kSource = LAYERSNET_SOURCE_DIR;
 const std::string kBinary = LAYERSNET_BINARY;
-const std::string kChecker = "/work/shared/tools/check_dlayers_h5.py";
+// The shared validator sits beside the repository (../shared), in CI as here.
+const std::string kChecker = kSource + "/../shared/tools/check_dlayers_h5.py";
 
 bool have_blender() { return std::system("blender --version > /dev/null 2>&1") == 0; }
 
