@@ -18,7 +18,11 @@ if [ -f "$data/dataset.json" ]; then
   has inspect && "$bin" inspect "$data"
 fi
 if has train && [ -f "$data/stats.h5" ]; then
-  "$bin" train --config configs/default.toml --run runs/default
+  if [ -f runs/default/config.toml ]; then
+    "$bin" train --resume runs/default   # finishes an interrupted run; a finished one is kept
+  else
+    "$bin" train --config configs/default.toml --run runs/default
+  fi
 fi
 if has eval && [ -d runs/default ]; then
   "$bin" eval --run runs/default --out runs/default/eval
