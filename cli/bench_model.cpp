@@ -17,6 +17,7 @@
 #include "model/synthetic_scene.h"
 
 #include <Eigen/Core>
+#include <malloc.h>
 #include <nlohmann/json.hpp>
 #include <omp.h>
 #include <sys/resource.h>
@@ -45,7 +46,9 @@ struct BenchModelOptions {
   std::string python = "/usr/bin/python3";
   double max_wait = 5;    // reference's quiet-machine wait per timing block, s
   bool no_reference = false;
-  bool torch_filter = false;  // keep the reference's contention filter
+  bool torch_filter = false;
+  bool malloc_heap = true;
+  bool eigen_threads = false;  // let Eigen's GEMM use the OpenMP threads itself    // mallopt as the reference's --malloc heap  // keep the reference's contention filter
   std::string json;
 };
 
@@ -172,6 +175,10 @@ Reference run_reference(const BenchModelOptions& o, const fs::path& script, int 
 }
 
 int run_bench_model(const BenchModelOptions& o) {
+  // Same malloc tuning as the reference's default (--malloc heap): freed tape buffers stay in
+  // the heap instead of being munmap'd and page-faulted in again every step (perf: ~17 % of
+  // a small-scene training step was page faults, clear_page and munmap without it).
+  if (o.malloc_heap) mallopt(M_MMAP_MAX, 0), mallopt(M_TRIM_THRESHOLD, -1), mallopt(M_ARENA_MAX, 1);
   const auto scene = model::make_synthetic_scene(reference_scene(o.size));
   ModelConfig mc;  // official sizes
   LossConfig lc;
@@ -219,13 +226,21 @@ int run_bench_model(const BenchModelOptions& o) {
   const auto threads = parse_threads(o.threads);
   std::map<int, Ours> ours;
   std::map<int, std::vector<Reference>> refs;
+  // libgomp reads OMP_WAIT_POLICY at start-up; the reference subprocess inherits it, so both
+  // sides run under the same policy. On a loaded machine PASSIVE avoids spinning at barriers
+  // for descheduled peers (small scene, 2 threads, load 7: train 130 ms vs 270-2800 ms).
+  const char* wait_policy = std::getenv("OMP_WAIT_POLICY");
   std::printf("bench model --size %s: %d passes x (ours %d iters, reference %d iters) per thread count, "
-              "input build %.1f ms\n",
-              o.size.c_str(), o.passes, o.iters, o.iters, build_ms);
+              "input build %.1f ms, OMP_WAIT_POLICY=%s\n",
+              o.size.c_str(), o.passes, o.iters, o.iters, build_ms, wait_policy ? wait_policy : "(default)");
   for (int pass = 0; pass < o.passes; ++pass)
     for (int t : threads) {
       omp_set_num_threads(t);
-      Eigen::setNbThreads(t);
+      // Eigen's own multi-threaded GEMM (outside the ops' OpenMP chunks) synchronises by
+      // spinning: on a loaded 2-core machine a 2-thread step took 30x the 1-thread one (perf:
+      // 75 % in Eigen's gemm run() and libgomp waits). The ops parallelise over row chunks with
+      // single-threaded Eigen products, so Eigen's threading stays off unless --eigen-threads.
+      Eigen::setNbThreads(o.eigen_threads ? t : 1);
       Ours& u = ours[t];
       std::vector<double> tr, inf;
       for (int i = 0; i < o.warmup; ++i) train_step();
@@ -242,6 +257,7 @@ int run_bench_model(const BenchModelOptions& o) {
       }
       u.train_ms.push_back(median(tr));
       u.infer_ms.push_back(median(inf));
+      Eigen::setNbThreads(t);  // the plain GEMM reference uses every thread
       u.gemm_gflops.push_back(gemm_rate(std::max<Eigen::Index>(8000, 4 * in.N)));
       std::printf("  pass %d threads %d: ours train %.1f ms infer %.1f ms (load %.2f)", pass + 1, t,
                   u.train_ms.back(), u.infer_ms.back(), load_average());
@@ -269,7 +285,7 @@ int run_bench_model(const BenchModelOptions& o) {
 
   // ---- summary: best-of-pass medians
   const double peak = vm_hwm_mib();
-  nlohmann::json out = {{"size", o.size}, {"scene_ours", ours_scene}, {"scene_torch", ref_scene},
+  nlohmann::json out = {{"size", o.size}, {"omp_wait_policy", wait_policy ? wait_policy : ""}, {"scene_ours", ours_scene}, {"scene_torch", ref_scene},
                         {"input_build_ms", build_ms}, {"peak_rss_mib_ours", peak}, {"rows", nlohmann::json::array()}};
   std::printf("\n%7s %10s %10s %7s %10s %10s %7s %9s %9s %9s %8s %9s %9s %6s\n", "threads", "train_ms", "torch_ms",
               "ratio", "infer_ms", "torch_ms", "ratio", "GF/s_trn", "GF/s_inf", "GEMM_GF/s", "trn/GEMM",
@@ -334,5 +350,7 @@ LAYERSNET_BENCH(model, "Training and inference step vs the PyTorch reference (is
   sub.add_flag("--torch-filter", o->torch_filter,
                "keep the reference's contention filter (drops iterations with foreign load; fails on a busy machine)");
   sub.add_option("--json", o->json, "write the figures as JSON");
+  sub.add_flag("--eigen-threads", o->eigen_threads, "Eigen's own GEMM threading on (default off)");
+  sub.add_flag("!--default-malloc", o->malloc_heap, "do not tune malloc (reference: --malloc default)");
   return [o] { return run_bench_model(*o); };
 });
