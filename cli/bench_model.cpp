@@ -181,6 +181,7 @@ int run_bench_model(const BenchModelOptions& o) {
   if (o.malloc_heap) mallopt(M_MMAP_MAX, 0), mallopt(M_TRIM_THRESHOLD, -1), mallopt(M_ARENA_MAX, 1);
   const auto scene = model::make_synthetic_scene(reference_scene(o.size));
   ModelConfig mc;  // official sizes
+  mc.body_query = "first";  // the reference's ball query: first K body vertices in index order
   LossConfig lc;
   const double t_build0 = now_ms();
   const auto in64 = model::build_model_input(scene, mc);
@@ -194,13 +195,20 @@ int run_bench_model(const BenchModelOptions& o) {
   ad::Tape<float> tape;
 
   const int64_t tokens_extra = 1 + (in.has_wind ? 1 : 0);  // gravity (+ wind) per patch
+  // Counted as the reference does: U = distinct body vertices of the patch body lists (ours
+  // also has tokens for the decoder's nearest vertices: U_all); E_mesh includes each patch's
+  // attribute token.
+  std::vector<int32_t> body_ids(in.body_tokens.begin(), in.body_tokens.end());
+  std::sort(body_ids.begin(), body_ids.end());
+  const auto u_lists = std::unique(body_ids.begin(), body_ids.end()) - body_ids.begin();
   nlohmann::json ours_scene = {{"N", in.N},
                                {"P", in.P},
                                {"A", in.A},
                                {"Nb", scene.B},
-                               {"U", in.U},
+                               {"U", u_lists},
+                               {"U_all", in.U},
                                {"E_world", in.world_senders.size()},
-                               {"E_mesh", in.mesh_senders.size()},
+                               {"E_mesh", static_cast<int64_t>(in.mesh_senders.size()) + in.P},
                                {"E_inter", static_cast<int64_t>(in.body_tokens.size()) + tokens_extra * in.P},
                                {"cand_valid_mean", static_cast<double>(in.cand_patches.size()) / in.N}};
   const fs::path script = o.reference.empty() ? default_reference() : fs::path(o.reference);
@@ -276,7 +284,7 @@ int run_bench_model(const BenchModelOptions& o) {
     for (const auto& r : v)
       if (r.ok) ref_scene = r.scene;
   std::printf("\nscene          %10s %10s\n", "ours", "torch");
-  for (const char* k : {"N", "P", "A", "Nb", "U", "E_world", "E_mesh", "E_inter", "cand_valid_mean"}) {
+  for (const char* k : {"N", "P", "A", "Nb", "U", "U_all", "E_world", "E_mesh", "E_inter", "cand_valid_mean"}) {
     auto num = [](const nlohmann::json& j, const char* key) {
       return j.contains(key) ? j[key].get<double>() : -1.0;
     };
