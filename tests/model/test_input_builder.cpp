@@ -82,5 +82,63 @@ TEST(InputBuilder, NeighbourListsFollowTheirDefinitions) {
   }
 }
 
+// The builder uses the data layer's grid / k-d tree; here the brute-force definitions:
+// body lists = the K nearest body vertices (t+1) within R_b of each patch centre, and
+// patch_body / vertex_body = the nearest body vertex if within R_b.
+TEST(InputBuilder, BodyListsAndNearestFollowTheirDefinitions) {
+  auto c = testing::tiny_config();
+  const auto scene = make_synthetic_scene(testing::tiny_scene());
+  const auto in = build_model_input(scene, c);
+  const int64_t B = scene.B;
+  auto body = [&](int64_t b) {
+    return Eigen::Vector3d(scene.body_tp1[3 * b] - scene.root[3][0], scene.body_tp1[3 * b + 1] - scene.root[3][1],
+                           scene.body_tp1[3 * b + 2] - scene.root[3][2]);
+  };
+  // Token -> body vertex, from the token's de-normalised position x_{t+1}.
+  std::vector<int64_t> vertex_of(in.U, -1);
+  for (int64_t u = 0; u < in.U; ++u) {
+    Eigen::Vector3d x;
+    for (int k = 0; k < 3; ++k) x[k] = in.body_norm[12 * u + k] * in.std12[k] + in.mean12[k];
+    for (int64_t b = 0; b < B; ++b)
+      if ((body(b) - x).norm() < 1e-9) vertex_of[u] = b;
+    ASSERT_GE(vertex_of[u], 0) << "token " << u;
+  }
+  auto nearest = [&](const Eigen::Vector3d& q) {
+    int64_t best = 0;
+    for (int64_t b = 1; b < B; ++b)
+      if ((body(b) - q).norm() < (body(best) - q).norm()) best = b;
+    return best;
+  };
+  for (int64_t p = 0; p < in.P; ++p) {
+    const Eigen::Vector3d cp(&in.patch_state[12 * p]);
+    std::vector<std::pair<double, int64_t>> hits;
+    for (int64_t b = 0; b < B; ++b)
+      if ((body(b) - cp).norm() < c.body_radius) hits.emplace_back((body(b) - cp).norm(), b);
+    std::sort(hits.begin(), hits.end());
+    hits.resize(std::min<std::size_t>(hits.size(), static_cast<std::size_t>(c.body_neighbors)));
+    std::vector<int64_t> want, got;
+    for (const auto& h : hits) want.push_back(h.second);
+    for (int k = in.body_offsets[p]; k < in.body_offsets[p + 1]; ++k) got.push_back(vertex_of[in.body_tokens[k]]);
+    EXPECT_EQ(got, want) << "patch " << p;
+    const int64_t nb = nearest(cp);
+    EXPECT_EQ(in.patch_body[p] >= 0, (body(nb) - cp).norm() < c.body_radius) << "patch " << p;
+    if (in.patch_body[p] >= 0) {
+      EXPECT_EQ(vertex_of[in.patch_body[p]], nb) << "patch " << p;
+    }
+  }
+  int near_vertices = 0;
+  for (int64_t v = 0; v < in.N; ++v) {
+    const Eigen::Vector3d x(in.state[12 * v], in.state[12 * v + 1], in.state[12 * v + 2]);
+    const int64_t nb = nearest(x);
+    const bool within = (body(nb) - x).norm() < c.body_radius;
+    EXPECT_EQ(in.vertex_body[v] >= 0, within) << "vertex " << v;
+    if (within) {
+      EXPECT_EQ(vertex_of[in.vertex_body[v]], nb) << "vertex " << v;
+      ++near_vertices;
+    }
+  }
+  EXPECT_GT(near_vertices, 0);
+}
+
 }  // namespace
 }  // namespace layersnet::model
