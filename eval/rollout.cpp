@@ -4,6 +4,7 @@
 #include "model/layersnet.h"
 #include "model/sample_input.h"
 #include "train/checkpoint.h"
+#include "train/train_data.h"
 
 #include <chrono>
 #include <limits>
@@ -78,24 +79,13 @@ std::map<std::string, std::vector<double>> stats_to_checkpoint(const dataset::No
   return out;
 }
 
-dataset::SampleOptions eval_sample_options(const ModelConfig& c) {
-  dataset::SampleOptions o;
-  o.patch_size = static_cast<float>(c.patch_size);
-  o.neighbours.world_radius = static_cast<float>(c.world_radius);
-  o.neighbours.body_radius = static_cast<float>(c.body_radius);
-  o.neighbours.body_k = c.body_neighbors;
-  o.neighbours.body_query = c.body_query == "first" ? dataset::BodyQuery::kFirstInIndexOrder : dataset::BodyQuery::kNearest;
-  o.neighbours.official_padding = false;
-  return o;
-}
-
 ModelPredictor::ModelPredictor(std::string name, Config config, ad::ParamStore<float> params,
                                dataset::NormalisationStats stats)
     : name_(std::move(name)),
       config_(std::move(config)),
       params_(std::move(params)),
       stats_(std::move(stats)),
-      sample_options_(eval_sample_options(config_.model)) {}
+      sample_options_(sample_options_for(config_.model)) {}
 
 void ModelPredictor::begin(const dataset::Sequence& seq) {
   structure_ = dataset::build_structure(seq.info, sample_options_.patch_size);

@@ -65,9 +65,6 @@ bool stats_from_checkpoint(const std::map<std::string, std::vector<double>>& sto
 // The inverse, for writing checkpoints in tests and tools.
 std::map<std::string, std::vector<double>> stats_to_checkpoint(const dataset::NormalisationStats& stats);
 
-// Sample options matching a model config (same as the trainer's sample_options_for) (patch size, radii, K, body query order;
-// no duplicate padding — the model drops duplicates anyway, model/README.md quirk 3).
-dataset::SampleOptions eval_sample_options(const ModelConfig& config);
 
 // The learned simulator: builds the dataset sample of the rollout's window, the model input,
 // runs forward without recording; world x_{t+1} = predicted root-relative x + r_{t+1}.
