@@ -15,7 +15,7 @@ if has generate; then
 fi
 if [ -f "$data/dataset.json" ]; then
   has prepare && "$bin" prepare "$data"
-  has inspect && "$bin" inspect "$data"
+  has inspect && "$bin" inspect "$data" --brief --patch-size "$("$bin" config -c configs/default.toml | sed -n 's/^patch_size = //p')"
 fi
 if has train && [ -f "$data/stats.h5" ]; then
   if [ -f runs/default/config.toml ]; then
@@ -25,6 +25,5 @@ if has train && [ -f "$data/stats.h5" ]; then
   fi
 fi
 if has eval && [ -d runs/default ]; then
-  "$bin" eval --run runs/default --out runs/default/eval
+  "$bin" eval --run runs/default --out runs/default/eval   # ends by printing the summary table
 fi
-"$bin" --version
