@@ -158,15 +158,10 @@ LAYERSNET_COMMAND(eval, "Roll out checkpoints and baselines over a split; error,
                     sub.add_option("--threads", o->threads, "OpenMP threads of the evaluation rollouts (0 = all; speed is measured at 1 and 2)");
                     sub.add_option("--out", o->out, "output folder for eval.json, eval.md and plots");
                     return [o] {
-                      try {
-                        if (o->checkpoints.empty() && o->runs.empty() && o->dataset.empty()) {
-                          std::fprintf(stderr, "layersnet eval: give --run or --checkpoint (or --dataset for baselines only)\n");
-                          return 2;
-                        }
-                        return run_eval(*o);
-                      } catch (const std::exception& e) {
-                        std::fprintf(stderr, "layersnet eval: %s\n", e.what());
+                      if (o->checkpoints.empty() && o->runs.empty() && o->dataset.empty()) {
+                        std::fprintf(stderr, "layersnet eval: give --run or --checkpoint (or --dataset for baselines only)\n");
                         return 2;
                       }
+                      return run_eval(*o);  // errors: reported by cli/main.cpp
                     };
                   });

@@ -82,15 +82,10 @@ LAYERSNET_COMMAND(export, "Write a rollout's predicted and ground-truth meshes (
                     sub.add_option("--strip-frames", o->exp.strip_frames, "panels in strip.png (0 = no strip)");
                     sub.add_option("--out", o->out, "output folder");
                     return [o] {
-                      try {
-                        if (o->checkpoint.empty() && o->dataset.empty()) {
-                          std::fprintf(stderr, "layersnet export: give --checkpoint or --dataset\n");
-                          return 2;
-                        }
-                        return run_export(*o);
-                      } catch (const std::exception& e) {
-                        std::fprintf(stderr, "layersnet export: %s\n", e.what());
+                      if (o->checkpoint.empty() && o->dataset.empty()) {
+                        std::fprintf(stderr, "layersnet export: give --checkpoint or --dataset\n");
                         return 2;
                       }
+                      return run_export(*o);  // errors: reported by cli/main.cpp
                     };
                   });

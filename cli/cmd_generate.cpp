@@ -383,12 +383,5 @@ LAYERSNET_COMMAND(generate, "Simulate D-LAYERS-like sequences with Blender's clo
   sub.add_option("--blender", opt->blender, "Blender executable");
   sub.add_option("--script", opt->script, "path of generate/make_sequence.py");
   sub.add_option("--checker", opt->checker, "check_dlayers_h5.py to validate each file (default: the shared one if present)");
-  return [opt] {
-    try {
-      return run_generate(*opt);
-    } catch (const std::exception& e) {
-      std::fprintf(stderr, "layersnet generate: %s\n", e.what());
-      return 2;
-    }
-  };
+  return [opt] { return run_generate(*opt); };  // errors: reported by cli/main.cpp
 });

@@ -64,8 +64,9 @@ int main(int argc, char** argv) {
       try {
         return action();
       } catch (const std::exception& e) {
+        // The one error report of every subcommand: name the command, then the message.
         std::fprintf(stderr, "layersnet %s: error: %s\n", sub->get_name().c_str(), e.what());
-        return 1;
+        return 2;
       }
     }
   }
