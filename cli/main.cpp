@@ -66,7 +66,7 @@ int main(int argc, char** argv) {
       } catch (const std::exception& e) {
         // The one error report of every subcommand: name the command, then the message.
         std::fprintf(stderr, "layersnet %s: error: %s\n", sub->get_name().c_str(), e.what());
-        return 2;
+        return 1;
       }
     }
   }
