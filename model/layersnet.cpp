@@ -5,12 +5,34 @@
 #include "model/params_layout.h"
 #include "model/tape_helpers.h"
 
+#include <chrono>
 #include <cmath>
 
 namespace layersnet::model {
 namespace {
 
 constexpr double kEps = 1e-7;  // official eps of the attention denominators
+
+// Adds the wall time from construction to stop() (or destruction) to one StageTimes field;
+// with no StageTimes it never reads the clock.
+class StageClock {
+ public:
+  StageClock(StageTimes* times, double StageTimes::*field) : sink_(times ? &(times->*field) : nullptr) {
+    if (sink_) t0_ = std::chrono::steady_clock::now();
+  }
+  ~StageClock() { stop(); }
+  StageClock(const StageClock&) = delete;
+  StageClock& operator=(const StageClock&) = delete;
+  void stop() {
+    if (!sink_) return;
+    *sink_ += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0_).count();
+    sink_ = nullptr;
+  }
+
+ private:
+  double* sink_;
+  std::chrono::steady_clock::time_point t0_;
+};
 
 // Index lists of one forward (built from ModelInput, no tape). Token table rows:
 //   [0, P) patches, [P, P+A) attribute tokens, [P+A, P+A+T) body/wind/gravity tokens.
@@ -180,6 +202,7 @@ Streams<T> encoder_layer(ad::Tape<T>& tape, const ParamView<T>& p, const ModelCo
   const bool last = layer == m.layers - 1;
   const int64_t P = gr.P, d = m.d, half = d / 2, G = m.groups;
   const Var<T> Xp = rows_of(st.X, 0, P);
+  StageClock attention_clock(opt.times, &StageTimes::attention_ms);
   // r = W_r x + W_m R + R;  s = W_s x + W_m S + S (every token);  q = W_q x.
   const Var<T> Wm = p(at + "memory_weight.weight");
   const Var<T> r = ad::add(tape, ad::add(tape, ad::linear(tape, Xp, p(at + "receiver_weight.weight")),
@@ -188,6 +211,7 @@ Streams<T> encoder_layer(ad::Tape<T>& tape, const ParamView<T>& p, const ModelCo
                                          ad::linear(tape, st.S, Wm)), st.S);
   const Var<T> q = ad::linear(tape, Xp, p(at + "q_proj.weight"));
   Var<T> out;
+  StageClock edges_clock(opt.times, &StageTimes::attention_edges_ms);
   if (cfg.attention == "ria" && opt.fused_attention) {
     const ad::RiaGraph graph{gr.fused_offsets, gr.fused_send, gr.fused_kind, gr.head_kinds, ad::kLayersnetMessageKinds};
     const T scale = static_cast<T>(1.0 / std::sqrt(static_cast<double>(m.head_dim)));
@@ -195,10 +219,12 @@ Streams<T> encoder_layer(ad::Tape<T>& tape, const ParamView<T>& p, const ModelCo
     out = ria.out;
     if (!gr.fused_inter_pos.empty()) {
       const Var<T> wi = ad::slice_cols(tape, ad::gather_rows(tape, ria.weights, gr.fused_inter_pos), 0, G);
+      StageClock inter_clock(opt.times, &StageTimes::attention_inter_ms);
       const Var<T> fi = ad::slice_cols(
           tape, ad::add(tape, ad::gather_rows(tape, r, gr.inter_recv), ad::gather_rows(tape, s, gr.inter_send)), 0, half);
       const Var<T> u = inter_messages(tape, p, cfg, m, at, fi, inter_rot);
       const Var<T> msg_inter = ad::segment_sum(tape, head_scale(tape, wi, u, G), gr.inter_offsets);
+      inter_clock.stop();
       out = ad::concat_cols(tape, {ad::add(tape, ad::slice_cols(tape, out, 0, half), msg_inter),
                                    ad::slice_cols(tape, out, half, d)});
     }
@@ -213,6 +239,7 @@ Streams<T> encoder_layer(ad::Tape<T>& tape, const ParamView<T>& p, const ModelCo
     const Var<T> msg_world = ad::segment_sum(tape, head_scale(tape, ad::mul(tape, aw, is_world), tw.f, G), gr.joint_offsets);
     Var<T> msg_inter;
     if (!gr.inter_pos.empty()) {
+      StageClock inter_clock(opt.times, &StageTimes::attention_inter_ms);
       const Var<T> fi = ad::gather_rows(tape, tw.f, gr.inter_pos);
       const Var<T> ai = ad::gather_rows(tape, aw, gr.inter_pos);
       const Var<T> u = inter_messages(tape, p, cfg, m, at, fi, inter_rot);
@@ -225,8 +252,11 @@ Streams<T> encoder_layer(ad::Tape<T>& tape, const ParamView<T>& p, const ModelCo
 
     out = ad::concat_cols(tape, {msg_inter.value ? ad::add(tape, msg_world, msg_inter) : msg_world, msg_mesh});
   }
+  edges_clock.stop();
   out = ad::add(tape, ad::mul(tape, out, p(at + "n_weight")), p(at + "n_bias"));
   const Var<T> x_attn = ad::linear(tape, out, p(at + "proj.weight"), p(at + "proj.bias"));
+  attention_clock.stop();
+  StageClock ffn_clock(opt.times, &StageTimes::ffn_ms);
 
   // Post-LN: patches LN0(x + attn); other tokens get no attention: LN0(2x). Then LN1(y + FFN(y)).
   // The other tokens' update is dead after the last layer (only patch tokens are decoded).
@@ -373,20 +403,44 @@ Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
   return out;
 }
 
+// Rows each stage works on (StageTimes' work fields).
+template <class T>
+void count_work(const ModelInput<T>& in, const Graph<T>& gr, StageTimes& t) {
+  t.patch_rows = in.P;
+  t.token_rows = gr.P + gr.A + gr.T_rows;
+  t.body_tokens = in.U;
+  t.ext_tokens = gr.T_rows - in.U;
+  t.inter_rows = static_cast<int64_t>(gr.inter_pos.size());
+  t.world_rows = static_cast<int64_t>(gr.joint_recv.size()) - t.inter_rows;
+  t.body_rows = static_cast<int64_t>(in.body_tokens.size());
+  t.mesh_rows = static_cast<int64_t>(gr.mesh_recv.size());
+  t.vertex_rows = in.N;
+  t.candidate_rows = static_cast<int64_t>(in.cand_patches.size());
+}
+
 }  // namespace
 
 template <class T>
 Predictions<T> forward(ad::Tape<T>& tape, ad::ParamStore<T>& params, const ModelConfig& cfg, const ModelInput<T>& in,
                        const ForwardOptions& options) {
+  StageTimes* times = options.times;
+  if (times) *times = StageTimes{};
+  StageClock total_clock(times, &StageTimes::total_ms);
   const ModelDims m = model_dims(cfg);
   const ParamView<T> p{params};
+  StageClock graph_clock(times, &StageTimes::graph_ms);
   const Graph<T> gr = build_graph(in, m.groups);
+  graph_clock.stop();
   const int64_t P = in.P, A = in.A, U = in.U;
+  if (times) count_work(in, gr, *times);
 
   // ---- token encoders ---------------------------------------------------------------------------------
+  StageClock encoder_clock(times, &StageTimes::encoder_ms);
   const Var<T> patch_x = mlp(tape, p, "embed.input", 2, true, constant(tape, in.patch_norm, P, 12));
   const Var<T> attr_x = mlp(tape, p, "embed.attr", 2, true, constant(tape, in.attr, A, 5));
+  StageClock body_clock(U > 0 ? times : nullptr, &StageTimes::encoder_body_ms);  // stays 0 without body tokens
   const Var<T> body_x = U > 0 ? mlp(tape, p, "embed.input", 2, true, constant(tape, in.body_norm, U, 12)) : Var<T>{};
+  body_clock.stop();
   Var<T> ext = mlp(tape, p, "embed.gravity", 2, true, constant(tape, in.gravity, 1, ModelDims::kGravityDim));
   if (in.has_wind)
     ext = ad::concat_rows(tape, mlp(tape, p, "embed.wind", 2, true, constant(tape, in.wind, 1, ModelDims::kWindDim)), ext);
@@ -399,6 +453,7 @@ Predictions<T> forward(ad::Tape<T>& tape, ad::ParamStore<T>& params, const Model
   st.S = norm(tape, p, "embed.sender_norm", mlp(tape, p, "embed.sender", 2, true, all_x));
   // Patch and attribute tokens are normalised, body/wind/gravity tokens are not (official).
   st.X = ad::concat_rows(tape, norm(tape, p, "embed.particle_norm", pa_x), h_x);
+  encoder_clock.stop();
 
   // ---- simulator -----------------------------------------------------------------------------------------
   const Var<T> inter_rot = constant(tape, gr.inter_rot, static_cast<int64_t>(gr.inter_pos.size()), 9);
@@ -406,6 +461,7 @@ Predictions<T> forward(ad::Tape<T>& tape, ad::ParamStore<T>& params, const Model
   for (int l = 0; l < m.layers; ++l) st = encoder_layer(tape, p, cfg, m, gr, inter_rot, is_world, l, st, options);
 
   // ---- decoder ---------------------------------------------------------------------------------------------
+  StageClock decoder_clock(times, &StageTimes::decoder_ms);
   return decode(tape, p, cfg, m, in, rows_of(st.X, 0, P), body_x, options);
 }
 

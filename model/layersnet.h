@@ -22,6 +22,7 @@
 #include "model/model_config.h"
 #include "model/model_input.h"
 
+#include <cstdint>
 #include <string>
 
 namespace layersnet::model {
@@ -30,6 +31,35 @@ template <class T>
 struct Predictions {
   ad::Var<T> vertex;  // (N, 9)
   ad::Var<T> patch;   // (P, 9)
+};
+
+// Wall-clock split of one forward (ms, steady clock) and the work each stage did, for the
+// cost benches (`layersnet bench scaling`, `bench scene`; model/README.md "Cost and scaling").
+// forward() overwrites the whole struct. The stages run one after another, so
+//   graph + encoder + attention + ffn + decoder <= total,
+// and each "of which" field is part of the field above it. Timing never changes a value:
+// the ops are synchronous (OpenMP inside), the clock is only read between them.
+struct StageTimes {
+  double graph_ms = 0;            // index lists of the attention graph (host loops over edges)
+  double encoder_ms = 0;          // token encoders + receiver/sender streams (every token)
+  double encoder_body_ms = 0;     //   of which: FFN_in of the U body tokens
+  double attention_ms = 0;        // simulator attention, all layers: q/r/s projections, edges, output projection
+  double attention_edges_ms = 0;  //   of which: per-edge work (RIA over world + inter + mesh rows, RET messages)
+  double attention_inter_ms = 0;  //     of which: the inter edges' RET messages ψ (body, wind, gravity)
+  double ffn_ms = 0;              // simulator FFN, LayerNorms and memory projections, all layers
+  double decoder_ms = 0;          // decoder (patch and vertex branches) and integration
+  double total_ms = 0;            // the whole forward() call
+  // Work of the same forward (rows per layer), for per-row cost models.
+  int64_t patch_rows = 0;      // P
+  int64_t token_rows = 0;      // P + A + T, T = U body + [wind] + gravity tokens
+  int64_t body_tokens = 0;     // U
+  int64_t ext_tokens = 0;      // wind (0/1) + gravity (1)
+  int64_t world_rows = 0;      // world edges (patch -> patch)
+  int64_t inter_rows = 0;      // inter edges (patch -> body/wind/gravity token), incl. body_rows
+  int64_t body_rows = 0;       // inter edges to body tokens
+  int64_t mesh_rows = 0;       // mesh edges incl. each patch's attribute token
+  int64_t vertex_rows = 0;     // N
+  int64_t candidate_rows = 0;  // decoder vertex-branch rows (candidate patches of all vertices)
 };
 
 // Implementation switches that do not change the function (tests compare both ways).
@@ -42,6 +72,8 @@ struct ForwardOptions {
   // Both compute eq. 7; they differ only in how eps enters the distance (fused:
   // sqrt(‖r−s‖² + eps²), composite: ‖r−s‖ + eps), i.e. by O(eps / ‖r−s‖) relative.
   bool fused_attention = true;
+  // When set, forward() fills it (see StageTimes); null: the clock is never read.
+  StageTimes* times = nullptr;
 };
 
 // One forward. `params` must come from register_params(config). With the tape recording,
