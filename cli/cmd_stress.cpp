@@ -1,0 +1,159 @@
+// `layersnet stress --checkpoint C [--dataset D] [--sequence ID] [--frames 600] [--winds 0,400,2000]
+// [--speed 5] [--precision-frames 100] [--json F]`: long rollouts of one checkpoint at constant
+// wind strengths and with the body sped up (eval/stress.h), and float32 against float64 over
+// the same checkpoint. Prints one table; exits 1 when any run breaks its bound.
+#include "cli/command_registry.h"
+#include "dataset/manifest.h"
+#include "dataset/stats.h"
+#include "eval/stress.h"
+#include "train/checkpoint.h"
+
+#include <nlohmann/json.hpp>
+#include <omp.h>
+
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+
+namespace {
+using namespace layersnet;
+using nlohmann::json;
+
+struct StressCliOptions {
+  std::string checkpoint;
+  std::string dataset;
+  std::string sequence;
+  int frames = 600;
+  std::vector<double> winds = {0, 400, 2000};
+  double speed = 5;
+  int precision_frames = 100;
+  int threads = 0;
+  std::string json_path;
+};
+
+json result_json(const eval::StressResult& r) {
+  return {{"label", r.label},
+          {"frames", r.frames},
+          {"speed", r.scene.speed},
+          {"wind_strength", r.scene.wind_strength},
+          {"finite", r.finite},
+          {"first_bad_frame", r.first_bad_frame},
+          {"max_distance_over_bound", r.max_bound_ratio},
+          {"max_distance_over_graph_diameter", r.max_diameter_ratio},
+          {"bounds_units", r.bounds},
+          {"max_vertex_speed_units_per_frame", r.max_vertex_speed},
+          {"max_body_speed_units_per_frame", r.max_body_speed},
+          {"ms_per_frame", r.ms_per_frame},
+          {"passed", r.passed()}};
+}
+
+int run_stress(const StressCliOptions& o) {
+  if (o.threads > 0) omp_set_num_threads(o.threads);
+  LoadedModel m = load_model(o.checkpoint);
+  const std::string root = o.dataset.empty() ? m.config.data.dataset : o.dataset;
+  const dataset::DatasetManifest manifest = dataset::read_manifest(root);
+  dataset::NormalisationStats stats;
+  if (!eval::stats_from_checkpoint(m.checkpoint.stats, stats)) {
+    if (!std::filesystem::exists(manifest.stats_path()))
+      throw std::runtime_error(o.checkpoint + ": no statistics in the checkpoint and no " + manifest.stats_path() +
+                               "; run `layersnet prepare " + root + "`");
+    stats = dataset::read_stats(manifest.stats_path());
+  }
+  std::string id = o.sequence;
+  if (id.empty()) {
+    for (const auto* split : {&manifest.test, &manifest.val, &manifest.train})
+      if (!split->empty()) {
+        id = split->front();
+        break;
+      }
+    if (id.empty()) throw std::runtime_error(root + ": the data set lists no sequences; give --sequence ID");
+  }
+  const dataset::Sequence source = dataset::read_sequence(manifest.sequence_path(id));
+  std::printf("stress: %s on %s sequence %s (%d frames, %lld garment vertices), rollouts of %d frames, %d thread(s)\n",
+              o.checkpoint.c_str(), root.c_str(), id.c_str(), source.info.num_frames,
+              static_cast<long long>(source.info.total_garment_vertices()), o.frames, omp_get_max_threads());
+
+  eval::ModelPredictor predictor("model", m.config, m.params, stats);
+  std::vector<eval::StressResult> results;
+  for (double w : o.winds) {
+    eval::StressScene s;
+    s.frames = o.frames;
+    s.wind_strength = w;
+    char label[64];
+    std::snprintf(label, sizeof label, "wind %g", w);
+    results.push_back(eval::stress_rollout(predictor, source, s, label));
+    std::fflush(stdout);
+  }
+  if (o.speed > 0) {
+    eval::StressScene s;
+    s.frames = o.frames;
+    s.speed = o.speed;
+    char label[64];
+    std::snprintf(label, sizeof label, "speed %gx", o.speed);
+    results.push_back(eval::stress_rollout(predictor, source, s, label));
+  }
+  const double mm = 1000.0 / source.info.scale;
+  std::printf("\n| run | frames | finite | first bad | max dist / bound | max dist / D | max speed mm/f (body) | ms/frame | |\n");
+  std::printf("|---|---|---|---|---|---|---|---|---|\n");
+  bool ok = true;
+  for (const auto& r : results) {
+    std::printf("| %s | %d | %s | %d | %.3f | %.3f | %.1f (%.1f) | %.1f | %s |\n", r.label.c_str(), r.frames,
+                r.finite ? "yes" : "NO", r.first_bad_frame, r.max_bound_ratio, r.max_diameter_ratio,
+                r.max_vertex_speed * mm, r.max_body_speed * mm, r.ms_per_frame, r.passed() ? "ok" : "FAIL");
+    ok = ok && r.passed();
+  }
+  std::printf("bound per garment (units):");
+  for (double b : results.empty() ? std::vector<double>{} : results[0].bounds) std::printf(" %.3f", b);
+  std::printf("  (c_g + %.1f x rest graph diameter; eval/stress.h)\n", eval::kStretchAllowance);
+
+  json j = {{"checkpoint", o.checkpoint}, {"dataset", root}, {"sequence", id}, {"runs", json::array()}};
+  for (const auto& r : results) j["runs"].push_back(result_json(r));
+  if (o.precision_frames > 0) {
+    const eval::PrecisionResult p = eval::compare_precision(m.config, m.params, stats, source, o.precision_frames);
+    std::printf("\nfloat32 vs float64 over %d frames: max divergence %.3g mm (per-vertex max), worst frame mean %.3g mm, "
+                "frame 1 mean %.3g mm, last frame mean %.3g mm; bound (model error on %s) %.3g mm; %s; ms/frame %.1f vs %.1f\n",
+                p.frames, p.worst_max() * p.mm_per_unit, p.worst_mean() * p.mm_per_unit,
+                p.mean_divergence.empty() ? 0.0 : p.mean_divergence.front() * p.mm_per_unit,
+                p.mean_divergence.empty() ? 0.0 : p.mean_divergence.back() * p.mm_per_unit, id.c_str(),
+                p.model_error * p.mm_per_unit, p.passed() ? "ok" : "FAIL", p.ms_float, p.ms_double);
+    ok = ok && p.passed();
+    j["precision"] = {{"frames", p.frames},
+                      {"max_divergence_units", p.max_divergence},
+                      {"mean_divergence_units", p.mean_divergence},
+                      {"worst_mean_mm", p.worst_mean() * p.mm_per_unit},
+                      {"worst_max_mm", p.worst_max() * p.mm_per_unit},
+                      {"bound_model_error_mm", p.model_error * p.mm_per_unit},
+                      {"ms_per_frame_float", p.ms_float},
+                      {"ms_per_frame_double", p.ms_double},
+                      {"finite", p.finite},
+                      {"passed", p.passed()}};
+  }
+  j["passed"] = ok;
+  if (!o.json_path.empty()) {
+    std::ofstream out(o.json_path);
+    out << j.dump(1) << "\n";
+    if (!out) throw std::runtime_error(o.json_path + ": cannot write the JSON report; check the folder exists");
+    std::printf("wrote %s\n", o.json_path.c_str());
+  }
+  std::printf("stress: %s\n", ok ? "every run within its bound" : "FAILED: a run broke its bound (see the table)");
+  return ok ? 0 : 1;
+}
+
+}  // namespace
+
+LAYERSNET_COMMAND(stress, "Long rollouts at extreme wind and body speed, and float32 vs float64, with bounds",
+                  [](CLI::App& sub) {
+                    auto o = std::make_shared<StressCliOptions>();
+                    sub.add_option("--checkpoint", o->checkpoint, "checkpoint to test")->required();
+                    sub.add_option("--dataset", o->dataset, "data set folder (default: the checkpoint's data.dataset)");
+                    sub.add_option("--sequence", o->sequence, "sequence id (default: the first test sequence)");
+                    sub.add_option("--frames", o->frames, "frames of each stress sequence (rollout: frames - 3)");
+                    sub.add_option("--winds", o->winds, "constant wind strengths, one run each")->delimiter(',');
+                    sub.add_option("--speed", o->speed, "body speed factor of the extra run (0 = none)");
+                    sub.add_option("--precision-frames", o->precision_frames, "frames of the float32/float64 comparison (0 = skip)");
+                    sub.add_option("--threads", o->threads, "OpenMP threads (0 = all)");
+                    sub.add_option("--json", o->json_path, "write the results as JSON to this file");
+                    return [o] { return run_stress(*o); };
+                  });

@@ -1,0 +1,312 @@
+// Stress scenes, distance bounds and the float32/float64 comparison (see stress.h).
+#include "eval/stress.h"
+
+#include "dataset/neighbours.h"
+#include "dataset/wind.h"
+#include "eval/evaluate.h"
+#include "model/layersnet.h"
+#include "model/params_layout.h"
+#include "model/sample_input.h"
+#include "train/train_data.h"
+
+#include <algorithm>
+#include <cmath>
+#include <functional>
+#include <limits>
+#include <queue>
+#include <stdexcept>
+
+namespace layersnet::eval {
+
+namespace {
+
+// Source time of stress frame t: forward over [0, T−1], then backward, ...
+double pingpong(double x, int T) {
+  const double period = 2.0 * (T - 1);
+  const double m = std::fmod(x, period);
+  return m <= T - 1 ? m : period - m;
+}
+
+// Rows of frame u (fractional) of a (T·n, 3) block, linearly interpolated.
+Points interpolate(const Points& block, int n, int T, double u) {
+  const int f0 = std::min(static_cast<int>(std::floor(u)), T - 1), f1 = std::min(f0 + 1, T - 1);
+  const float w = static_cast<float>(u - f0);
+  const auto a = block.middleRows(static_cast<Eigen::Index>(f0) * n, n);
+  const auto b = block.middleRows(static_cast<Eigen::Index>(f1) * n, n);
+  return (1.f - w) * a + w * b;
+}
+
+double median(std::vector<double> v) {
+  if (v.empty()) return 0;
+  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
+  return v[v.size() / 2];
+}
+
+// Rotation (w, x, y, z) that maps +z (the wind axis of the spec) to +x: 90° about y.
+Eigen::Vector4f plus_x_wind() {
+  const float h = static_cast<float>(std::sqrt(0.5));
+  return {h, 0.f, h, 0.f};
+}
+
+}  // namespace
+
+dataset::Sequence make_stress_sequence(const dataset::Sequence& source, const StressScene& scene) {
+  const dataset::SequenceInfo& in = source.info;
+  const int T = in.num_frames, F = scene.frames, B = in.num_body_vertices;
+  if (F < 4 || !(scene.speed > 0) || T < 2)
+    throw std::invalid_argument(in.path + ": a stress scene needs frames >= 4 (got " + std::to_string(F) +
+                                "), speed > 0 (got " + std::to_string(scene.speed) + ") and a source of >= 2 frames");
+  dataset::Sequence out;
+  out.info = in;
+  out.info.path = in.path + " (stress)";
+  out.info.num_frames = F;
+  out.info.has_translation = true;
+  out.info.translation.resize(F, 3);
+  out.frames.first = 0;
+  out.frames.count = F;
+  out.frames.body.resize(static_cast<Eigen::Index>(F) * B, 3);
+  out.frames.garments.assign(in.num_garments(), Points());
+  for (int g = 0; g < in.num_garments(); ++g)
+    out.frames.garments[g].resize(static_cast<Eigen::Index>(F) * in.garments[g].num_vertices, 3);
+  // The source's translation as a (T, 3) block (zeros when the file has none).
+  Points translation = in.translation.rows() == T ? in.translation : Points::Zero(T, 3);
+
+  // Wind: constant strength along the first windy segment's rotation, or the source's.
+  const auto segments = dataset::wind_segments(in);
+  Eigen::Vector4f wind_q = plus_x_wind();
+  for (const auto& s : segments)
+    if (s.strength > 0) {
+      wind_q = s.rotation;
+      break;
+    }
+  const bool constant_wind = scene.wind_strength >= 0;
+  out.info.has_wind = constant_wind || in.has_wind;
+  if (out.info.has_wind) {
+    out.info.wind_rotation.resize(F, 4);
+    out.info.wind_strength.resize(F);
+  }
+  for (int t = 0; t < F; ++t) {
+    const double u = pingpong(scene.speed * t, T);
+    out.frames.body.middleRows(static_cast<Eigen::Index>(t) * B, B) = interpolate(source.frames.body, B, T, u);
+    out.info.translation.row(t) = interpolate(translation, 1, T, u);
+    for (int g = 0; g < in.num_garments(); ++g) {
+      const int n = in.garments[g].num_vertices;
+      out.frames.garments[g].middleRows(static_cast<Eigen::Index>(t) * n, n) =
+          interpolate(source.frames.garments[g], n, T, u);
+    }
+    if (constant_wind) {
+      out.info.wind_rotation.row(t) = wind_q.transpose();
+      out.info.wind_strength[t] = static_cast<float>(scene.wind_strength);
+    } else if (in.has_wind) {
+      const int f = std::min(static_cast<int>(std::lround(u)), T - 1);  // piecewise constant in the data
+      out.info.wind_rotation.row(t) = in.wind_rotation.row(f);
+      out.info.wind_strength[t] = in.wind_strength[f];
+    }
+  }
+  return out;
+}
+
+std::vector<double> garment_graph_diameters(const dataset::Sequence& seq) {
+  std::vector<double> out;
+  for (int g = 0; g < seq.info.num_garments(); ++g) {
+    const dataset::GarmentMesh& mesh = seq.info.garments[g];
+    const int n = mesh.num_vertices;
+    const Points x = mesh.rest.rows() == n ? mesh.rest : Points(seq.garment_at(g, 0));
+    // Undirected edge lists with rest lengths.
+    std::vector<std::vector<std::pair<int, double>>> adj(static_cast<size_t>(n));
+    for (int f = 0; f < mesh.num_faces(); ++f)
+      for (int c = 0; c < 3; ++c) {
+        const int a = mesh.faces(f, c), b = mesh.faces(f, (c + 1) % 3);
+        const double len = (x.row(a) - x.row(b)).cast<double>().norm();
+        adj[static_cast<size_t>(a)].push_back({b, len});
+        adj[static_cast<size_t>(b)].push_back({a, len});
+      }
+    double diameter = 0;
+    std::vector<double> dist(static_cast<size_t>(n));
+    using Item = std::pair<double, int>;
+    for (int s = 0; s < n; ++s) {
+      std::fill(dist.begin(), dist.end(), std::numeric_limits<double>::infinity());
+      std::priority_queue<Item, std::vector<Item>, std::greater<Item>> queue;
+      dist[static_cast<size_t>(s)] = 0;
+      queue.push({0.0, s});
+      while (!queue.empty()) {
+        const auto [d, v] = queue.top();
+        queue.pop();
+        if (d > dist[static_cast<size_t>(v)]) continue;
+        for (const auto& [w, len] : adj[static_cast<size_t>(v)])
+          if (d + len < dist[static_cast<size_t>(w)]) {
+            dist[static_cast<size_t>(w)] = d + len;
+            queue.push({d + len, w});
+          }
+      }
+      // A garment in several pieces: the farthest reachable vertex (each piece is bounded
+      // by its own diameter; an unreachable vertex is not a path).
+      for (double d : dist)
+        if (std::isfinite(d)) diameter = std::max(diameter, d);
+    }
+    out.push_back(diameter);
+  }
+  return out;
+}
+
+std::vector<double> garment_body_distances(const dataset::Sequence& seq, int t, const Points& x) {
+  std::vector<double> out;
+  const Points body = seq.body_at(t);
+  Eigen::Index row = 0;
+  for (int g = 0; g < seq.info.num_garments(); ++g) {
+    const int n = seq.info.garments[g].num_vertices;
+    const auto part = x.middleRows(row, n);
+    row += n;
+    if (!part.allFinite()) {
+      out.push_back(std::numeric_limits<double>::quiet_NaN());
+      continue;
+    }
+    const dataset::NearestBody nn = dataset::nearest_body(part, body);
+    double m = 0;
+    for (float d : nn.distance) m = std::max(m, static_cast<double>(d));
+    out.push_back(m);
+  }
+  return out;
+}
+
+std::vector<double> garment_distance_bounds(const dataset::Sequence& seq) {
+  const std::vector<double> diameters = garment_graph_diameters(seq);
+  std::vector<double> out;
+  const Points body = seq.body_at(0);
+  for (int g = 0; g < seq.info.num_garments(); ++g) {
+    const dataset::NearestBody nn = dataset::nearest_body(seq.garment_at(g, 0), body);
+    const double gap = nn.distance.empty() ? 0.0 : *std::min_element(nn.distance.begin(), nn.distance.end());
+    out.push_back(gap + kStretchAllowance * diameters[static_cast<size_t>(g)]);
+  }
+  return out;
+}
+
+StressResult stress_rollout(Predictor& predictor, const dataset::Sequence& source, const StressScene& scene,
+                            const std::string& label) {
+  const dataset::Sequence seq = make_stress_sequence(source, scene);
+  StressResult res;
+  res.label = label;
+  res.scene = scene;
+  res.bounds = garment_distance_bounds(seq);
+  const std::vector<double> diameters = garment_graph_diameters(seq);
+  for (int t = 1; t < seq.info.num_frames; ++t) {
+    const auto v = seq.body_at(t) - seq.body_at(t - 1);
+    res.max_body_speed = std::max(res.max_body_speed, static_cast<double>(v.rowwise().norm().maxCoeff()));
+  }
+  const Rollout r = rollout(predictor, seq, 2, seq.info.num_frames - 3);
+  res.frames = static_cast<int>(r.frames.size());
+  res.finite = r.diverged_at < 0;
+  Points prev = garments_at(seq, 2);
+  for (int k = 0; k < res.frames; ++k) {
+    const Points& x = r.frames[static_cast<size_t>(k)];
+    if (!x.allFinite()) {
+      if (res.first_bad_frame < 0) res.first_bad_frame = k;
+      break;
+    }
+    res.max_vertex_speed = std::max(res.max_vertex_speed, static_cast<double>((x - prev).rowwise().norm().maxCoeff()));
+    prev = x;
+    const std::vector<double> d = garment_body_distances(seq, r.first_frame + k, x);
+    for (size_t g = 0; g < d.size(); ++g) {
+      const double ratio = d[g] / res.bounds[g];
+      res.max_bound_ratio = std::max(res.max_bound_ratio, ratio);
+      if (diameters[g] > 0) res.max_diameter_ratio = std::max(res.max_diameter_ratio, d[g] / diameters[g]);
+      if (ratio > 1 && res.first_bad_frame < 0) res.first_bad_frame = k;
+    }
+  }
+  std::vector<double> ms;
+  for (double m : r.step_ms)
+    if (m > 0) ms.push_back(m);
+  res.ms_per_frame = median(ms);
+  return res;
+}
+
+DoubleModelPredictor::DoubleModelPredictor(Config config, const ad::ParamStore<float>& params,
+                                           dataset::NormalisationStats stats)
+    : config_(std::move(config)), stats_(std::move(stats)), sample_options_(sample_options_for(config_.model)) {
+  model::register_params(params_, config_.model);
+  if (params_.total_size() != params.total_size())
+    throw std::invalid_argument("float64 model: the float32 parameters hold " + std::to_string(params.total_size()) +
+                                " values, the config's layout " + std::to_string(params_.total_size()) +
+                                "; pass the parameters loaded with the same config");
+  std::copy(params.values().begin(), params.values().end(), params_.values().begin());
+}
+
+void DoubleModelPredictor::begin(const dataset::Sequence& seq) {
+  structure_ = dataset::build_structure(seq.info, sample_options_.patch_size);
+}
+
+// The same window as ModelPredictor::step (eval/rollout.cpp); only the forward is double.
+Points DoubleModelPredictor::step(const dataset::Sequence& seq, int t, const Points& x_prev2, const Points& x_prev,
+                                  const Points& x_now) {
+  const dataset::SequenceInfo& info = seq.info;
+  if (!structure_) begin(seq);
+  dataset::FrameWindow w;
+  w.first = t - 2;
+  w.count = 4;
+  const int B = info.num_body_vertices;
+  w.body = seq.frames.body.middleRows(static_cast<Eigen::Index>(t - 2) * B, 4 * static_cast<Eigen::Index>(B));
+  const Points* hist[3] = {&x_prev2, &x_prev, &x_now};
+  Eigen::Index offset = 0;
+  for (int g = 0; g < info.num_garments(); ++g) {
+    const int n = info.garments[g].num_vertices;
+    Points x(4 * static_cast<Eigen::Index>(n), 3);
+    for (int k = 0; k < 3; ++k) x.middleRows(k * n, n) = hist[k]->middleRows(offset, n);
+    x.middleRows(3 * n, n) = seq.garment_at(g, t + 1);
+    w.garments.push_back(std::move(x));
+    offset += n;
+  }
+  const dataset::TrainingSample sample = dataset::build_sample(info, w, t, stats_, structure_, sample_options_);
+  const model::ModelInput<double> input =
+      model::cast_input<double>(model::model_input_from_sample(sample, stats_, config_.model));
+  tape_.reset();
+  ad::NoRecord<double> off(tape_);
+  const model::Predictions<double> pred = model::forward(tape_, params_, config_.model, input);
+  const auto v = pred.vertex.val();
+  Points x = v.leftCols(3).cast<float>();
+  x.rowwise() += sample.root_translation_next.transpose();
+  return x;
+}
+
+double PrecisionResult::worst_mean() const {
+  double m = 0;
+  for (double d : mean_divergence) m = std::isfinite(d) ? std::max(m, d) : std::numeric_limits<double>::infinity();
+  return m;
+}
+double PrecisionResult::worst_max() const {
+  double m = 0;
+  for (double d : max_divergence) m = std::isfinite(d) ? std::max(m, d) : std::numeric_limits<double>::infinity();
+  return m;
+}
+
+PrecisionResult compare_precision(const Config& config, const ad::ParamStore<float>& params,
+                                  const dataset::NormalisationStats& stats, const dataset::Sequence& source,
+                                  int frames) {
+  ModelPredictor single("float32", config, params, stats);
+  DoubleModelPredictor dbl(config, params, stats);
+  PrecisionResult res;
+  res.mm_per_unit = 1000.0 / source.info.scale;
+  // The model's own error level on the source (every frame it has).
+  const Rollout own = rollout(single, source, 2, source.info.num_frames - 3);
+  res.model_error = own.diverged_at < 0 ? score_rollout(source, own, {}).error : std::numeric_limits<double>::infinity();
+
+  StressScene scene;
+  scene.frames = frames + 3;
+  const dataset::Sequence seq = make_stress_sequence(source, scene);
+  const Rollout a = rollout(single, seq, 2, frames), b = rollout(dbl, seq, 2, frames);
+  res.frames = static_cast<int>(a.frames.size());
+  res.finite = a.diverged_at < 0 && b.diverged_at < 0;
+  for (int k = 0; k < res.frames; ++k) {
+    const Eigen::VectorXf d = (a.frames[static_cast<size_t>(k)] - b.frames[static_cast<size_t>(k)]).rowwise().norm();
+    const bool ok = d.allFinite();
+    res.max_divergence.push_back(ok ? d.maxCoeff() : std::numeric_limits<double>::quiet_NaN());
+    res.mean_divergence.push_back(ok ? d.cast<double>().mean() : std::numeric_limits<double>::quiet_NaN());
+  }
+  std::vector<double> ms_a, ms_b;
+  for (double m : a.step_ms) if (m > 0) ms_a.push_back(m);
+  for (double m : b.step_ms) if (m > 0) ms_b.push_back(m);
+  res.ms_float = median(ms_a);
+  res.ms_double = median(ms_b);
+  return res;
+}
+
+}  // namespace layersnet::eval

@@ -1,0 +1,119 @@
+#pragma once
+// Stability at the extremes (issue 8 point 4): long rollouts of a model under conditions
+// beyond its training data, and float32 against float64 on the same checkpoint.
+//
+// Stress scene. A sequence of F frames built in memory from a real one (T frames):
+//   time      stress frame t plays source time u(t) = pingpong(s·t) in [0, T−1] (forward,
+//             then backward, ...), linearly interpolated between source frames, so every
+//             body velocity is s× the data's (s = speed) and the motion never runs out;
+//   body      vertices and root translation at u(t);
+//   garments  at u(t) too: frames 0..2 are the rollout's initial state (consistent with the
+//             resampled body); later frames are placeholders that only fill the sample's
+//             unused target slot (ModelPredictor::step) — they are not ground truth;
+//   wind      strength S >= 0: constant strength S along the source's first windy segment's
+//             direction (+x when the source has none); S < 0: the source's own wind at u(t).
+//
+// Bound on every predicted vertex (scene units). A worn garment touches the body (or the
+// layer under it, which touches the body), so its nearest vertex is within c_g of the body,
+// c_g = the garment's smallest vertex-to-body distance at frame 0 (the layer gap). Every
+// other vertex is joined to that one by a path of mesh edges; at most kStretchAllowance
+// times its rest length (the generator's data stretches edges by at most 18 %, its
+// q_max_edge_stretch), a path is never longer than the mesh's graph diameter D_g (longest
+// shortest edge path, rest lengths). Hence, for every vertex v of garment g at every frame:
+//   dist(v, body_t) <= B_g = c_g + kStretchAllowance · D_g.
+// dist is to the nearest body VERTEX (an upper bound of the distance to the body surface).
+// D_g is an upper bound of the garment's Euclidean diameter in any unstretched pose, so the
+// bound holds for cloth blown straight out by wind, and fails only for cloth that came off
+// the body or stretched by more than the allowance — i.e. an unstable rollout.
+#include "autodiff/params.h"
+#include "dataset/sequence.h"
+#include "dataset/stats.h"
+#include "eval/rollout.h"
+#include "train/config.h"
+
+#include <string>
+#include <vector>
+
+namespace layersnet::eval {
+
+inline constexpr double kStretchAllowance = 1.2;  // edge length / rest length allowed (data: <= 1.18)
+
+struct StressScene {
+  int frames = 600;             // F: frames of the built sequence (D-LAYERS' longest: 600)
+  double speed = 1.0;           // s: body and root velocity factor (> 0)
+  double wind_strength = -1.0;  // S >= 0: constant wind of this strength; < 0: the source's wind
+};
+
+// Builds the stress sequence (see above). Throws std::invalid_argument for frames < 4 or
+// speed <= 0, naming the source file.
+dataset::Sequence make_stress_sequence(const dataset::Sequence& source, const StressScene& scene);
+
+// Per garment (G,): graph diameter D_g of the rest mesh (the file's /rest template, else
+// frame 0), scene units, via Dijkstra from every vertex (N_g² log N_g: fine for N_g ~ 10³).
+std::vector<double> garment_graph_diameters(const dataset::Sequence& seq);
+// Per garment (G,): B_g = c_g + kStretchAllowance · D_g (see above), from frame 0.
+std::vector<double> garment_distance_bounds(const dataset::Sequence& seq);
+
+// Largest distance of each garment's vertices to their nearest body vertex at frame t of
+// `seq`: x (N, 3) world in layer order -> (G,), scene units; NaN if x has a NaN.
+std::vector<double> garment_body_distances(const dataset::Sequence& seq, int t, const Points& x);
+
+struct StressResult {
+  std::string label;            // e.g. "wind 2000", "speed 5x"
+  StressScene scene;
+  int frames = 0;               // predicted frames
+  bool finite = true;
+  int first_bad_frame = -1;     // first rollout index that is non-finite or out of bound; -1 none
+  double max_bound_ratio = 0;   // max over frames and garments of dist / B_g (pass: <= 1)
+  double max_diameter_ratio = 0;  // max over frames and garments of dist / D_g
+  double max_vertex_speed = 0;  // garment vertices, scene units per frame
+  double max_body_speed = 0;    // body vertices in the stress sequence, scene units per frame
+  double ms_per_frame = 0;      // median prediction time
+  std::vector<double> bounds;   // (G,) B_g
+  bool passed() const { return finite && first_bad_frame < 0; }
+};
+
+// Rolls `predictor` over make_stress_sequence(source, scene) from input frame 2 to the end.
+StressResult stress_rollout(Predictor& predictor, const dataset::Sequence& source, const StressScene& scene,
+                            const std::string& label);
+
+// The model predictor in float64: the same checkpoint's parameters converted to double, the
+// same samples (built in float32 by the data layer, as for the float model) cast with
+// model::cast_input; only the network's arithmetic differs.
+class DoubleModelPredictor : public Predictor {
+ public:
+  DoubleModelPredictor(Config config, const ad::ParamStore<float>& params, dataset::NormalisationStats stats);
+  std::string name() const override { return "float64"; }
+  void begin(const dataset::Sequence& seq) override;
+  Points step(const dataset::Sequence& seq, int t, const Points& x_prev2, const Points& x_prev,
+              const Points& x_now) override;
+
+ private:
+  Config config_;
+  ad::ParamStore<double> params_;
+  dataset::NormalisationStats stats_;
+  dataset::SampleOptions sample_options_;
+  std::shared_ptr<const dataset::SequenceStructure> structure_;
+  ad::Tape<double> tape_;
+};
+
+// float32 vs float64 rollouts of one checkpoint over `frames` frames of the stress sequence
+// with speed 1 and the source's wind. Bound: the largest per-frame mean divergence must stay
+// below the float model's own mean error against the ground truth on the source sequence
+// (all its frames from input frame 2): rounding then changes the rollout by less than the
+// model is wrong anyway.
+struct PrecisionResult {
+  int frames = 0;
+  std::vector<double> max_divergence, mean_divergence;  // (frames,) per-vertex max / mean, scene units
+  double model_error = 0;   // float model vs ground truth on the source, mean per vertex, scene units
+  double mm_per_unit = 100; // 1000 / scale
+  double ms_float = 0, ms_double = 0;  // median per frame
+  bool finite = true;
+  double worst_mean() const;
+  double worst_max() const;
+  bool passed() const { return finite && worst_mean() < model_error; }
+};
+PrecisionResult compare_precision(const Config& config, const ad::ParamStore<float>& params,
+                                  const dataset::NormalisationStats& stats, const dataset::Sequence& source, int frames);
+
+}  // namespace layersnet::eval
