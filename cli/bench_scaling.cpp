@@ -1,0 +1,491 @@
+// `layersnet bench scaling`: rollout ms/frame and training step ms of one outfit re-meshed at
+// several garment vertex counts (issue 8 point 2), with the split of where the time goes.
+//
+// The outfit: two open cylindrical garment grids of fixed metric extent (inner 5.0 x 4.0,
+// outer 6.25 x 4.75 scene units, radii 1.235 / 1.26) around a fixed body (106 x 65 = 6890
+// vertices, radius 1.2; the body never changes with the garment resolution). At a target N
+// the garment spacing is h = sqrt(area / N). Two patch modes:
+//   metric    patch = UV cell of fixed metric size (--patch-size, scene units): P constant,
+//             only the per-vertex parts (input build, decoder) grow with N;
+//   vertices  patch = --cell x --cell grid quads: P ∝ N, world neighbours of a patch grow too
+//             (R is metric, patches shrink), so the attention rows grow faster than N.
+// Model: ModelConfig defaults (the official sizes, which configs/default.toml keeps; its
+// patch_size is a UV size of the data set path and does not apply here), random init.
+//
+// Per size and thread count: input build (model/input_builder.h, incl. neighbour search;
+// the searches are also timed alone by re-running the same dataset/neighbours.h calls),
+// forward stages (model::StageTimes), inference = input build + forward (no tape), training
+// step = forward + losses + backward + Adam. Medians of --iters after --warmup.
+#include "autodiff/optim.h"
+#include "cli/command_registry.h"
+#include "dataset/neighbours.h"
+#include "losses/losses.h"
+#include "model/input_builder.h"
+#include "model/layersnet.h"
+#include "model/params_layout.h"
+#include "model/synthetic_scene.h"
+
+#include <Eigen/Core>
+#include <malloc.h>
+#include <nlohmann/json.hpp>
+#include <omp.h>
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <functional>
+#include <map>
+#include <set>
+#include <sstream>
+#include <stdexcept>
+
+namespace {
+
+using namespace layersnet;
+
+struct ScalingOptions {
+  std::string sizes = "1000,2000,4000,8000,16000,32000";
+  std::string threads = "1,2";
+  std::string modes = "metric,vertices";
+  double patch_size = 0.25;  // metric mode: patch edge, scene units (~10 vertices per patch at N = 8000)
+  int cell = 3;              // vertices mode: quads per patch side (16 vertices incl. borders)
+  int iters = 3;
+  int warmup = 1;
+  bool no_train = false;
+  std::string json, png;
+};
+
+struct OutfitGarment {
+  double around, along, radius, z0;  // extent (scene units), nominal radius, first row height
+};
+constexpr OutfitGarment kOutfit[2] = {{5.0, 4.0, 1.235, 0.0}, {6.25, 4.75, 1.26, -0.2}};
+
+double now_ms() {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+double median(std::vector<double> v) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  const std::size_t n = v.size();
+  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+std::string uptime_load() {
+  std::ifstream f("/proc/loadavg");
+  double a = 0, b = 0, c = 0;
+  f >> a >> b >> c;
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.2f %.2f %.2f", a, b, c);
+  return buf;
+}
+template <class T>
+std::vector<T> parse_list(const std::string& list, const char* what) {
+  std::vector<T> out;
+  std::stringstream ss(list);
+  std::string item;
+  while (std::getline(ss, item, ',')) {
+    if (item.empty()) continue;
+    if constexpr (std::is_same_v<T, std::string>) {
+      out.push_back(item);
+    } else {
+      const long v = std::stol(item);
+      if (v < 1) throw std::runtime_error(std::string("bench scaling: ") + what + " '" + list + "' needs positive numbers");
+      out.push_back(static_cast<T>(v));
+    }
+  }
+  if (out.empty()) throw std::runtime_error(std::string("bench scaling: ") + what + " is empty");
+  return out;
+}
+
+// Patches from grid quads: quad (i, j) of garment g goes to cell_of(g, i, j); cells numbered
+// densely per garment in (u, v) order (as model/synthetic_scene.cpp does for its fixed cells).
+// Rewrites v2p, p2v, own_patch, mesh adjacency and patch_garment of `s`, whose faces must be
+// the synthetic scene's (two per quad, garments in order, i-major).
+using CellOf = std::function<std::array<int, 2>(int g, int i, int j)>;
+void repatch(model::SceneWindow& s, const std::vector<std::array<int, 2>>& grids, const CellOf& cell_of) {
+  std::vector<std::array<int, 3>> face_cell;  // (g, cu, cv) of every face
+  for (int g = 0; g < static_cast<int>(grids.size()); ++g)
+    for (int i = 0; i + 1 < grids[g][0]; ++i)
+      for (int j = 0; j + 1 < grids[g][1]; ++j) {
+        const auto c = cell_of(g, i, j);
+        face_cell.push_back({g, c[0], c[1]}), face_cell.push_back({g, c[0], c[1]});
+      }
+  if (face_cell.size() * 3 != s.faces.size())
+    throw std::runtime_error("bench scaling: repatch expects 2 faces per grid quad; the synthetic scene changed");
+  std::set<std::array<int, 3>> cells(face_cell.begin(), face_cell.end());
+  std::map<std::array<int, 3>, int32_t> id;
+  s.patch_garment.clear();
+  for (const auto& c : cells) id.emplace(c, static_cast<int32_t>(id.size())), s.patch_garment.push_back(c[0]);
+  s.P = static_cast<int64_t>(id.size());
+  std::vector<std::set<int32_t>> v2p(s.N), adj(s.P);
+  for (std::size_t f = 0; f < face_cell.size(); ++f)
+    for (int k = 0; k < 3; ++k) v2p[s.faces[3 * f + k]].insert(id[face_cell[f]]);
+  for (std::size_t f = 0; f < s.faces.size(); f += 3)
+    for (int k = 0; k < 3; ++k)
+      for (int32_t pu : v2p[s.faces[f + k]])
+        for (int32_t pw : v2p[s.faces[f + (k + 1) % 3]]) adj[pu].insert(pw), adj[pw].insert(pu);
+  std::vector<std::vector<int32_t>> p2v(s.P);
+  s.v2p_offsets.assign(1, 0), s.v2p_patches.clear(), s.own_patch.clear();
+  for (int64_t v = 0; v < s.N; ++v) {
+    for (int32_t p : v2p[v]) s.v2p_patches.push_back(p), p2v[p].push_back(static_cast<int32_t>(v));
+    s.v2p_offsets.push_back(static_cast<int32_t>(s.v2p_patches.size()));
+    s.own_patch.push_back(v2p[v].empty() ? -1 : *v2p[v].begin());
+  }
+  s.p2v_offsets.assign(1, 0), s.p2v_vertices.clear(), s.adj_offsets.assign(1, 0), s.adj_patches.clear();
+  for (int64_t p = 0; p < s.P; ++p) {
+    s.p2v_vertices.insert(s.p2v_vertices.end(), p2v[p].begin(), p2v[p].end());
+    s.p2v_offsets.push_back(static_cast<int32_t>(s.p2v_vertices.size()));
+    s.adj_patches.insert(s.adj_patches.end(), adj[p].begin(), adj[p].end());
+    s.adj_offsets.push_back(static_cast<int32_t>(s.adj_patches.size()));
+  }
+}
+
+// The outfit at about `target` garment vertices (see the file comment).
+model::SceneWindow make_outfit(int64_t target, const std::string& mode, const ScalingOptions& o) {
+  double area = 0, zmax = 0;
+  for (const auto& g : kOutfit) area += g.around * g.along, zmax = std::max(zmax, g.z0 + g.along);
+  const double h = std::sqrt(area / static_cast<double>(target));
+  model::SyntheticSceneOptions so;
+  so.garments.clear();
+  for (const auto& g : kOutfit) {
+    so.garments.push_back({static_cast<int>(std::lround(g.around / h)) + 1, static_cast<int>(std::lround(g.along / h)) + 1});
+    so.garment_radius.push_back(g.radius), so.garment_z0.push_back(g.z0);
+  }
+  so.cell = {1 << 20, 1 << 20};  // one patch per garment here (cheap); repatch() below sets the real ones
+  so.spacing = h;
+  so.body = {106, 65};
+  so.body_radius = 1.2;
+  so.body_z = {-0.6, zmax + 0.6};
+  so.wind = true;
+  so.seed = 0;
+  model::SceneWindow s = model::make_synthetic_scene(so);
+  CellOf cell_of;
+  if (mode == "metric") {
+    cell_of = [&o, h](int g, int i, int j) {
+      const int nu = std::max(1, static_cast<int>(std::lround(kOutfit[g].around / o.patch_size)));
+      const int nv = std::max(1, static_cast<int>(std::lround(kOutfit[g].along / o.patch_size)));
+      const int cu = std::min(nu - 1, static_cast<int>(std::floor((i + 0.5) * h / o.patch_size)));
+      const int cv = std::min(nv - 1, static_cast<int>(std::floor((j + 0.5) * h / o.patch_size)));
+      return std::array<int, 2>{cu, cv};
+    };
+  } else if (mode == "vertices") {
+    cell_of = [&o](int, int i, int j) { return std::array<int, 2>{i / o.cell, j / o.cell}; };
+  } else {
+    throw std::runtime_error("bench scaling: --modes item '" + mode + "' is unknown; use metric and/or vertices");
+  }
+  repatch(s, so.garments, cell_of);
+  return s;
+}
+
+// The input builder's neighbour searches alone (same dataset/neighbours.h calls and sizes).
+struct SearchMs {
+  double world = 0, body = 0, nearest = 0, candidates = 0;
+  double total() const { return world + body + nearest + candidates; }
+};
+SearchMs time_searches(const model::SceneWindow& s, const ModelConfig& mc) {
+  auto rel = [](const std::vector<double>& x, const double r[3]) {
+    std::vector<double> o(x.size());
+    for (std::size_t i = 0; i < x.size(); ++i) o[i] = x[i] - r[i % 3];
+    return o;
+  };
+  auto pts = [](const std::vector<double>& x) {
+    dataset::Points p(static_cast<Eigen::Index>(x.size() / 3), 3);
+    for (std::size_t i = 0; i < x.size(); ++i) p(static_cast<Eigen::Index>(i / 3), static_cast<Eigen::Index>(i % 3)) = static_cast<float>(x[i]);
+    return p;
+  };
+  const auto xt = rel(s.x_t, s.root[2]), b1 = rel(s.body_tp1, s.root[3]);
+  std::vector<double> centre(3 * s.P, 0.0);
+  for (int64_t p = 0; p < s.P; ++p) {
+    const int32_t b = s.p2v_offsets[p], e = s.p2v_offsets[p + 1];
+    for (int32_t k = b; k < e; ++k)
+      for (int c = 0; c < 3; ++c) centre[3 * p + c] += xt[3 * s.p2v_vertices[k] + c] / (e - b);
+  }
+  SearchMs ms;
+  double t0 = now_ms();
+  const auto cp = pts(centre), bp = pts(b1), xp = pts(xt);
+  dataset::Csr adjacency{s.adj_offsets, s.adj_patches};
+  const auto w = dataset::world_edges(cp, adjacency, static_cast<float>(mc.world_radius));
+  ms.world = now_ms() - t0;
+  t0 = now_ms();
+  dataset::NeighbourOptions no;
+  no.body_radius = static_cast<float>(mc.body_radius);
+  no.body_k = mc.body_neighbors;
+  no.body_query = mc.body_query == "first" ? dataset::BodyQuery::kFirstInIndexOrder : dataset::BodyQuery::kNearest;
+  no.official_padding = false;
+  const auto nb = dataset::body_neighbours(cp, bp, no);
+  ms.body = now_ms() - t0;
+  t0 = now_ms();
+  const auto n1 = dataset::nearest_body(cp, bp), n2 = dataset::nearest_body(xp, bp);
+  ms.nearest = now_ms() - t0;
+  t0 = now_ms();
+  std::vector<int32_t> co, ci;
+  model::decoder_candidates(xt, centre, s.own_patch, s.adj_offsets, s.adj_patches, mc.decoder_patch_candidates, co, ci);
+  ms.candidates = now_ms() - t0;
+  if (w.items.size() + nb.hits.size() + n1.index.size() + n2.index.size() + ci.size() == 0) std::printf(" ");  // keep the work
+  return ms;
+}
+
+struct Row {
+  std::string mode;
+  int threads = 1;
+  int64_t N = 0, P = 0, B = 0, U = 0, E_world = 0, E_inter = 0, E_body = 0, E_mesh = 0, E_cand = 0;
+  double h = 0, input_ms = 0, forward_ms = 0, infer_ms = 0;
+  SearchMs search;
+  model::StageTimes stages;  // medians, inference forward
+  double train_ms = 0, train_forward_ms = 0, losses_ms = 0, backward_ms = 0, adam_ms = 0;
+};
+
+model::StageTimes median_times(const std::vector<model::StageTimes>& v) {
+  model::StageTimes m = v.empty() ? model::StageTimes{} : v.front();
+  auto med = [&](double model::StageTimes::*f) {
+    std::vector<double> x;
+    for (const auto& t : v) x.push_back(t.*f);
+    m.*f = median(x);
+  };
+  for (auto f : {&model::StageTimes::graph_ms, &model::StageTimes::encoder_ms, &model::StageTimes::encoder_body_ms,
+                 &model::StageTimes::attention_ms, &model::StageTimes::attention_edges_ms,
+                 &model::StageTimes::attention_inter_ms, &model::StageTimes::ffn_ms, &model::StageTimes::decoder_ms,
+                 &model::StageTimes::total_ms})
+    med(f);
+  return m;
+}
+
+Row measure(const model::SceneWindow& scene, const ModelConfig& mc, int threads, const ScalingOptions& o) {
+  omp_set_num_threads(threads);
+  Eigen::setNbThreads(1);  // the ops own the threads (see bench model)
+  Row r;
+  r.threads = threads;
+  std::vector<double> input, fwd, infer, srch[4];
+  std::vector<model::StageTimes> st;
+  model::ModelInput<double> in64;
+  ad::ParamStore<float> ps;
+  model::register_params(ps, mc);
+  model::init_params(ps, mc, 1);
+  ad::Tape<float> tape;
+  for (int it = 0; it < o.warmup + o.iters; ++it) {
+    const SearchMs sm = time_searches(scene, mc);
+    double t0 = now_ms();
+    in64 = model::build_model_input(scene, mc);
+    const auto in = model::cast_input<float>(in64);
+    const double t_in = now_ms() - t0;
+    model::StageTimes t;
+    model::ForwardOptions fo;
+    fo.times = &t;
+    t0 = now_ms();
+    {
+      tape.reset();
+      ad::NoRecord<float> off(tape);
+      model::forward(tape, ps, mc, in, fo);
+    }
+    const double t_fwd = now_ms() - t0;
+    if (it < o.warmup) continue;
+    input.push_back(t_in), fwd.push_back(t_fwd), infer.push_back(t_in + t_fwd), st.push_back(t);
+    srch[0].push_back(sm.world), srch[1].push_back(sm.body), srch[2].push_back(sm.nearest), srch[3].push_back(sm.candidates);
+  }
+  r.input_ms = median(input), r.forward_ms = median(fwd), r.infer_ms = median(infer);
+  r.search = {median(srch[0]), median(srch[1]), median(srch[2]), median(srch[3])};
+  r.stages = median_times(st);
+  r.N = in64.N, r.P = in64.P, r.B = scene.B, r.U = in64.U;
+  r.E_world = r.stages.world_rows, r.E_inter = r.stages.inter_rows, r.E_body = r.stages.body_rows;
+  r.E_mesh = r.stages.mesh_rows, r.E_cand = r.stages.candidate_rows;
+  if (o.no_train) return r;
+
+  const auto in = model::cast_input<float>(in64);
+  const auto target = losses::cast_loss_input<float>(losses::build_loss_input(scene, in64));
+  ad::Adam<float> adam(ps, {.lr = 1e-6});  // tiny steps: the parameters stay near the initial ones
+  LossConfig lc;
+  std::vector<double> tr, tf, tl, tb, ta;
+  for (int it = 0; it < o.warmup + o.iters; ++it) {
+    const double t0 = now_ms();
+    tape.reset();
+    ps.zero_grads();
+    const auto pred = model::forward(tape, ps, mc, in);
+    const double t1 = now_ms();
+    const auto terms = losses::compute_losses(tape, ps, mc, lc, target, pred);
+    const double t2 = now_ms();
+    tape.backward(terms.total);
+    const double t3 = now_ms();
+    adam.step();
+    const double t4 = now_ms();
+    if (it < o.warmup) continue;
+    tr.push_back(t4 - t0), tf.push_back(t1 - t0), tl.push_back(t2 - t1), tb.push_back(t3 - t2), ta.push_back(t4 - t3);
+  }
+  r.train_ms = median(tr), r.train_forward_ms = median(tf), r.losses_ms = median(tl);
+  r.backward_ms = median(tb), r.adam_ms = median(ta);
+  return r;
+}
+
+// Cost ratio per doubling of N between two sizes: (y2 / y1)^(1 / log2(N2 / N1)).
+double per_doubling(double y1, double y2, int64_t n1, int64_t n2) {
+  const double k = std::log2(static_cast<double>(n2) / static_cast<double>(n1));
+  return k > 0 && y1 > 0 ? std::pow(y2 / y1, 1.0 / k) : 0.0;
+}
+// Least-squares slope of log y against log N (1 = linear).
+double loglog_slope(const std::vector<Row>& rows, double Row::*f) {
+  double sx = 0, sy = 0, sxx = 0, sxy = 0, n = 0;
+  for (const auto& r : rows) {
+    if (r.*f <= 0) continue;
+    const double x = std::log(static_cast<double>(r.N)), y = std::log(r.*f);
+    sx += x, sy += y, sxx += x * x, sxy += x * y, n += 1;
+  }
+  const double d = n * sxx - sx * sx;
+  return n > 1 && d != 0 ? (n * sxy - sx * sy) / d : 0.0;
+}
+
+void print_block(const std::vector<Row>& rows, bool train) {
+  std::printf("%6s %5s %5s %6s %7s %7s %6s %7s | %7s %6s | %6s %6s %6s %6s %6s %6s %6s | %7s %5s",
+              "N", "P", "U", "E_wld", "E_int", "E_mesh", "E_cand", "h", "input", "search", "graph", "enc", "attn",
+              "edges", "ffn", "dec", "fwd", "infer", "x/dbl");
+  if (train) std::printf(" | %7s %5s %6s %6s %6s %6s", "train", "x/dbl", "fwd", "loss", "bwd", "adam");
+  std::printf("\n");
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    const Row& r = rows[i];
+    const auto& s = r.stages;
+    const double di = i ? per_doubling(rows[i - 1].infer_ms, r.infer_ms, rows[i - 1].N, r.N) : 0;
+    std::printf("%6lld %5lld %5lld %6lld %7lld %7lld %6lld %7.4f | %7.1f %6.1f | %6.1f %6.1f %6.1f %6.1f %6.1f %6.1f %6.1f | %7.1f %4.2f%s",
+                (long long)r.N, (long long)r.P, (long long)r.U, (long long)r.E_world, (long long)r.E_inter,
+                (long long)r.E_mesh, (long long)r.E_cand, r.h, r.input_ms, r.search.total(), s.graph_ms, s.encoder_ms,
+                s.attention_ms, s.attention_edges_ms, s.ffn_ms, s.decoder_ms, r.forward_ms, r.infer_ms, di,
+                di > 2.2 ? "!" : " ");
+    if (train) {
+      const double dt = i ? per_doubling(rows[i - 1].train_ms, r.train_ms, rows[i - 1].N, r.N) : 0;
+      std::printf(" | %7.1f %4.2f%s %6.1f %6.1f %6.1f %6.1f", r.train_ms, dt, dt > 2.2 ? "!" : " ", r.train_forward_ms,
+                  r.losses_ms, r.backward_ms, r.adam_ms);
+    }
+    std::printf("\n");
+  }
+  std::printf("log-log slope (1 = linear): infer %.2f, forward %.2f, input %.2f", loglog_slope(rows, &Row::infer_ms),
+              loglog_slope(rows, &Row::forward_ms), loglog_slope(rows, &Row::input_ms));
+  if (train) std::printf(", train %.2f", loglog_slope(rows, &Row::train_ms));
+  std::printf("\n");
+}
+
+nlohmann::json row_json(const Row& r) {
+  const auto& s = r.stages;
+  return {{"mode", r.mode}, {"threads", r.threads}, {"N", r.N}, {"P", r.P}, {"B", r.B}, {"U", r.U},
+          {"spacing", r.h}, {"E_world", r.E_world}, {"E_inter", r.E_inter}, {"E_inter_body", r.E_body},
+          {"E_mesh", r.E_mesh}, {"E_candidates", r.E_cand},
+          {"input_ms", r.input_ms},
+          {"search_ms", {{"world", r.search.world}, {"body", r.search.body}, {"nearest", r.search.nearest},
+                         {"candidates", r.search.candidates}, {"total", r.search.total()}}},
+          {"forward_ms", r.forward_ms}, {"infer_ms", r.infer_ms},
+          {"stages_ms", {{"graph", s.graph_ms}, {"encoder", s.encoder_ms}, {"encoder_body", s.encoder_body_ms},
+                         {"attention", s.attention_ms}, {"attention_edges", s.attention_edges_ms},
+                         {"attention_inter", s.attention_inter_ms}, {"ffn", s.ffn_ms}, {"decoder", s.decoder_ms},
+                         {"total", s.total_ms}}},
+          {"train_ms", r.train_ms}, {"train_split_ms", {{"forward", r.train_forward_ms}, {"losses", r.losses_ms},
+                                                        {"backward", r.backward_ms}, {"adam", r.adam_ms}}}};
+}
+
+void write_png(const std::string& path, const std::map<std::pair<std::string, int>, std::vector<Row>>& blocks, bool train) {
+  if (std::system("command -v gnuplot > /dev/null 2>&1") != 0) {
+    std::printf("gnuplot not found (scripts/debian-packages.txt lists it): no PNG\n");
+    return;
+  }
+  const std::string dat = path + ".dat";
+  std::ofstream d(dat);
+  std::string plot;
+  int index = 0;
+  double n0 = 0, y0 = 0, t0 = 0;
+  for (const auto& [key, rows] : blocks) {
+    d << "# " << key.first << " threads " << key.second << "\n";
+    for (const auto& r : rows) d << r.N << " " << r.infer_ms << " " << r.train_ms << "\n";
+    d << "\n\n";
+    const std::string name = key.first + ", " + std::to_string(key.second) + " thr";
+    plot += "'" + dat + "' index " + std::to_string(index) + " using 1:2 with linespoints title 'infer " + name + "', ";
+    if (train) plot += "'" + dat + "' index " + std::to_string(index) + " using 1:3 with linespoints dt 2 title 'train " + name + "', ";
+    if (index == 0 && !rows.empty()) n0 = static_cast<double>(rows.front().N), y0 = rows.front().infer_ms, t0 = rows.front().train_ms;
+    ++index;
+  }
+  char ref[256];
+  std::snprintf(ref, sizeof ref, "%g*x/%g with lines lc 'gray' dt 3 title 'linear (from first infer point)'", y0, n0);
+  plot += ref;
+  if (train && t0 > 0) {
+    std::snprintf(ref, sizeof ref, ", %g*x/%g with lines lc 'black' dt 3 title 'linear (from first train point)'", t0, n0);
+    plot += ref;
+  }
+  const std::string script = path + ".gp";
+  std::ofstream g(script);
+  g << "set terminal pngcairo size 1000,700\nset output '" << path << "'\nset logscale xy\nset grid\n"
+    << "set xlabel 'garment vertices N'\nset ylabel 'ms per frame / per training step'\n"
+    << "set title 'LayersNet cost vs garment resolution (same outfit re-meshed)'\nset key left top\n"
+    << "plot " << plot << "\n";
+  g.close();
+  d.close();
+  if (std::system(("gnuplot '" + script + "'").c_str()) != 0)
+    std::printf("gnuplot failed on %s\n", script.c_str());
+  else
+    std::printf("wrote %s (data %s, script %s)\n", path.c_str(), dat.c_str(), script.c_str());
+}
+
+int run_bench_scaling(const ScalingOptions& o) {
+  mallopt(M_MMAP_MAX, 0), mallopt(M_TRIM_THRESHOLD, -1), mallopt(M_ARENA_MAX, 1);  // as bench model
+  const auto sizes = parse_list<int64_t>(o.sizes, "--sizes");
+  const auto threads = parse_list<int>(o.threads, "--threads");
+  const auto modes = parse_list<std::string>(o.modes, "--modes");
+  const ModelConfig mc;  // official sizes
+  const char* wait = std::getenv("OMP_WAIT_POLICY");
+  std::printf("bench scaling: sizes %s, threads %s, medians of %d (+%d warm-up); model d=%d, %d layers, R=%g, R_b=%g, "
+              "K=%d; body 6890 vertices fixed; OMP_WAIT_POLICY=%s\nload (uptime) at start: %s\n",
+              o.sizes.c_str(), o.threads.c_str(), o.iters, o.warmup, mc.width, mc.layers, mc.world_radius,
+              mc.body_radius, mc.body_neighbors, wait ? wait : "(default)", uptime_load().c_str());
+  std::map<std::pair<std::string, int>, std::vector<Row>> blocks;
+  for (const auto& mode : modes)
+    for (int64_t n : sizes) {
+      const auto scene = make_outfit(n, mode, o);
+      double area = 0;
+      for (const auto& g : kOutfit) area += g.around * g.along;
+      for (int t : threads) {
+        Row r = measure(scene, mc, t, o);
+        r.mode = mode, r.h = std::sqrt(area / static_cast<double>(n));
+        std::printf("  %-8s N %6lld P %5lld threads %d: infer %.1f ms, train %.1f ms (load %s)\n", mode.c_str(),
+                    (long long)r.N, (long long)r.P, t, r.infer_ms, r.train_ms, uptime_load().c_str());
+        std::fflush(stdout);
+        blocks[{mode, t}].push_back(r);
+      }
+    }
+  std::printf("\nms per frame (medians). input = model input build incl. neighbour search; search = the searches "
+              "alone (world, body, nearest, decoder candidates); graph/enc/attn/ffn/dec = forward stages (attn incl. "
+              "edges); fwd = forward; infer = input + fwd; x/dbl = cost ratio per doubling of N vs the previous size "
+              "(! > 2.2); train = forward + losses + backward + Adam\n");
+  for (const auto& [key, rows] : blocks) {
+    std::printf("\nmode %s (%s), threads %d\n", key.first.c_str(),
+                key.first == "metric" ? ("patch " + std::to_string(o.patch_size) + " units: P constant").c_str()
+                                      : (std::to_string(o.cell) + "x" + std::to_string(o.cell) + " quads per patch: P ∝ N").c_str(),
+                key.second);
+    print_block(rows, !o.no_train);
+  }
+  std::printf("\nload (uptime) at end: %s\n", uptime_load().c_str());
+  if (!o.json.empty()) {
+    nlohmann::json j = {{"sizes", sizes}, {"patch_size", o.patch_size}, {"cell", o.cell}, {"iters", o.iters},
+                        {"omp_wait_policy", wait ? wait : ""}, {"load_end", uptime_load()}, {"rows", nlohmann::json::array()}};
+    for (const auto& [key, rows] : blocks)
+      for (const auto& r : rows) j["rows"].push_back(row_json(r));
+    std::ofstream f(o.json);
+    if (!f) throw std::runtime_error("bench scaling: cannot write --json " + o.json + "; check the folder exists");
+    f << j.dump(1) << "\n";
+  }
+  if (!o.png.empty()) write_png(o.png, blocks, !o.no_train);
+  return 0;
+}
+
+}  // namespace
+
+LAYERSNET_BENCH(scaling, "Rollout and training cost vs garment resolution, with the stage split (issue 8 point 2)",
+                [](CLI::App& sub) {
+                  auto o = std::make_shared<ScalingOptions>();
+                  sub.add_option("--sizes", o->sizes, "target garment vertex counts")->capture_default_str();
+                  sub.add_option("--threads", o->threads, "comma-separated thread counts")->capture_default_str();
+                  sub.add_option("--modes", o->modes, "patch modes: metric (P constant), vertices (P ∝ N)")
+                      ->capture_default_str();
+                  sub.add_option("--patch-size", o->patch_size, "metric mode: patch edge, scene units")->capture_default_str();
+                  sub.add_option("--cell", o->cell, "vertices mode: grid quads per patch side")->capture_default_str();
+                  sub.add_option("--iters", o->iters, "timed iterations per size")->capture_default_str();
+                  sub.add_option("--warmup", o->warmup, "warm-up iterations per size")->capture_default_str();
+                  sub.add_flag("--no-train", o->no_train, "inference only");
+                  sub.add_option("--json", o->json, "write the figures as JSON");
+                  sub.add_option("--png", o->png, "gnuplot PNG of ms vs N (log-log, linear reference)");
+                  return [o] { return run_bench_scaling(*o); };
+                });

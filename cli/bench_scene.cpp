@@ -1,0 +1,289 @@
+// `layersnet bench scene`: cost follows the scene's content (issue 8 point 3). One motion (the
+// synthetic outfit of `bench scaling` at --vertices, 3x3-quad patches, body 106 x 65), timed
+// in configurations that each take one part away (model/scene_variants.h):
+//   full         two garments + wind + body near
+//   one_garment  the inner garment only (its vertices, patches and their edges)
+//   no_wind      no wind token (ModelInput has_wind = false: no encoder, no edges)
+//   body_far     body moved 20 units up, beyond R_b: no body neighbours, no body tokens
+//   bare         all three removals at once (checks that the savings add up)
+// For each: inference ms/frame (input build + forward without tape) and training step ms
+// (forward + losses + backward + Adam), medians over interleaved passes, the measured saving
+// vs full, and the EXPECTED saving from the full run's own stage times (model::StageTimes)
+// scaled by the share of rows each stage loses (rows counted by the forward itself):
+//   graph, attention edges  world + inter + mesh rows      inter RET messages   inter rows
+//   body encoder            U body tokens                  other encoders       2P + A + ext + tokens
+//   attention projections   4P + 2 tokens                  FFN/LN/memory        (L-1) tokens + P
+//   decoder                 candidate rows + N + P         unstaged remainder   P
+//   input build             N + P (the body/wind searches still run)
+//   train step              (train - Adam) x expected forward share (backward assumed ∝ forward)
+#include "autodiff/optim.h"
+#include "cli/command_registry.h"
+#include "losses/losses.h"
+#include "model/input_builder.h"
+#include "model/layersnet.h"
+#include "model/params_layout.h"
+#include "model/scene_variants.h"
+#include "model/synthetic_scene.h"
+
+#include <Eigen/Core>
+#include <malloc.h>
+#include <nlohmann/json.hpp>
+#include <omp.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <stdexcept>
+
+namespace {
+
+using namespace layersnet;
+
+struct SceneBenchOptions {
+  int64_t vertices = 8000;
+  int threads = 1;
+  int passes = 3;
+  int iters = 3;
+  int warmup = 1;
+  std::string json;
+};
+
+double now_ms() {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+double median(std::vector<double> v) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  const std::size_t n = v.size();
+  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+std::string uptime_load() {
+  std::ifstream f("/proc/loadavg");
+  double a = 0, b = 0, c = 0;
+  f >> a >> b >> c;
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.2f %.2f %.2f", a, b, c);
+  return buf;
+}
+
+// The outfit of bench scaling (inner 5.0 x 4.0, outer 6.25 x 4.75 scene units) at ~`target`
+// garment vertices, patches of 3x3 grid quads.
+model::SceneWindow make_scene(int64_t target) {
+  const double ext[2][4] = {{5.0, 4.0, 1.235, 0.0}, {6.25, 4.75, 1.26, -0.2}};  // around, along, radius, z0
+  const double area = ext[0][0] * ext[0][1] + ext[1][0] * ext[1][1], h = std::sqrt(area / static_cast<double>(target));
+  model::SyntheticSceneOptions so;
+  so.garments.clear();
+  for (const auto& g : ext) {
+    so.garments.push_back({static_cast<int>(std::lround(g[0] / h)) + 1, static_cast<int>(std::lround(g[1] / h)) + 1});
+    so.garment_radius.push_back(g[2]), so.garment_z0.push_back(g[3]);
+  }
+  so.cell = {3, 3};
+  so.spacing = h;
+  so.body = {106, 65};
+  so.body_radius = 1.2;
+  so.body_z = {-0.6, 4.55 + 0.6};
+  so.wind = true;
+  so.seed = 0;
+  return model::make_synthetic_scene(so);
+}
+
+struct Config {
+  std::string name;
+  model::SceneWindow scene;
+  model::ModelInput<float> input;
+  losses::LossInput<float> target;
+  std::vector<double> infer, input_ms, forward, train, adam;
+  std::vector<model::StageTimes> stages;
+  model::StageTimes med;  // medians of the stage times, counts of the input
+};
+
+model::StageTimes median_times(const std::vector<model::StageTimes>& v) {
+  model::StageTimes m = v.front();
+  for (auto f : {&model::StageTimes::graph_ms, &model::StageTimes::encoder_ms, &model::StageTimes::encoder_body_ms,
+                 &model::StageTimes::attention_ms, &model::StageTimes::attention_edges_ms,
+                 &model::StageTimes::attention_inter_ms, &model::StageTimes::ffn_ms, &model::StageTimes::decoder_ms,
+                 &model::StageTimes::total_ms}) {
+    std::vector<double> x;
+    for (const auto& t : v) x.push_back(t.*f);
+    m.*f = median(x);
+  }
+  return m;
+}
+
+// Expected forward saving (ms) of a variant with work counts `v`, from the full run's stage
+// times and counts `f` (see the file comment for the rows of each stage).
+struct Expected {
+  double graph = 0, encoder = 0, attention = 0, ffn = 0, decoder = 0, rest = 0;
+  double forward() const { return graph + encoder + attention + ffn + decoder + rest; }
+};
+Expected expected_saving(const model::StageTimes& f, const model::StageTimes& v, int layers) {
+  auto lost = [](double full, double var) { return full > 0 ? 1.0 - var / full : 0.0; };
+  auto rows = [](const model::StageTimes& t) { return static_cast<double>(t.world_rows + t.inter_rows + t.mesh_rows); };
+  auto enc = [](const model::StageTimes& t) {
+    const double A = static_cast<double>(t.token_rows - t.patch_rows - t.body_tokens - t.ext_tokens);
+    return 2.0 * t.patch_rows + A + t.ext_tokens + t.token_rows;
+  };
+  auto proj = [](const model::StageTimes& t) { return 4.0 * t.patch_rows + 2.0 * t.token_rows; };
+  auto ffn = [layers](const model::StageTimes& t) { return (layers - 1.0) * t.token_rows + t.patch_rows; };
+  auto dec = [](const model::StageTimes& t) { return static_cast<double>(t.candidate_rows + t.vertex_rows + t.patch_rows); };
+  Expected e;
+  e.graph = f.graph_ms * lost(rows(f), rows(v));
+  e.encoder = f.encoder_body_ms * lost(static_cast<double>(f.body_tokens), static_cast<double>(v.body_tokens)) +
+              (f.encoder_ms - f.encoder_body_ms) * lost(enc(f), enc(v));
+  e.attention = (f.attention_ms - f.attention_edges_ms) * lost(proj(f), proj(v)) +
+                (f.attention_edges_ms - f.attention_inter_ms) * lost(rows(f), rows(v)) +
+                f.attention_inter_ms * lost(static_cast<double>(f.inter_rows), static_cast<double>(v.inter_rows));
+  e.ffn = f.ffn_ms * lost(ffn(f), ffn(v));
+  e.decoder = f.decoder_ms * lost(dec(f), dec(v));
+  const double staged = f.graph_ms + f.encoder_ms + f.attention_ms + f.ffn_ms + f.decoder_ms;
+  e.rest = std::max(0.0, f.total_ms - staged) * lost(static_cast<double>(f.patch_rows), static_cast<double>(v.patch_rows));
+  return e;
+}
+
+int run_bench_scene(const SceneBenchOptions& o) {
+  mallopt(M_MMAP_MAX, 0), mallopt(M_TRIM_THRESHOLD, -1), mallopt(M_ARENA_MAX, 1);  // as bench model
+  omp_set_num_threads(o.threads);
+  Eigen::setNbThreads(1);
+  const ModelConfig mc;  // official sizes
+  const LossConfig lc;
+  const double far[3] = {0, 0, 20};
+  std::vector<Config> cs(5);
+  cs[0].name = "full", cs[0].scene = make_scene(o.vertices);
+  cs[1].name = "one_garment", cs[1].scene = model::keep_first_garments(cs[0].scene, 1);
+  cs[2].name = "no_wind", cs[2].scene = cs[0].scene, model::drop_wind(cs[2].scene);
+  cs[3].name = "body_far", cs[3].scene = cs[0].scene, model::move_body(cs[3].scene, far);
+  cs[4].name = "bare", cs[4].scene = cs[1].scene, model::drop_wind(cs[4].scene), model::move_body(cs[4].scene, far);
+  for (auto& c : cs) {
+    const auto in64 = model::build_model_input(c.scene, mc);
+    c.input = model::cast_input<float>(in64);
+    c.target = losses::cast_loss_input<float>(losses::build_loss_input(c.scene, in64));
+  }
+  ad::ParamStore<float> ps;
+  model::register_params(ps, mc);
+  model::init_params(ps, mc, 1);
+  ad::Adam<float> adam(ps, {.lr = 1e-6});  // tiny steps: the parameters stay near the initial ones
+  ad::Tape<float> tape;
+
+  const char* wait = std::getenv("OMP_WAIT_POLICY");
+  std::printf("bench scene: ~%lld garment vertices, %d thread(s), %d interleaved passes x %d iterations (+%d warm-up), "
+              "OMP_WAIT_POLICY=%s\nload (uptime) at start: %s\n",
+              (long long)o.vertices, o.threads, o.passes, o.iters, o.warmup, wait ? wait : "(default)",
+              uptime_load().c_str());
+  for (int pass = 0; pass < o.passes; ++pass) {
+    for (auto& c : cs) {
+      for (int it = 0; it < (pass == 0 ? o.warmup : 0) + o.iters; ++it) {
+        const bool keep = !(pass == 0 && it < o.warmup);
+        double t0 = now_ms();
+        const auto in = model::cast_input<float>(model::build_model_input(c.scene, mc));
+        const double t_in = now_ms() - t0;
+        model::StageTimes st;
+        model::ForwardOptions fo;
+        fo.times = &st;
+        t0 = now_ms();
+        {
+          tape.reset();
+          ad::NoRecord<float> off(tape);
+          model::forward(tape, ps, mc, in, fo);
+        }
+        const double t_fwd = now_ms() - t0;
+        t0 = now_ms();
+        tape.reset();
+        ps.zero_grads();
+        const auto pred = model::forward(tape, ps, mc, c.input);
+        tape.backward(losses::compute_losses(tape, ps, mc, lc, c.target, pred).total);
+        const double t_adam = now_ms();
+        adam.step();
+        const double t_end = now_ms();
+        if (!keep) continue;
+        c.input_ms.push_back(t_in), c.forward.push_back(t_fwd), c.infer.push_back(t_in + t_fwd);
+        c.train.push_back(t_end - t0), c.adam.push_back(t_end - t_adam), c.stages.push_back(st);
+      }
+    }
+    std::printf("  pass %d done (load %s)\n", pass + 1, uptime_load().c_str());
+    std::fflush(stdout);
+  }
+  for (auto& c : cs) c.med = median_times(c.stages);
+
+  const Config& f = cs[0];
+  const auto& F = f.med;
+  const double f_inf = median(f.infer), f_tr = median(f.train), f_in = median(f.input_ms), f_adam = median(f.adam);
+  std::printf("\nfull run's forward split (ms, medians): graph %.1f, encoder %.1f (body tokens %.1f), attention %.1f "
+              "(edges %.1f, of which inter RET %.1f), FFN/LN %.1f, decoder %.1f, total %.1f; input build %.1f; "
+              "train %.1f (Adam %.1f)\n",
+              F.graph_ms, F.encoder_ms, F.encoder_body_ms, F.attention_ms, F.attention_edges_ms, F.attention_inter_ms,
+              F.ffn_ms, F.decoder_ms, F.total_ms, f_in, f_tr, f_adam);
+  std::printf("\n%-12s %6s %5s %5s %4s %7s %7s %7s | %8s %15s %15s | %8s %15s %15s\n", "config", "N", "P", "U", "T",
+              "E_world", "E_inter", "E_mesh", "infer_ms", "saved (meas.)", "saved (exp.)", "train_ms", "saved (meas.)",
+              "saved (exp.)");
+  nlohmann::json out = {{"vertices", o.vertices}, {"threads", o.threads}, {"passes", o.passes}, {"iters", o.iters},
+                        {"omp_wait_policy", wait ? wait : ""}, {"configs", nlohmann::json::array()}};
+  for (const auto& c : cs) {
+    const auto& m = c.med;
+    const double inf = median(c.infer), tr = median(c.train);
+    const Expected e = expected_saving(F, m, mc.layers);
+    const double n_share = 1.0 - static_cast<double>(m.vertex_rows + m.patch_rows) / static_cast<double>(F.vertex_rows + F.patch_rows);
+    const double e_inf = e.forward() + f_in * n_share;
+    const double e_tr = F.total_ms > 0 ? (f_tr - f_adam) * e.forward() / F.total_ms : 0;
+    auto cell = [](double saved, double base) {
+      char b[32];
+      std::snprintf(b, sizeof b, "%7.1f %5.1f%%", saved, base > 0 ? 100 * saved / base : 0.0);
+      return std::string(b);
+    };
+    std::printf("%-12s %6lld %5lld %5lld %4lld %7lld %7lld %7lld | %8.1f %15s %15s | %8.1f %15s %15s\n", c.name.c_str(),
+                (long long)m.vertex_rows, (long long)m.patch_rows, (long long)m.body_tokens,
+                (long long)(m.body_tokens + m.ext_tokens), (long long)m.world_rows, (long long)m.inter_rows,
+                (long long)m.mesh_rows, inf, cell(f_inf - inf, f_inf).c_str(), cell(e_inf, f_inf).c_str(), tr,
+                cell(f_tr - tr, f_tr).c_str(), cell(e_tr, f_tr).c_str());
+    out["configs"].push_back(
+        {{"name", c.name}, {"N", m.vertex_rows}, {"P", m.patch_rows}, {"U", m.body_tokens}, {"ext_tokens", m.ext_tokens},
+         {"E_world", m.world_rows}, {"E_inter", m.inter_rows}, {"E_inter_body", m.body_rows}, {"E_mesh", m.mesh_rows},
+         {"E_candidates", m.candidate_rows}, {"infer_ms", inf}, {"input_ms", median(c.input_ms)},
+         {"forward_ms", median(c.forward)}, {"train_ms", tr}, {"adam_ms", median(c.adam)},
+         {"saved_infer_ms", f_inf - inf}, {"expected_saved_infer_ms", e_inf}, {"saved_train_ms", f_tr - tr},
+         {"expected_saved_train_ms", e_tr},
+         {"forward_stages_ms", {{"graph", m.graph_ms}, {"encoder", m.encoder_ms}, {"encoder_body", m.encoder_body_ms},
+                                {"attention", m.attention_ms}, {"attention_edges", m.attention_edges_ms},
+                                {"attention_inter", m.attention_inter_ms}, {"ffn", m.ffn_ms}, {"decoder", m.decoder_ms},
+                                {"total", m.total_ms}}},
+         {"expected_saved_forward_ms", {{"graph", e.graph}, {"encoder", e.encoder}, {"attention", e.attention},
+                                        {"ffn", e.ffn}, {"decoder", e.decoder}, {"rest", e.rest}, {"total", e.forward()}}}});
+  }
+  std::printf("\nforward stages per config (ms, medians): measured saving vs full | expected saving per stage\n");
+  std::printf("%-12s %7s %7s %7s %7s %7s %7s | %6s %6s %6s %6s %6s %6s\n", "config", "graph", "enc", "attn", "ffn",
+              "dec", "fwd", "e_grph", "e_enc", "e_attn", "e_ffn", "e_dec", "e_fwd");
+  for (const auto& c : cs) {
+    const auto& m = c.med;
+    const Expected e = expected_saving(F, m, mc.layers);
+    std::printf("%-12s %7.1f %7.1f %7.1f %7.1f %7.1f %7.1f | %6.1f %6.1f %6.1f %6.1f %6.1f %6.1f\n", c.name.c_str(),
+                F.graph_ms - m.graph_ms, F.encoder_ms - m.encoder_ms, F.attention_ms - m.attention_ms, F.ffn_ms - m.ffn_ms,
+                F.decoder_ms - m.decoder_ms, F.total_ms - m.total_ms, e.graph, e.encoder, e.attention, e.ffn, e.decoder,
+                e.forward());
+  }
+  std::printf("T = body + wind + gravity tokens; E_inter = patch -> token edges; expected = full run's stage time x "
+              "share of the stage's rows that the configuration lacks (rows counted by the forward)\nload (uptime) at "
+              "end: %s\n",
+              uptime_load().c_str());
+  out["load_end"] = uptime_load();
+  if (!o.json.empty()) {
+    std::ofstream fo(o.json);
+    if (!fo) throw std::runtime_error("bench scene: cannot write --json " + o.json + "; check the folder exists");
+    fo << out.dump(1) << "\n";
+  }
+  return 0;
+}
+
+}  // namespace
+
+LAYERSNET_BENCH(scene, "Cost of each scene part: one vs two garments, wind, body near/far (issue 8 point 3)",
+                [](CLI::App& sub) {
+                  auto o = std::make_shared<SceneBenchOptions>();
+                  sub.add_option("--vertices", o->vertices, "garment vertices of the full scene")->capture_default_str();
+                  sub.add_option("--threads", o->threads, "OpenMP threads")->capture_default_str();
+                  sub.add_option("--passes", o->passes, "interleaved passes over the configurations")->capture_default_str();
+                  sub.add_option("--iters", o->iters, "iterations per configuration and pass")->capture_default_str();
+                  sub.add_option("--warmup", o->warmup, "warm-up iterations (first pass)")->capture_default_str();
+                  sub.add_option("--json", o->json, "write the figures as JSON");
+                  return [o] { return run_bench_scene(*o); };
+                });
