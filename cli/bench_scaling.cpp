@@ -15,7 +15,8 @@
 // Per size and thread count: input build (model/input_builder.h, incl. neighbour search;
 // the searches are also timed alone by re-running the same dataset/neighbours.h calls),
 // forward stages (model::StageTimes), inference = input build + forward (no tape), training
-// step = forward + losses + backward + Adam. Medians of --iters after --warmup.
+// step = forward + losses + backward + Adam. Interleaved passes over all sizes (foreign load
+// spreads over every size); medians over all passes' iterations after the first pass's warm-up.
 #include "autodiff/optim.h"
 #include "cli/command_registry.h"
 #include "dataset/neighbours.h"
@@ -52,7 +53,8 @@ struct ScalingOptions {
   std::string modes = "metric,vertices";
   double patch_size = 0.25;  // metric mode: patch edge, scene units (~10 vertices per patch at N = 8000)
   int cell = 3;              // vertices mode: quads per patch side (16 vertices incl. borders)
-  int iters = 3;
+  int passes = 2;
+  int iters = 2;
   int warmup = 1;
   bool no_train = false;
   std::string json, png;
@@ -252,23 +254,33 @@ model::StageTimes median_times(const std::vector<model::StageTimes>& v) {
   return m;
 }
 
-Row measure(const model::SceneWindow& scene, const ModelConfig& mc, int threads, const ScalingOptions& o) {
+// One (mode, size): the scene, its input and loss target (built once), and the timings of
+// every pass per thread count.
+struct Samples {
+  std::vector<double> input, fwd, infer, search[4], train, train_fwd, losses, backward, adam;
+  std::vector<model::StageTimes> stages;
+};
+struct Case {
+  std::string mode;
+  double h = 0;
+  model::SceneWindow scene;
+  model::ModelInput<float> input;
+  losses::LossInput<float> target;
+  int64_t U = 0;
+  std::map<int, Samples> by_threads;
+};
+
+// `n` iterations of inference (input build + forward) and training steps at `threads`;
+// the first `skip` are warm-up.
+void measure(Case& c, const ModelConfig& mc, int threads, int skip, int n, bool train, ad::ParamStore<float>& ps,
+             ad::Adam<float>& adam, ad::Tape<float>& tape) {
   omp_set_num_threads(threads);
   Eigen::setNbThreads(1);  // the ops own the threads (see bench model)
-  Row r;
-  r.threads = threads;
-  std::vector<double> input, fwd, infer, srch[4];
-  std::vector<model::StageTimes> st;
-  model::ModelInput<double> in64;
-  ad::ParamStore<float> ps;
-  model::register_params(ps, mc);
-  model::init_params(ps, mc, 1);
-  ad::Tape<float> tape;
-  for (int it = 0; it < o.warmup + o.iters; ++it) {
-    const SearchMs sm = time_searches(scene, mc);
+  Samples& s = c.by_threads[threads];
+  for (int it = 0; it < skip + n; ++it) {
+    const SearchMs sm = time_searches(c.scene, mc);
     double t0 = now_ms();
-    in64 = model::build_model_input(scene, mc);
-    const auto in = model::cast_input<float>(in64);
+    const auto in = model::cast_input<float>(model::build_model_input(c.scene, mc));
     const double t_in = now_ms() - t0;
     model::StageTimes t;
     model::ForwardOptions fo;
@@ -280,40 +292,43 @@ Row measure(const model::SceneWindow& scene, const ModelConfig& mc, int threads,
       model::forward(tape, ps, mc, in, fo);
     }
     const double t_fwd = now_ms() - t0;
-    if (it < o.warmup) continue;
-    input.push_back(t_in), fwd.push_back(t_fwd), infer.push_back(t_in + t_fwd), st.push_back(t);
-    srch[0].push_back(sm.world), srch[1].push_back(sm.body), srch[2].push_back(sm.nearest), srch[3].push_back(sm.candidates);
+    if (it >= skip) {
+      s.input.push_back(t_in), s.fwd.push_back(t_fwd), s.infer.push_back(t_in + t_fwd), s.stages.push_back(t);
+      s.search[0].push_back(sm.world), s.search[1].push_back(sm.body), s.search[2].push_back(sm.nearest);
+      s.search[3].push_back(sm.candidates);
+    }
   }
-  r.input_ms = median(input), r.forward_ms = median(fwd), r.infer_ms = median(infer);
-  r.search = {median(srch[0]), median(srch[1]), median(srch[2]), median(srch[3])};
-  r.stages = median_times(st);
-  r.N = in64.N, r.P = in64.P, r.B = scene.B, r.U = in64.U;
-  r.E_world = r.stages.world_rows, r.E_inter = r.stages.inter_rows, r.E_body = r.stages.body_rows;
-  r.E_mesh = r.stages.mesh_rows, r.E_cand = r.stages.candidate_rows;
-  if (o.no_train) return r;
-
-  const auto in = model::cast_input<float>(in64);
-  const auto target = losses::cast_loss_input<float>(losses::build_loss_input(scene, in64));
-  ad::Adam<float> adam(ps, {.lr = 1e-6});  // tiny steps: the parameters stay near the initial ones
+  if (!train) return;
   LossConfig lc;
-  std::vector<double> tr, tf, tl, tb, ta;
-  for (int it = 0; it < o.warmup + o.iters; ++it) {
+  for (int it = 0; it < skip + n; ++it) {
     const double t0 = now_ms();
     tape.reset();
     ps.zero_grads();
-    const auto pred = model::forward(tape, ps, mc, in);
+    const auto pred = model::forward(tape, ps, mc, c.input);
     const double t1 = now_ms();
-    const auto terms = losses::compute_losses(tape, ps, mc, lc, target, pred);
+    const auto terms = losses::compute_losses(tape, ps, mc, lc, c.target, pred);
     const double t2 = now_ms();
     tape.backward(terms.total);
     const double t3 = now_ms();
     adam.step();
     const double t4 = now_ms();
-    if (it < o.warmup) continue;
-    tr.push_back(t4 - t0), tf.push_back(t1 - t0), tl.push_back(t2 - t1), tb.push_back(t3 - t2), ta.push_back(t4 - t3);
+    if (it < skip) continue;
+    s.train.push_back(t4 - t0), s.train_fwd.push_back(t1 - t0), s.losses.push_back(t2 - t1);
+    s.backward.push_back(t3 - t2), s.adam.push_back(t4 - t3);
   }
-  r.train_ms = median(tr), r.train_forward_ms = median(tf), r.losses_ms = median(tl);
-  r.backward_ms = median(tb), r.adam_ms = median(ta);
+}
+
+Row summarise(const Case& c, int threads, const Samples& s) {
+  Row r;
+  r.mode = c.mode, r.threads = threads, r.h = c.h;
+  r.input_ms = median(s.input), r.forward_ms = median(s.fwd), r.infer_ms = median(s.infer);
+  r.search = {median(s.search[0]), median(s.search[1]), median(s.search[2]), median(s.search[3])};
+  r.stages = median_times(s.stages);
+  r.N = c.input.N, r.P = c.input.P, r.B = c.scene.B, r.U = c.input.U;
+  r.E_world = r.stages.world_rows, r.E_inter = r.stages.inter_rows, r.E_body = r.stages.body_rows;
+  r.E_mesh = r.stages.mesh_rows, r.E_cand = r.stages.candidate_rows;
+  r.train_ms = median(s.train), r.train_forward_ms = median(s.train_fwd), r.losses_ms = median(s.losses);
+  r.backward_ms = median(s.backward), r.adam_ms = median(s.adam);
   return r;
 }
 
@@ -394,8 +409,10 @@ void write_png(const std::string& path, const std::map<std::pair<std::string, in
     for (const auto& r : rows) d << r.N << " " << r.infer_ms << " " << r.train_ms << "\n";
     d << "\n\n";
     const std::string name = key.first + ", " + std::to_string(key.second) + " thr";
-    plot += "'" + dat + "' index " + std::to_string(index) + " using 1:2 with linespoints title 'infer " + name + "', ";
-    if (train) plot += "'" + dat + "' index " + std::to_string(index) + " using 1:3 with linespoints dt 2 title 'train " + name + "', ";
+    const std::string lc = " lc " + std::to_string(index + 1);  // same colour for a block's two curves
+    plot += "'" + dat + "' index " + std::to_string(index) + " using 1:2 with linespoints" + lc + " title 'infer " + name + "', ";
+    if (train)
+      plot += "'" + dat + "' index " + std::to_string(index) + " using 1:3 with linespoints dt 2" + lc + " title 'train " + name + "', ";
     if (index == 0 && !rows.empty()) n0 = static_cast<double>(rows.front().N), y0 = rows.front().infer_ms, t0 = rows.front().train_ms;
     ++index;
   }
@@ -408,9 +425,9 @@ void write_png(const std::string& path, const std::map<std::pair<std::string, in
   }
   const std::string script = path + ".gp";
   std::ofstream g(script);
-  g << "set terminal pngcairo size 1000,700\nset output '" << path << "'\nset logscale xy\nset grid\n"
+  g << "set terminal pngcairo size 1200,700\nset output '" << path << "'\nset logscale xy\nset grid\n"
     << "set xlabel 'garment vertices N'\nset ylabel 'ms per frame / per training step'\n"
-    << "set title 'LayersNet cost vs garment resolution (same outfit re-meshed)'\nset key left top\n"
+    << "set title 'LayersNet cost vs garment resolution (same outfit re-meshed)'\nset key outside right\n"
     << "plot " << plot << "\n";
   g.close();
   d.close();
@@ -427,25 +444,39 @@ int run_bench_scaling(const ScalingOptions& o) {
   const auto modes = parse_list<std::string>(o.modes, "--modes");
   const ModelConfig mc;  // official sizes
   const char* wait = std::getenv("OMP_WAIT_POLICY");
-  std::printf("bench scaling: sizes %s, threads %s, medians of %d (+%d warm-up); model d=%d, %d layers, R=%g, R_b=%g, "
+  std::printf("bench scaling: sizes %s, threads %s, %d interleaved passes x %d iterations (+%d warm-up); model d=%d, %d layers, R=%g, R_b=%g, "
               "K=%d; body 6890 vertices fixed; OMP_WAIT_POLICY=%s\nload (uptime) at start: %s\n",
-              o.sizes.c_str(), o.threads.c_str(), o.iters, o.warmup, mc.width, mc.layers, mc.world_radius,
+              o.sizes.c_str(), o.threads.c_str(), o.passes, o.iters, o.warmup, mc.width, mc.layers, mc.world_radius,
               mc.body_radius, mc.body_neighbors, wait ? wait : "(default)", uptime_load().c_str());
-  std::map<std::pair<std::string, int>, std::vector<Row>> blocks;
+  std::vector<Case> cases;
+  double area = 0;
+  for (const auto& g : kOutfit) area += g.around * g.along;
   for (const auto& mode : modes)
     for (int64_t n : sizes) {
-      const auto scene = make_outfit(n, mode, o);
-      double area = 0;
-      for (const auto& g : kOutfit) area += g.around * g.along;
-      for (int t : threads) {
-        Row r = measure(scene, mc, t, o);
-        r.mode = mode, r.h = std::sqrt(area / static_cast<double>(n));
-        std::printf("  %-8s N %6lld P %5lld threads %d: infer %.1f ms, train %.1f ms (load %s)\n", mode.c_str(),
-                    (long long)r.N, (long long)r.P, t, r.infer_ms, r.train_ms, uptime_load().c_str());
-        std::fflush(stdout);
-        blocks[{mode, t}].push_back(r);
-      }
+      Case c;
+      c.mode = mode, c.h = std::sqrt(area / static_cast<double>(n));
+      c.scene = make_outfit(n, mode, o);
+      const auto in64 = model::build_model_input(c.scene, mc);
+      c.input = model::cast_input<float>(in64);
+      c.target = losses::cast_loss_input<float>(losses::build_loss_input(c.scene, in64));
+      cases.push_back(std::move(c));
     }
+  // One parameter set, optimiser and tape for every case (the tape's arena keeps the largest size).
+  ad::ParamStore<float> ps;
+  model::register_params(ps, mc);
+  model::init_params(ps, mc, 1);
+  ad::Adam<float> adam(ps, {.lr = 1e-6});  // tiny steps: the parameters stay near the initial ones
+  ad::Tape<float> tape;
+  // Interleaved: every pass visits every case, so foreign load spreads over all sizes.
+  for (int pass = 0; pass < o.passes; ++pass) {
+    for (auto& c : cases)
+      for (int t : threads) measure(c, mc, t, pass == 0 ? o.warmup : 0, o.iters, !o.no_train, ps, adam, tape);
+    std::printf("  pass %d of %d done (load %s)\n", pass + 1, o.passes, uptime_load().c_str());
+    std::fflush(stdout);
+  }
+  std::map<std::pair<std::string, int>, std::vector<Row>> blocks;
+  for (const auto& c : cases)
+    for (const auto& [t, s] : c.by_threads) blocks[{c.mode, t}].push_back(summarise(c, t, s));
   std::printf("\nms per frame (medians). input = model input build incl. neighbour search; search = the searches "
               "alone (world, body, nearest, decoder candidates); graph/enc/attn/ffn/dec = forward stages (attn incl. "
               "edges); fwd = forward; infer = input + fwd; x/dbl = cost ratio per doubling of N vs the previous size "
@@ -459,7 +490,7 @@ int run_bench_scaling(const ScalingOptions& o) {
   }
   std::printf("\nload (uptime) at end: %s\n", uptime_load().c_str());
   if (!o.json.empty()) {
-    nlohmann::json j = {{"sizes", sizes}, {"patch_size", o.patch_size}, {"cell", o.cell}, {"iters", o.iters},
+    nlohmann::json j = {{"sizes", sizes}, {"patch_size", o.patch_size}, {"cell", o.cell}, {"passes", o.passes}, {"iters", o.iters},
                         {"omp_wait_policy", wait ? wait : ""}, {"load_end", uptime_load()}, {"rows", nlohmann::json::array()}};
     for (const auto& [key, rows] : blocks)
       for (const auto& r : rows) j["rows"].push_back(row_json(r));
@@ -482,8 +513,9 @@ LAYERSNET_BENCH(scaling, "Rollout and training cost vs garment resolution, with 
                       ->capture_default_str();
                   sub.add_option("--patch-size", o->patch_size, "metric mode: patch edge, scene units")->capture_default_str();
                   sub.add_option("--cell", o->cell, "vertices mode: grid quads per patch side")->capture_default_str();
-                  sub.add_option("--iters", o->iters, "timed iterations per size")->capture_default_str();
-                  sub.add_option("--warmup", o->warmup, "warm-up iterations per size")->capture_default_str();
+                  sub.add_option("--passes", o->passes, "interleaved passes over all sizes")->capture_default_str();
+                  sub.add_option("--iters", o->iters, "timed iterations per size and pass")->capture_default_str();
+                  sub.add_option("--warmup", o->warmup, "warm-up iterations per size (first pass)")->capture_default_str();
                   sub.add_flag("--no-train", o->no_train, "inference only");
                   sub.add_option("--json", o->json, "write the figures as JSON");
                   sub.add_option("--png", o->png, "gnuplot PNG of ms vs N (log-log, linear reference)");
