@@ -1,5 +1,6 @@
 #include "autodiff/ops_dense.h"
 
+#include "autodiff/bf16_gemm.h"
 #include "autodiff/row_blocks.h"
 
 #include <algorithm>
@@ -201,6 +202,20 @@ Var<T> linear_op(Tape<T>& tape, const Var<T>& x, const Var<T>& W, const Var<T>& 
                                                      << W.cols << "); W must be (Cout, Cin) in torch layout");
   LAYERSNET_CHECK(absent(b) || (b.rows == 1 && b.cols == W.rows),
                   "linear: bias is (" << b.rows << ", " << b.cols << "), expected (1, " << W.rows << ") or empty");
+  if (tape.matmul_precision() == MatmulPrecision::kBFloat16) {
+    LAYERSNET_CHECK(!tape.recording(), "linear: matmul precision bf16 is for inference only, but the tape is recording; "
+                                       "run the forward under ad::NoRecord, or set_matmul_precision(kFloat32) to train");
+    if constexpr (std::is_same_v<T, float>) {
+      if (x.cols >= kBf16MinChannels && W.rows >= kBf16MinChannels) {
+        Var<T> out = tape.new_var(x.rows, W.rows, false);
+        bf16_linear_forward(x.value, x.rows, x.cols, *bf16_cached_weights(W.value, W.rows, W.cols), b.value, relu,
+                            out.value);
+        return out;
+      }
+    } else {
+      LAYERSNET_CHECK(false, "linear: matmul precision bf16 needs a float tape (this one is double)");
+    }
+  }
   const bool grad = tape.wants_grad({x, W, b});
   Var<T> out = tape.new_var(x.rows, W.rows, grad);
   linear_forward<T>({x.value, x.rows, x.cols}, {W.value, W.rows, W.cols}, b.value, relu, out.val());

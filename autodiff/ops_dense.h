@@ -34,6 +34,10 @@ namespace layersnet::ad {
 // chunks spread over the OpenMP threads. Backward: dx += dy W per chunk; dW += dyᵀ x and
 // db += column sums of dy as per-chunk partials added in chunk order, so every gradient
 // is bit-identical for any thread count.
+// With tape.matmul_precision() == kBFloat16 (inference only: throws if the tape records),
+// products with Cin >= 16 and Cout >= 16 run in bfloat16 (autodiff/bf16_gemm.h); narrower
+// ones (the model's transposes by an identity, its 3-D geometric maps) stay float: bf16
+// would make them lossy and gains nothing there.
 template <class T>
 Var<T> linear(Tape<T>& tape, const Var<T>& x, const Var<T>& W, const Var<T>& b = {});
 

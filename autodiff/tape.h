@@ -32,6 +32,12 @@ enum class OpKind : int32_t {
 };
 
 constexpr int32_t kOpCount = static_cast<int32_t>(OpKind::Count);
+
+// Number format of the products in linear / linear_relu (autodiff/bf16_gemm.h).
+// kBFloat16 is for inference only: such an op on a recording tape throws.
+enum class MatmulPrecision : int32_t { kFloat32, kBFloat16 };
+const char* matmul_precision_name(MatmulPrecision p);  // "float32" | "bf16" (bf16_gemm.cpp)
+
 const char* op_name(OpKind op);
 
 // What backward needs of one op. Fields are op-specific; each op's header says which it uses.
@@ -59,6 +65,9 @@ class Tape {
   Arena& arena() { return arena_; }
   bool recording() const { return recording_; }
   void set_recording(bool on) { recording_ = on; }
+  // Kept across reset(); see MatmulPrecision.
+  MatmulPrecision matmul_precision() const { return matmul_precision_; }
+  void set_matmul_precision(MatmulPrecision p) { matmul_precision_ = p; }
 
   // A fresh (rows, cols) tensor; values uninitialised; gradient zeroed when `with_grad`
   // and the tape is recording, else null.
@@ -96,6 +105,7 @@ class Tape {
   Arena arena_;
   std::vector<Node<T>> nodes_;
   bool recording_ = true;
+  MatmulPrecision matmul_precision_ = MatmulPrecision::kFloat32;
 };
 
 // Scope without recording (rollouts, evaluation, the no-grad part of noisy rollouts).
@@ -110,6 +120,22 @@ class NoRecord {
  private:
   Tape<T>& tape_;
   bool was_;
+};
+
+// Scope with another matmul precision (e.g. bf16 inside a NoRecord rollout step).
+template <class T>
+class MatmulPrecisionScope {
+ public:
+  MatmulPrecisionScope(Tape<T>& tape, MatmulPrecision p) : tape_(tape), was_(tape.matmul_precision()) {
+    tape.set_matmul_precision(p);
+  }
+  ~MatmulPrecisionScope() { tape_.set_matmul_precision(was_); }
+  MatmulPrecisionScope(const MatmulPrecisionScope&) = delete;
+  MatmulPrecisionScope& operator=(const MatmulPrecisionScope&) = delete;
+
+ private:
+  Tape<T>& tape_;
+  MatmulPrecision was_;
 };
 
 // Backward of each op, defined next to its forward in ops_*.cpp.

@@ -5,7 +5,12 @@
 // Ours:      linear(tape, x, W, b) recording (as in training: also zeroes the output's
 //            gradient buffer), the same without recording (rollouts), and the node's
 //            backward (dx, dW, db) via tape.backward_seeded().
+// bf16:      linear without recording at MatmulPrecision::kBFloat16 (autodiff/bf16_gemm.h;
+//            inference only): x and W rounded to bfloat16, float accumulation; the weights
+//            are packed once (cache) and checked against the cache on every call, as in a
+//            rollout. Its speed-up is fwd0 / bf16; its error is reported against float.
 // Goals (issue 2): forward >= 0.8 of the GEMM rate, backward <= 2.2x the forward time.
+#include "autodiff/bf16_gemm.h"
 #include "autodiff/ops_dense.h"
 #include "cli/command_registry.h"
 
@@ -47,6 +52,8 @@ struct Result {
   double gemm_ms, fwd_ms, fwd_norecord_ms, bwd_ms;
   double min_fwd_rate = 0, min_bwd_over_fwd = 0;  // the same ratios from the fastest repetitions
   double relu_separate_ms = 0, relu_fused_ms = 0;  // linear + relu, forward + backward
+  double bf16_ms = 0, min_bf16_speedup = 0;        // bf16 forward (no recording); fwd0 / bf16 of the fastest
+  double bf16_rel_err = 0;                         // max |y_bf16 - y_float| / max |y_float|
 };
 
 double median(std::vector<double> t) {
@@ -87,7 +94,7 @@ Result bench_shape(const Shape& s, int threads, const LinearBenchOptions& o) {
     return std::array<Var<float>, 3>{tape.leaf(xs.data(), s.n, s.cin), tape.leaf(ws.data(), s.cout, s.cin),
                                      tape.leaf(bs.data(), 1, s.cout)};
   };
-  std::vector<double> gemm, fwd, fwd0, bwd, relu_separate, relu_fused;
+  std::vector<double> gemm, fwd, fwd0, bwd, relu_separate, relu_fused, bf16;
   for (int rep = 0; rep < o.warmup + o.reps; ++rep) {
     const bool keep = rep >= o.warmup;
     const double t_gemm = time_ms([&] { C.noalias() = A * B.transpose(); });
@@ -97,12 +104,19 @@ Result bench_shape(const Shape& s, int threads, const LinearBenchOptions& o) {
       NoRecord<float> off(tape);
       t_fwd0 = time_ms([&] { linear(tape, v[0], v[1], v[2]); });
     }
+    double t_bf16;
+    {
+      const auto v = setup();
+      NoRecord<float> off(tape);
+      MatmulPrecisionScope<float> low(tape, MatmulPrecision::kBFloat16);
+      t_bf16 = time_ms([&] { linear(tape, v[0], v[1], v[2]); });
+    }
     const auto v = setup();
     Var<float> y;
     const double t_fwd = time_ms([&] { y = linear(tape, v[0], v[1], v[2]); });
     std::memcpy(y.grad, dys.data(), sizeof(float) * dys.size());
     const double t_bwd = time_ms([&] { tape.backward_seeded(); });
-    if (keep) gemm.push_back(t_gemm), fwd.push_back(t_fwd), fwd0.push_back(t_fwd0), bwd.push_back(t_bwd);
+    if (keep) gemm.push_back(t_gemm), fwd.push_back(t_fwd), fwd0.push_back(t_fwd0), bwd.push_back(t_bwd), bf16.push_back(t_bf16);
     if (o.relu) {  // relu(linear(x)) as two ops, then fused; forward + backward each
       for (bool fused : {false, true}) {
         const auto u = setup();
@@ -119,6 +133,8 @@ Result bench_shape(const Shape& s, int threads, const LinearBenchOptions& o) {
   const auto min_of = [](const std::vector<double>& v) { return *std::min_element(v.begin(), v.end()); };
   r.min_fwd_rate = min_of(gemm) / min_of(fwd);
   r.min_bwd_over_fwd = min_of(bwd) / min_of(fwd);
+  r.bf16_ms = median(bf16);
+  r.min_bf16_speedup = min_of(fwd0) / min_of(bf16);
   if (o.relu) r.relu_separate_ms = median(relu_separate), r.relu_fused_ms = median(relu_fused);
   // The result must be the GEMM's plus the bias (guards against timing a broken kernel).
   {
@@ -127,6 +143,9 @@ Result bench_shape(const Shape& s, int threads, const LinearBenchOptions& o) {
     const Var<float> y = linear(tape, v[0], v[1], v[2]);
     const float err = (y.val() - (C.rowwise() + ConstMatMap<float>(bs.data(), 1, s.cout).row(0))).cwiseAbs().maxCoeff();
     if (!(err < 1e-3f)) throw std::runtime_error("bench linear: forward differs from the GEMM by " + std::to_string(err));
+    MatmulPrecisionScope<float> low(tape, MatmulPrecision::kBFloat16);
+    const Var<float> y16 = linear(tape, v[0], v[1], v[2]);
+    r.bf16_rel_err = (y16.val() - y.val()).cwiseAbs().maxCoeff() / y.val().cwiseAbs().maxCoeff();
   }
   return r;
 }
@@ -175,6 +194,20 @@ int run_bench(const LinearBenchOptions& o) {
     }
   }
   std::printf("\ngoals: fwd/gemm (rate ratio) >= 0.8, bwd/fwd (time ratio) <= 2.2\n");
+  std::printf("\nbf16 products (inference, kernel: %s) against the float forward without recording (fwd0);\n"
+              "err = max |y_bf16 - y_float| / max |y_float|; goal fwd0/bf16 >= 1.5 at 1 thread\n",
+              bf16_kernel_name());
+  std::printf("%-18s %3s | %8s %8s | %7s %7s | %9s %9s | %9s\n", "shape N x Cin>Cout", "thr", "fwd0 ms", "bf16 ms",
+              "GF fwd0", "GF bf16", "fwd0/bf16", "min ratio", "err");
+  for (const Result& r : results) {
+    const double gf = 2e-6 * static_cast<double>(r.shape.n * r.shape.cin * r.shape.cout);
+    char name[32];
+    std::snprintf(name, sizeof name, "%ldx%ld>%ld", static_cast<long>(r.shape.n), static_cast<long>(r.shape.cin),
+                  static_cast<long>(r.shape.cout));
+    std::printf("%-18s %3d | %8.2f %8.2f | %7.1f %7.1f | %9.3f %9.3f | %9.2e\n", name, r.threads, r.fwd_norecord_ms,
+                r.bf16_ms, gf / r.fwd_norecord_ms, gf / r.bf16_ms, r.fwd_norecord_ms / r.bf16_ms, r.min_bf16_speedup,
+                r.bf16_rel_err);
+  }
   print_load("after");
   if (o.relu) {
     std::printf("\nrelu(linear(x)) forward + backward (the memcpy seeding dy included in both):\n");
@@ -186,7 +219,8 @@ int run_bench(const LinearBenchOptions& o) {
   if (!o.json.empty()) {
     std::ofstream f(o.json);
     if (!f) throw std::runtime_error("bench linear: cannot write --json file '" + o.json + "'");
-    f << "{\n  \"bench\": \"linear\",\n  \"reps\": " << o.reps << ",\n  \"results\": [\n";
+    f << "{\n  \"bench\": \"linear\",\n  \"reps\": " << o.reps << ",\n  \"bf16_kernel\": \"" << bf16_kernel_name()
+      << "\",\n  \"results\": [\n";
     for (std::size_t k = 0; k < results.size(); ++k) {
       const Result& r = results[k];
       f << "    {\"n\": " << r.shape.n << ", \"cin\": " << r.shape.cin << ", \"cout\": " << r.shape.cout
@@ -195,7 +229,9 @@ int run_bench(const LinearBenchOptions& o) {
         << ", \"forward_rate_vs_gemm\": " << r.gemm_ms / r.fwd_ms
         << ", \"forward_norecord_rate_vs_gemm\": " << r.gemm_ms / r.fwd_norecord_ms
         << ", \"backward_over_forward\": " << r.bwd_ms / r.fwd_ms << ", \"min_forward_rate_vs_gemm\": " << r.min_fwd_rate
-        << ", \"min_backward_over_forward\": " << r.min_bwd_over_fwd;
+        << ", \"min_backward_over_forward\": " << r.min_bwd_over_fwd << ", \"bf16_ms\": " << r.bf16_ms
+        << ", \"bf16_speedup_vs_forward_norecord\": " << r.fwd_norecord_ms / r.bf16_ms
+        << ", \"min_bf16_speedup\": " << r.min_bf16_speedup << ", \"bf16_max_rel_error\": " << r.bf16_rel_err;
       if (o.relu) f << ", \"relu_separate_ms\": " << r.relu_separate_ms << ", \"relu_fused_ms\": " << r.relu_fused_ms;
       f << "}" << (k + 1 < results.size() ? "," : "")
         << "\n";
@@ -207,7 +243,7 @@ int run_bench(const LinearBenchOptions& o) {
 
 }  // namespace
 
-LAYERSNET_BENCH(linear, "Linear layer forward/backward vs a plain Eigen GEMM (1 and 2 threads)", [](CLI::App& sub) {
+LAYERSNET_BENCH(linear, "Linear layer forward/backward vs a plain Eigen GEMM, and its bf16 inference forward (1 and 2 threads)", [](CLI::App& sub) {
   auto opts = std::make_shared<LinearBenchOptions>();
   sub.add_option("--threads", opts->threads, "comma-separated thread counts")->default_val("1,2");
   sub.add_option("--reps", opts->reps, "timed repetitions (median is shown)")->default_val(7)->check(CLI::PositiveNumber);
