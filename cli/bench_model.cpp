@@ -182,6 +182,7 @@ int run_bench_model(const BenchModelOptions& o) {
   const auto scene = model::make_synthetic_scene(reference_scene(o.size));
   ModelConfig mc;  // official sizes
   mc.body_query = "first";  // the reference's ball query: first K body vertices in index order
+  mc.decoder_ret_channels = 1;  // the reference's rank-3 decoder map (same FLOPs and parameters)
   LossConfig lc;
   const double t_build0 = now_ms();
   const auto in64 = model::build_model_input(scene, mc);

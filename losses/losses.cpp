@@ -129,16 +129,18 @@ LossTerms<T> compute_losses(ad::Tape<T>& tape, ad::ParamStore<T>& params, const 
   const auto rot_names = model::rotation_map_names(mc);
   // With model.orthogonality = "exact" the constraint holds by construction: no penalty.
   if (lc.orthogonality != 0 && !rot_names.empty() && mc.orthogonality != "exact") {
-    const std::vector<T> eye3{1, 0, 0, 0, 1, 0, 0, 0, 1};
-    const Var<T> I3 = model::constant(tape, eye3, 3, 3);
+    auto identity = [&](int64_t n) {
+      std::vector<T> eye(n * n, T(0));
+      for (int64_t i = 0; i < n; ++i) eye[i * n + i] = T(1);
+      return model::constant(tape, eye, n, n);
+    };
     std::vector<Var<T>> parts;
     for (const auto& name : rot_names) {
-      const Var<T> W = params.var(name);  // (d, 3)
-      std::vector<T> eye_d(W.rows * W.rows, T(0));
-      for (int64_t i = 0; i < W.rows; ++i) eye_d[i * W.rows + i] = T(1);
-      const Var<T> Wt = ad::linear(tape, I3, W);  // (3, d)
-      parts.push_back(ad::sum_all(tape, ad::squared_error(tape, ad::linear(tape, W, W), model::constant(tape, eye_d, W.rows, W.rows))));
-      parts.push_back(ad::sum_all(tape, ad::squared_error(tape, ad::linear(tape, Wt, Wt), I3)));
+      const Var<T> W = params.var(name);  // (d, c), c = 3 (simulator) or 3k (decoder)
+      const Var<T> Ic = identity(W.cols);
+      const Var<T> Wt = ad::linear(tape, Ic, W);  // (c, d)
+      parts.push_back(ad::sum_all(tape, ad::squared_error(tape, ad::linear(tape, W, W), identity(W.rows))));
+      parts.push_back(ad::sum_all(tape, ad::squared_error(tape, ad::linear(tape, Wt, Wt), Ic)));
     }
     Var<T> orth = parts[0];
     for (std::size_t k = 1; k < parts.size(); ++k) orth = ad::add(tape, orth, parts[k]);

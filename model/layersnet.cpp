@@ -153,23 +153,31 @@ Var<T> edge_weights(ad::Tape<T>& tape, const EdgeTerms<T>& t, std::span<const in
   return t.inv_norm.value ? ad::div(tape, a, t.inv_norm) : a;
 }
 
+// xᵀ for a small matrix x (r, c) -> (c, r), on the tape: x applied to the identity.
+template <class T>
+Var<T> transpose_of(ad::Tape<T>& tape, const Var<T>& x) {
+  std::vector<T> eye(x.cols * x.cols, T(0));
+  for (int64_t i = 0; i < x.cols; ++i) eye[i * x.cols + i] = T(1);
+  return ad::linear(tape, constant(tape, eye, x.cols, x.cols), x);  // I xᵀ
+}
+
 template <class T>
 Var<T> rotation_map_impl(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfig& cfg, const std::string& name) {
-  const Var<T> V = p(name);  // (d, 3)
+  const Var<T> V = p(name);  // (d, c), c = 3 or 3k
   if (cfg.orthogonality != "exact") return V;
-  const std::vector<T> eye3{1, 0, 0, 0, 1, 0, 0, 0, 1};
-  const Var<T> Vt = ad::linear(tape, constant(tape, eye3, 3, 3), V);  // (3, d): columns as rows
-  const Var<T> r0 = rows_of(Vt, 0, 1), r1 = rows_of(Vt, 1, 2), r2 = rows_of(Vt, 2, 3);
+  const Var<T> Vt = transpose_of(tape, V);  // (c, d): columns as rows
   auto minus_proj = [&](const Var<T>& x, const Var<T>& u) {  // x − (x·u) u, u unit
     return ad::sub(tape, x, ad::mul(tape, u, ad::row_sum(tape, ad::mul(tape, x, u))));
   };
-  const Var<T> u0 = ad::row_normalize(tape, r0);
-  const Var<T> u1 = ad::row_normalize(tape, minus_proj(r1, u0));
-  const Var<T> u2 = ad::row_normalize(tape, minus_proj(minus_proj(r2, u0), u1));
-  const Var<T> Ut = ad::concat_rows(tape, ad::concat_rows(tape, u0, u1), u2);  // (3, d)
-  std::vector<T> eye_d(V.rows * V.rows, T(0));
-  for (int64_t i = 0; i < V.rows; ++i) eye_d[i * V.rows + i] = T(1);
-  return ad::linear(tape, constant(tape, eye_d, V.rows, V.rows), Ut);  // (d, 3)
+  Var<T> Ut;  // Gram–Schmidt of the rows, (c, d)
+  std::vector<Var<T>> us;
+  for (int64_t i = 0; i < Vt.rows; ++i) {
+    Var<T> r = rows_of(Vt, i, i + 1);
+    for (const Var<T>& u : us) r = minus_proj(r, u);
+    us.push_back(ad::row_normalize(tape, r));
+    Ut = i == 0 ? us.back() : ad::concat_rows(tape, Ut, us.back());
+  }
+  return transpose_of(tape, Ut);  // (d, c)
 }
 
 // ψ with RET for the inter edges of group g: φ(R)ᵀ ReLU(A_g φ(R) v + c_g), φ(R) = W_g R W_gᵀ (eq. 10–11).
@@ -317,14 +325,26 @@ Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
       if (k < 0) k = static_cast<int32_t>(U);
     return out;
   };
+  // RET with k channels: φ(R) = W (I_k ⊗ R) Wᵀ, W (d, 3k); k = 1 is the official rank-3 map.
+  const int k3 = 3 * cfg.decoder_ret_channels;
   Var<T> W, Wt;
   if (ret) {
-    W = rotation_map_impl(tape, p, cfg, "decoder.rot_mapping.weight");  // (d, 3)
-    const std::vector<T> eye3{1, 0, 0, 0, 1, 0, 0, 0, 1};
-    Wt = ad::linear(tape, constant(tape, eye3, 3, 3), W);  // (3, d) = Wᵀ
+    W = rotation_map_impl(tape, p, cfg, "decoder.rot_mapping.weight");  // (d, 3k)
+    Wt = transpose_of(tape, W);                                          // (3k, d)
   }
+  // (I_k ⊗ R_i) z_i for every row i: z (n, 3k) read as n·k 3-vectors, R_host (n, 9).
+  auto rotate_blocks = [&](const std::vector<T>& R_host, const Var<T>& z) {
+    const int64_t n = z.rows, k = cfg.decoder_ret_channels;
+    if (k == 1) return ad::rotate3(tape, constant(tape, R_host, n, 9), z);
+    std::vector<T> R_rep(n * k * 9);
+    for (int64_t i = 0; i < n; ++i)
+      for (int64_t j = 0; j < k; ++j) std::copy_n(&R_host[9 * i], 9, &R_rep[9 * (i * k + j)]);
+    const Var<T> y = ad::rotate3(tape, constant(tape, R_rep, n * k, 9), ad::reshape(z, n * k, 3));
+    return ad::reshape(y, n, 3 * k);
+  };
 
-  const Var<T> Rp = constant(tape, frames_of(in, in.patch_body), P, 9);
+  const std::vector<T> Rp_host = frames_of(in, in.patch_body);
+  const Var<T> Rp = constant(tape, Rp_host, P, 9);
   const Var<T> phi_p = ad::gather_rows(tape, body_tab, body_index(in.patch_body));
   const Var<T> phi_v = ad::gather_rows(tape, body_tab, body_index(in.vertex_body));
   std::vector<T> Rv_host = frames_of(in, in.vertex_body);
@@ -350,16 +370,16 @@ Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
 
   Var<T> a_p, a_e;  // decoder outputs (local frame): per patch (P, 3), per candidate (Ec, 3)
   if (ret && opt.factor_decoder) {
-    // First layer on [rel, R Wᵀe, R Wᵀh] with weight [W1_rel | W1_e W | W1_h W] (exact, rank 3).
+    // First layer on [rel, R Wᵀe, R Wᵀh] with weight [W1_rel | W1_e W | W1_h W] (exact, rank 3k).
     const Var<T> W1 = p("decoder.proj.0.weight"), b1 = p("decoder.proj.0.bias");
     const Var<T> M = ad::concat_cols(tape, {ad::slice_cols(tape, W1, 0, 12),
                                             ad::linear(tape, ad::slice_cols(tape, W1, 12, 12 + d), Wt),
                                             ad::linear(tape, ad::slice_cols(tape, W1, 12 + d, 12 + 2 * d), Wt)});
-    const Var<T> z_p = ad::linear(tape, emb, Wt);  // Wᵀ e_p  (P, 3)
-    const Var<T> feat_p = ad::concat_cols(tape, {tape.zeros(P, 12), ad::rotate3(tape, Rp, z_p),
-                                                 ad::rotate3(tape, Rp, ad::linear(tape, phi_p, Wt))});
-    const Var<T> zh_v = ad::rotate3(tape, Rv, ad::linear(tape, phi_v, Wt));  // R_v Wᵀ h_v  (N, 3)
-    const Var<T> ze_v = ad::rotate3(tape, constant(tape, Re, Ec, 9), ad::gather_rows(tape, z_p, in.cand_patches));
+    const Var<T> z_p = ad::linear(tape, emb, Wt);  // Wᵀ e_p  (P, 3k)
+    const Var<T> feat_p = ad::concat_cols(tape, {tape.zeros(P, 12), rotate_blocks(Rp_host, z_p),
+                                                 rotate_blocks(Rp_host, ad::linear(tape, phi_p, Wt))});
+    const Var<T> zh_v = rotate_blocks(Rv_host, ad::linear(tape, phi_v, Wt));  // (I⊗R_v) Wᵀ h_v  (N, 3k)
+    const Var<T> ze_v = rotate_blocks(Re, ad::gather_rows(tape, z_p, in.cand_patches));
     const Var<T> feat_v = ad::concat_cols(tape, {rel_v, ze_v, ad::gather_rows(tape, zh_v, cand_vertex)});
     auto rest = [&](const Var<T>& f) {
       const Var<T> h = ad::linear_relu(tape, f, M, b1);
@@ -370,15 +390,19 @@ Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
     a_e = rest(feat_v);
   } else {
     // Patch branch: [0 (12), φ(R_p) e_p, φ(R_p) h_p]; vertex branch: [rel, φ(R_v) e_p, φ(R_v) h_v].
-    const Var<T> He_p = ret ? ad::rot_map_apply(tape, W, Rp, emb) : emb;
-    const Var<T> Hh_p = ret ? ad::rot_map_apply(tape, W, Rp, phi_p) : phi_p;
+    // k = 1: the fused W R Wᵀ op; k > 1: W (I⊗R) Wᵀ composed.
+    auto phi = [&](const std::vector<T>& R_host, const Var<T>& R, const Var<T>& x) {
+      if (cfg.decoder_ret_channels == 1) return ad::rot_map_apply(tape, W, R, x);
+      return ad::linear(tape, rotate_blocks(R_host, ad::linear(tape, x, Wt)), W);
+    };
+    const Var<T> He_p = ret ? phi(Rp_host, Rp, emb) : emb;
+    const Var<T> Hh_p = ret ? phi(Rp_host, Rp, phi_p) : phi_p;
     a_p = mlp(tape, p, "decoder.proj", 3, false, ad::concat_cols(tape, {tape.zeros(P, 12), He_p, Hh_p}));
     Var<T> He_v, Hh_v;
     if (ret) {
-      const Var<T> z_e = ad::rotate3(tape, constant(tape, Re, Ec, 9),
-                                     ad::gather_rows(tape, ad::linear(tape, emb, Wt), in.cand_patches));
-      He_v = ad::linear(tape, z_e, W);  // W R_v Wᵀ e_p  (Ec, d)
-      Hh_v = ad::gather_rows(tape, ad::rot_map_apply(tape, W, Rv, phi_v), cand_vertex);
+      const Var<T> z_e = rotate_blocks(Re, ad::gather_rows(tape, ad::linear(tape, emb, Wt), in.cand_patches));
+      He_v = ad::linear(tape, z_e, W);  // W (I⊗R_v) Wᵀ e_p  (Ec, d)
+      Hh_v = ad::gather_rows(tape, phi(Rv_host, Rv, phi_v), cand_vertex);
     } else {
       He_v = ad::gather_rows(tape, emb, in.cand_patches);
       Hh_v = ad::gather_rows(tape, phi_v, cand_vertex);

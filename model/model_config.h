@@ -18,6 +18,10 @@ struct ModelConfig {
   int body_neighbors = 16;          // K: body vertices per patch
   std::string body_query = "nearest";  // "nearest" K, or "first" K in index order (official ball query)
   int decoder_patch_candidates = 4;    // patches per vertex in the decoder
+  // k: 3-vector channels the decoder's RET rotates, φ(R) = W (I_k ⊗ R) Wᵀ with W (d, 3k).
+  // Official: 1, so the decoder sees only a 3-D projection of each token (rank 3); larger k
+  // keeps the equivariance and lets more of the token through (model/README.md). 3k ≤ d.
+  int decoder_ret_channels = 8;
   std::string attention = "ria";    // "ria" (paper eq. 5–7) or "tie" (TIE's LayerNorm logits)
   bool rotation_equivalent = true;  // RET (eq. 8–11); false = the "vanilla" ablation
   std::string orthogonality = "penalty";  // W_R: "penalty" (official) or "exact" (QR parametrisation)

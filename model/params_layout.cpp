@@ -43,6 +43,9 @@ ModelDims model_dims(const ModelConfig& c) {
                   "model.attention = '" << c.attention << "': use \"ria\" or \"tie\"");
   LAYERSNET_CHECK(c.orthogonality == "penalty" || c.orthogonality == "exact",
                   "model.orthogonality = '" << c.orthogonality << "': use \"penalty\" or \"exact\"");
+  LAYERSNET_CHECK(!c.rotation_equivalent || (c.decoder_ret_channels >= 1 && 3 * c.decoder_ret_channels <= c.width),
+                  "model.decoder_ret_channels = " << c.decoder_ret_channels << " with model.width = " << c.width
+                                                  << ": need 1 <= k and 3k <= width");
   ModelDims m;
   m.d = c.width, m.heads = c.heads, m.head_dim = c.width / c.heads, m.groups = c.heads / 2;
   m.layers = c.layers, m.ffn = c.ffn_width, m.dec_width = c.decoder_width, m.dec_in = 12 + 2 * c.width;
@@ -91,7 +94,7 @@ void register_params(ad::ParamStore<T>& ps, const ModelConfig& c) {
       add_norm(ps, p + "res_norms.1", d);
     }
   }
-  if (c.rotation_equivalent) ps.add("decoder.rot_mapping.weight", d, 3);
+  if (c.rotation_equivalent) ps.add("decoder.rot_mapping.weight", d, 3 * c.decoder_ret_channels);
   add_mlp(ps, "decoder.proj", {m.dec_in, m.dec_width, m.dec_width, 3});
   ps.finalize();
 }

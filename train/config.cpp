@@ -163,6 +163,7 @@ const Schema& schema() {
     k.add("model.decoder_patch_candidates", [](Config& c) -> int& { return c.model.decoder_patch_candidates; }, "patches decoding each vertex", {1, 64, {}});
     k.add("model.attention", [](Config& c) -> std::string& { return c.model.attention; }, "attention normalisation", {0, 0, {"ria", "tie"}});
     k.add("model.rotation_equivalent", [](Config& c) -> bool& { return c.model.rotation_equivalent; }, "Rotation Equivalent Transformation on/off");
+    k.add("model.decoder_ret_channels", [](Config& c) -> int& { return c.model.decoder_ret_channels; }, "3-vector channels of the decoder's RET (official 1; 3k <= width)", {1, 1024, {}});
     k.add("model.orthogonality", [](Config& c) -> std::string& { return c.model.orthogonality; }, "how W_R stays orthogonal", {0, 0, {"penalty", "exact"}});
     // [loss]
     const Range weight{0, 1e6, {}};

@@ -95,10 +95,15 @@ TEST(Losses, VertexNormalsGradcheck) {
   EXPECT_TRUE(report.ok) << report.failures;
 }
 
-// With orthonormal columns, ‖W Wᵀ − I_d‖² = d − 3 and ‖Wᵀ W − I_3‖² = 0: official sizes give
-// 16·(16 − 3) + (128 − 3) = 333 at initialisation (reference §2.7).
-TEST(Losses, OrthogonalityFloorAtInitialisation) {
+// With orthonormal columns, ‖W Wᵀ − I_d‖² = d − c and ‖Wᵀ W − I_c‖² = 0 for W (d, c): official
+// sizes give 16·(16 − 3) + (128 − 3) = 333 at initialisation (reference §2.7); our default
+// decoder map with k = 8 channels (c = 24) gives 16·13 + (128 − 24) = 312.
+class OrthogonalityFloor : public ::testing::TestWithParam<std::pair<int, double>> {};
+INSTANTIATE_TEST_SUITE_P(DecoderChannels, OrthogonalityFloor,
+                         ::testing::Values(std::make_pair(1, 333.0), std::make_pair(8, 312.0)));
+TEST_P(OrthogonalityFloor, AtInitialisation) {
   ModelConfig c;
+  c.decoder_ret_channels = GetParam().first;
   ad::ParamStore<double> ps;
   model::register_params(ps, c);
   model::init_params(ps, c, 1);
@@ -108,8 +113,8 @@ TEST(Losses, OrthogonalityFloorAtInitialisation) {
   ad::Tape<double> tape;
   model::Predictions<double> pred{tape.constant(toy.pred.data(), 6, 9), tape.constant(toy.patch.data(), 1, 9)};
   const auto t = compute_losses(tape, ps, c, lc, toy.target, pred);
-  EXPECT_NEAR(t.orthogonality, 333.0, 1e-9);
-  EXPECT_NEAR(t.total.scalar(), 333.0, 1e-9);
+  EXPECT_NEAR(t.orthogonality, GetParam().second, 1e-9);
+  EXPECT_NEAR(t.total.scalar(), GetParam().second, 1e-9);
 }
 
 }  // namespace

@@ -15,6 +15,7 @@ inline ModelConfig tiny_config() {
   c.ffn_width = 24;
   c.decoder_width = 20;
   c.body_neighbors = 4;
+  c.decoder_ret_channels = 4;  // 3k <= width
   return c;
 }
 

@@ -55,7 +55,7 @@ void directional_check(const ModelConfig& c) {
   double analytic = 0;
   for (std::size_t i = 0; i < dir.size(); ++i) dir[i] = normal(rng), analytic += dir[i] * ps.grads()[i];
   const std::vector<double> x0(ps.values().begin(), ps.values().end());
-  const double eps = 1e-6;
+  const double eps = 1e-7;  // 1e-6 crossed a ReLU or contact kink in the TIE variant (0.5 % off; 1e-7 agrees)
   auto at = [&](double t) {
     for (std::size_t i = 0; i < dir.size(); ++i) ps.values()[i] = x0[i] + t * dir[i];
     return loss_value(ps, c, lc, s);
@@ -106,7 +106,7 @@ TEST(ModelOrthogonality, ExactParametrisationHoldsForAnyParameter) {
     for (auto& x : ps.value(ps.index_of(name))) x += 0.7 * normal(rng);
     const auto W = rotation_map(tape, ps, c, name);
     Eigen::MatrixXd WtW = W.val().transpose() * W.val();
-    EXPECT_LT((WtW - Eigen::MatrixXd::Identity(3, 3)).norm(), 1e-12) << name;
+    EXPECT_LT((WtW - Eigen::MatrixXd::Identity(WtW.rows(), WtW.cols())).norm(), 1e-12) << name;
   }
   const auto s = make_sample<double>(testing::tiny_scene(), c);
   ad::Tape<double> tape;
