@@ -326,7 +326,6 @@ Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
     return out;
   };
   // RET with k channels: φ(R) = W (I_k ⊗ R) Wᵀ, W (d, 3k); k = 1 is the official rank-3 map.
-  const int k3 = 3 * cfg.decoder_ret_channels;
   Var<T> W, Wt;
   if (ret) {
     W = rotation_map_impl(tape, p, cfg, "decoder.rot_mapping.weight");  // (d, 3k)
