@@ -3,6 +3,7 @@
 // over a split, Euclidean error and collision rates (with the ground truth's own rates as the
 // floor), speed at 1 and 2 threads against Blender's recorded time; writes eval.json,
 // eval.md, curve.png, speed.png to --out and prints the summary table. See eval/README.md.
+#include "autodiff/bf16_gemm.h"
 #include "cli/command_registry.h"
 #include "dataset/manifest.h"
 #include "dataset/stats.h"
@@ -12,6 +13,7 @@
 
 #include <omp.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -32,6 +34,7 @@ struct EvalCliOptions {
   int speed_frames = 10;
   int threads = 0;
   std::string out = "eval_out";
+  std::string precision = "float32";  // of the models' linear products: float32 | bf16 | float32,bf16
 };
 
 // The checkpoint of a run directory (train/trainer.h): best.h5, else the newest
@@ -80,14 +83,25 @@ int run_eval(EvalCliOptions o) {
   eo.start_frame = o.start_frame >= 2 ? o.start_frame : std::max(2, base.data.first_frame);
   eo.max_sequences = o.max_sequences;
 
+  // Every model once per listed precision (a list shows the bf16 speed/accuracy trade in one table).
+  std::vector<ad::MatmulPrecision> precisions;
+  for (std::size_t a = 0, b; a <= o.precision.size(); a = b + 1) {
+    b = std::min(o.precision.find(',', a), o.precision.size());
+    precisions.push_back(ad::parse_matmul_precision(o.precision.substr(a, b - a)));
+  }
+  const bool any_bf16 = std::count(precisions.begin(), precisions.end(), ad::MatmulPrecision::kBFloat16) > 0;
   std::vector<std::unique_ptr<eval::Predictor>> owned;
   std::vector<std::string> kinds, paths;
   for (size_t i = 0; i < o.checkpoints.size(); ++i) {
     const Config c = parse_config_text(read_checkpoint_config(o.checkpoints[i]), o.checkpoints[i]);
     const std::string name = i < o.names.size() ? o.names[i] : default_name(o.checkpoints[i], c);
-    owned.push_back(eval::load_model_predictor(o.checkpoints[i], name, fallback.get()));
-    kinds.push_back("model");
-    paths.push_back(o.checkpoints[i]);
+    for (const ad::MatmulPrecision precision : precisions) {
+      auto model = eval::load_model_predictor(o.checkpoints[i], name, fallback.get());
+      model->set_matmul_precision(precision);  // bf16: the name gets "[bf16] " in front
+      owned.push_back(std::move(model));
+      kinds.push_back("model");
+      paths.push_back(o.checkpoints[i]);
+    }
   }
   owned.push_back(std::make_unique<eval::ConstantVelocity>());
   owned.push_back(std::make_unique<eval::FollowBody>());
@@ -100,8 +114,10 @@ int run_eval(EvalCliOptions o) {
   for (auto& p : owned) predictors.push_back(p.get());
 
   if (o.threads > 0) omp_set_num_threads(o.threads);  // the evaluation rollouts (speed sets its own)
-  std::printf("eval: %s split '%s', %zu method(s) + 2 baselines, up to %d frames from input frame %d, %d thread(s)\n",
-              root.c_str(), eo.split.c_str(), o.checkpoints.size(), eo.frames, eo.start_frame, omp_get_max_threads());
+  std::printf("eval: %s split '%s', %zu method(s) + 2 baselines, up to %d frames from input frame %d, %d thread(s), "
+              "products %s%s%s\n",
+              root.c_str(), eo.split.c_str(), owned.size() - 3, eo.frames, eo.start_frame, omp_get_max_threads(),
+              o.precision.c_str(), any_bf16 ? ", bf16 kernel " : "", any_bf16 ? ad::bf16_kernel_name() : "");
   std::vector<eval::MethodResult> results = eval::evaluate(manifest, predictors, eo, true);
   for (size_t p = 0; p < results.size(); ++p) {
     results[p].kind = kinds[p];
@@ -157,6 +173,10 @@ LAYERSNET_COMMAND(eval, "Roll out checkpoints and baselines over a split; error,
                     sub.add_option("--speed-frames", o->speed_frames, "frames of the 1- and 2-thread speed rollouts");
                     sub.add_option("--threads", o->threads, "OpenMP threads of the evaluation rollouts (0 = all; speed is measured at 1 and 2)");
                     sub.add_option("--out", o->out, "output folder for eval.json, eval.md and plots");
+                    sub.add_option("--precision", o->precision,
+                                   "linear products of the models: float32, bf16 (inference-only bfloat16; names "
+                                   "get '[bf16] '), or float32,bf16 (every model both ways)")
+                        ->check(CLI::IsMember({"float32", "bf16", "float32,bf16", "bf16,float32"}));
                     return [o] {
                       if (o->checkpoints.empty() && o->runs.empty() && o->dataset.empty()) {
                         std::fprintf(stderr, "layersnet eval: give --run or --checkpoint (or --dataset for baselines only)\n");

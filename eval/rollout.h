@@ -71,7 +71,13 @@ std::map<std::string, std::vector<double>> stats_to_checkpoint(const dataset::No
 class ModelPredictor : public Predictor {
  public:
   ModelPredictor(std::string name, Config config, ad::ParamStore<float> params, dataset::NormalisationStats stats);
-  std::string name() const override { return name_; }
+  // The name, with "[bf16] " in front when the products run in bfloat16 (in front: tables
+  // cut long names).
+  std::string name() const override {
+    return tape_.matmul_precision() == ad::MatmulPrecision::kBFloat16 ? "[bf16] " + name_ : name_;
+  }
+  // Precision of the linear layers' products (autodiff/bf16_gemm.h; default float32).
+  void set_matmul_precision(ad::MatmulPrecision p) { tape_.set_matmul_precision(p); }
   void begin(const dataset::Sequence& seq) override;
   Points step(const dataset::Sequence& seq, int t, const Points& x_prev2, const Points& x_prev,
               const Points& x_now) override;
