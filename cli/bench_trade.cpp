@@ -97,12 +97,9 @@ std::string fmt(const char* f, double v) {
   return b;
 }
 
-std::string self_exe() {
-  std::error_code ec;
-  const fs::path p = fs::read_symlink("/proc/self/exe", ec);
-  if (ec) throw std::runtime_error("bench trade: cannot read /proc/self/exe (" + ec.message() + ")");
-  return p.string();
-}
+// This process's binary as /proc/<pid>/exe: still the same program when the file on disk is
+// rebuilt during a sweep, and (unlike /proc/self/exe) the same path for a shell of popen().
+std::string self_exe() { return "/proc/" + std::to_string(::getpid()) + "/exe"; }
 
 std::string slurp(const fs::path& p) {
   std::ifstream in(p, std::ios::binary);
@@ -140,7 +137,8 @@ struct ChildResult {
 ChildResult run_child(const std::vector<std::string>& args, const fs::path& log, const std::string& label) {
   const std::string exe = self_exe();
   std::vector<char*> argv;
-  argv.push_back(const_cast<char*>(exe.c_str()));
+  char name[] = "layersnet";
+  argv.push_back(name);
   for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
   argv.push_back(nullptr);
   std::fflush(stdout);
@@ -256,6 +254,19 @@ json run_variant(const Variant& v, const TradeOptions& o, const fs::path& out, b
     const json old = json::parse(slurp(record_path), nullptr, false);
     if (!old.is_discarded()) rec = old;
   }
+  // A record of a smaller budget: continue that training to this budget (exact resume: the
+  // same parameters as training this budget from scratch) and evaluate again.
+  const int had = rec.value("budget_epochs", budget);
+  if (had > budget)
+    throw std::runtime_error((dir / "variant.json").string() + ": trained for " + std::to_string(had) +
+                             " epochs, more than --budget-epochs " + std::to_string(budget) + "; use another --out");
+  if (had < budget && !v.bf16) {
+    if (rec.contains("train")) rec["train_before"] = rec["train"];
+    rec.erase("train");
+    rec.erase("eval");
+    rec.erase("status");
+  }
+  rec["budget_epochs"] = budget;
   if (rec.contains("eval") && fs::exists(dir / "eval" / "eval.json")) {
     rec["reused"] = true;
     rec["result"] = read_eval(dir / "eval" / "eval.json");
@@ -279,7 +290,8 @@ json run_variant(const Variant& v, const TradeOptions& o, const fs::path& out, b
   } else if (!rec.contains("train")) {
     std::vector<std::string> args;
     if (fs::exists(dir / "config.toml")) {
-      args = {"train", "--resume", dir.string()};  // interrupted earlier: continue it
+      // Interrupted earlier, or trained for a smaller budget: continue it.
+      args = {"train", "--resume", dir.string(), "--set", "train.epochs=" + std::to_string(budget)};
       rec["train_resumed"] = true;
     } else {
       args = {"train", "--config", o.config, "--set", "train.epochs=" + std::to_string(budget)};
@@ -299,6 +311,12 @@ json run_variant(const Variant& v, const TradeOptions& o, const fs::path& out, b
       std::printf("      FAILED: %s\n", rec["message"].get<std::string>().c_str());
       write_text(record_path, rec.dump(2));  // no "train" key: the next run retries (resumes)
       return rec;
+    }
+    if (rec.contains("train_before")) {  // the whole training: earlier part + this one
+      const json& b = rec["train_before"];
+      train["wall_s"] = c.wall_s + num(b, "wall_s");
+      train["peak_mb"] = std::max(c.peak_mb, num(b, "peak_mb"));
+      train["note"] = "continued from a smaller budget; samples_per_s of the continued part";
     }
     rec["train"] = train;
     write_text(record_path, rec.dump(2));
@@ -434,10 +452,12 @@ std::string trade_markdown(const json& t) {
       << (r.value("diverged_sequences", 0) > 0 ? " (diverged)" : "") << " | " << cell(num(r, "h_collision_percent"), "%.2f")
       << " | " << cell(num(r, "l_collision_outer_percent"), "%.2f") << " | " << cell(num(r, "l_collision_near_percent"), "%.2f")
       << " | " << cell(num(r, "ms_per_frame_1thread"), "%.3g") << " | " << cell(num(r, "ms_per_frame_2threads"), "%.3g")
-      << " | " << cell(num(tr, "samples_per_s"), "%.3g") << " | " << cell(num(tr, "wall_s"), "%.3g") << " | "
+      << " | " << cell(num(tr, "samples_per_s"), "%.3g") << " | " << cell(num(tr, "wall_s"), "%.3g") << (v.value("train_resumed", false) ? " †" : "") << " | "
       << cell(num(tr, "peak_mb"), "%.0f") << " | " << cell(num(ev, "peak_mb"), "%.0f") << " | "
       << (v.value("on_front", false) ? "**●**" : "") << " |\n";
   }
+  o << "\n† training continued with `--resume` (an interrupted run, or a smaller earlier budget extended exactly): "
+       "train s is the sum of both parts, samples/s that of the continued part.\n";
   if (t.contains("baselines") && !t["baselines"].empty()) {
     o << "\nBaselines on the same rollouts (no training):";
     for (const auto& [k, e] : t["baselines"].items()) o << " " << k << " " << fmt("%.1f", e.get<double>()) << " mm;";

@@ -137,6 +137,22 @@ TEST(BenchTrade, TwoVariantsEndToEndThenReused) {
   ASSERT_EQ(code, 0) << again;
   EXPECT_NE(again.find("reused"), std::string::npos) << again;
   EXPECT_EQ(again.find("train: layersnet"), std::string::npos) << again;
+
+  // A larger budget continues both trainings (train --resume to 2 epochs) and evaluates again.
+  std::string args2 = args;
+  args2.replace(args2.find("--budget-epochs 1"), 17, "--budget-epochs 2");
+  const std::string more = run(args2, &code);
+  ASSERT_EQ(code, 0) << more;
+  EXPECT_NE(more.find("train --resume"), std::string::npos) << more;
+  const auto j2 = nlohmann::json::parse(slurp(out / "trade.json"));
+  EXPECT_EQ(j2["settings"]["budget_epochs"], 2);
+  for (const auto& v : j2["variants"]) {
+    EXPECT_EQ(v["budget_epochs"], 2);
+    EXPECT_TRUE(v["train_resumed"].get<bool>());
+    EXPECT_GE(v["train"]["wall_s"].get<double>(), v["train_before"]["wall_s"].get<double>());
+  }
+  // The run's log says the second epoch ran.
+  EXPECT_NE(slurp(out / "variants" / "default" / "train.log").find("epoch 2"), std::string::npos);
   if (!std::getenv("LAYERSNET_TRADE_TEST_KEEP")) fs::remove_all(root);
 }
 
