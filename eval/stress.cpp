@@ -1,6 +1,7 @@
 // Stress scenes, distance bounds and the float32/float64 comparison (see stress.h).
 #include "eval/stress.h"
 
+#include "dataset/h5.h"
 #include "dataset/neighbours.h"
 #include "dataset/wind.h"
 #include "eval/evaluate.h"
@@ -53,9 +54,11 @@ Eigen::Vector4f plus_x_wind() {
 dataset::Sequence make_stress_sequence(const dataset::Sequence& source, const StressScene& scene) {
   const dataset::SequenceInfo& in = source.info;
   const int T = in.num_frames, F = scene.frames, B = in.num_body_vertices;
-  if (F < 4 || !(scene.speed > 0) || T < 2)
+  const int f0 = scene.first;
+  if (F < 4 || !(scene.speed > 0) || f0 < 0 || f0 > T - 2)
     throw std::invalid_argument(in.path + ": a stress scene needs frames >= 4 (got " + std::to_string(F) +
-                                "), speed > 0 (got " + std::to_string(scene.speed) + ") and a source of >= 2 frames");
+                                "), speed > 0 (got " + std::to_string(scene.speed) + ") and a first frame in [0, T-2] (got " +
+                                std::to_string(f0) + ", T = " + std::to_string(T) + ")");
   dataset::Sequence out;
   out.info = in;
   out.info.path = in.path + " (stress)";
@@ -86,7 +89,7 @@ dataset::Sequence make_stress_sequence(const dataset::Sequence& source, const St
     out.info.wind_strength.resize(F);
   }
   for (int t = 0; t < F; ++t) {
-    const double u = pingpong(scene.speed * t, T);
+    const double u = f0 + pingpong(scene.speed * t, T - f0);
     out.frames.body.middleRows(static_cast<Eigen::Index>(t) * B, B) = interpolate(source.frames.body, B, T, u);
     out.info.translation.row(t) = interpolate(translation, 1, T, u);
     for (int g = 0; g < in.num_garments(); ++g) {
@@ -104,6 +107,16 @@ dataset::Sequence make_stress_sequence(const dataset::Sequence& source, const St
     }
   }
   return out;
+}
+
+int settled_frame(const std::string& sequence_path) {
+  const dataset::h5::Handle file = dataset::h5::open_file(sequence_path);
+  const dataset::h5::Where where{sequence_path, "/"};
+  int f = 0;
+  for (const char* name : {"rest_frames", "ramp_frames"})
+    if (dataset::h5::has_attr(file.get(), name))
+      f += static_cast<int>(std::lround(dataset::h5::read_float_attr(file.get(), name, where)));
+  return f;
 }
 
 std::vector<double> garment_graph_diameters(const dataset::Sequence& seq) {
@@ -280,7 +293,7 @@ double PrecisionResult::worst_max() const {
 
 PrecisionResult compare_precision(const Config& config, const ad::ParamStore<float>& params,
                                   const dataset::NormalisationStats& stats, const dataset::Sequence& source,
-                                  int frames) {
+                                  int frames, int first) {
   ModelPredictor single("float32", config, params, stats);
   DoubleModelPredictor dbl(config, params, stats);
   PrecisionResult res;
@@ -291,6 +304,7 @@ PrecisionResult compare_precision(const Config& config, const ad::ParamStore<flo
 
   StressScene scene;
   scene.frames = frames + 3;
+  scene.first = first;
   const dataset::Sequence seq = make_stress_sequence(source, scene);
   const Rollout a = rollout(single, seq, 2, frames), b = rollout(dbl, seq, 2, frames);
   res.frames = static_cast<int>(a.frames.size());

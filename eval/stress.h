@@ -3,9 +3,13 @@
 // beyond its training data, and float32 against float64 on the same checkpoint.
 //
 // Stress scene. A sequence of F frames built in memory from a real one (T frames):
-//   time      stress frame t plays source time u(t) = pingpong(s·t) in [0, T−1] (forward,
-//             then backward, ...), linearly interpolated between source frames, so every
-//             body velocity is s× the data's (s = speed) and the motion never runs out;
+//   time      stress frame t plays source time u(t) = f0 + pingpong(s·t) in [f0, T−1]
+//             (forward, then backward, ...), linearly interpolated between source frames, so
+//             every body velocity is s× the data's (s = speed) and the motion never runs out.
+//             f0 (`first`) skips the generator's rest and T-pose ramp (frames where the body
+//             swings from the T-pose into the clip at up to 0.8 m/frame — an initialisation
+//             artefact, not body motion; replaying it backwards every loop would test the
+//             ramp, not the animation);
 //   body      vertices and root translation at u(t);
 //   garments  at u(t) too: frames 0..2 are the rollout's initial state (consistent with the
 //             resampled body); later frames are placeholders that only fill the sample's
@@ -42,10 +46,15 @@ struct StressScene {
   int frames = 600;             // F: frames of the built sequence (D-LAYERS' longest: 600)
   double speed = 1.0;           // s: body and root velocity factor (> 0)
   double wind_strength = -1.0;  // S >= 0: constant wind of this strength; < 0: the source's wind
+  int first = 0;                // f0: first source frame played (0 <= f0 <= T − 2)
 };
 
-// Builds the stress sequence (see above). Throws std::invalid_argument for frames < 4 or
-// speed <= 0, naming the source file.
+// First frame after the generator's rest and ramp: the root attributes rest_frames +
+// ramp_frames that `layersnet generate` writes; 0 when the file has neither.
+int settled_frame(const std::string& sequence_path);
+
+// Builds the stress sequence (see above). Throws std::invalid_argument for frames < 4,
+// speed <= 0 or f0 outside [0, T − 2], naming the source file.
 dataset::Sequence make_stress_sequence(const dataset::Sequence& source, const StressScene& scene);
 
 // Per garment (G,): graph diameter D_g of the rest mesh (the file's /rest template, else
@@ -98,7 +107,7 @@ class DoubleModelPredictor : public Predictor {
 };
 
 // float32 vs float64 rollouts of one checkpoint over `frames` frames of the stress sequence
-// with speed 1 and the source's wind. Bound: the largest per-frame mean divergence must stay
+// with speed 1, the source's wind and f0 = first. Bound: the largest per-frame mean divergence must stay
 // below the float model's own mean error against the ground truth on the source sequence
 // (all its frames from input frame 2): rounding then changes the rollout by less than the
 // model is wrong anyway.
@@ -114,6 +123,7 @@ struct PrecisionResult {
   bool passed() const { return finite && worst_mean() < model_error; }
 };
 PrecisionResult compare_precision(const Config& config, const ad::ParamStore<float>& params,
-                                  const dataset::NormalisationStats& stats, const dataset::Sequence& source, int frames);
+                                  const dataset::NormalisationStats& stats, const dataset::Sequence& source, int frames,
+                                  int first = 0);
 
 }  // namespace layersnet::eval
