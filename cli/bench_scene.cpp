@@ -59,6 +59,14 @@ double median(std::vector<double> v) {
   const std::size_t n = v.size();
   return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
 }
+// q-quantile by linear interpolation (q in [0, 1]).
+double quantile(std::vector<double> v, double q) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  const double x = q * static_cast<double>(v.size() - 1);
+  const std::size_t i = static_cast<std::size_t>(x);
+  return i + 1 < v.size() ? v[i] + (x - static_cast<double>(i)) * (v[i + 1] - v[i]) : v.back();
+}
 std::string uptime_load() {
   std::ifstream f("/proc/loadavg");
   double a = 0, b = 0, c = 0;
@@ -168,9 +176,9 @@ int run_bench_scene(const SceneBenchOptions& o) {
 
   const char* wait = std::getenv("OMP_WAIT_POLICY");
   std::printf("bench scene: ~%lld garment vertices, %d thread(s), %d interleaved passes x %d iterations (+%d warm-up), "
-              "OMP_WAIT_POLICY=%s\nload (uptime) at start: %s\n",
-              (long long)o.vertices, o.threads, o.passes, o.iters, o.warmup, wait ? wait : "(default)",
-              uptime_load().c_str());
+              "model d=%d, %d layers, K=%d, decoder RET channels k=%d, OMP_WAIT_POLICY=%s\nload (uptime) at start: %s\n",
+              (long long)o.vertices, o.threads, o.passes, o.iters, o.warmup, mc.width, mc.layers, mc.body_neighbors,
+              mc.decoder_ret_channels, wait ? wait : "(default)", uptime_load().c_str());
   for (int pass = 0; pass < o.passes; ++pass) {
     for (auto& c : cs) {
       for (int it = 0; it < (pass == 0 ? o.warmup : 0) + o.iters; ++it) {
@@ -214,11 +222,17 @@ int run_bench_scene(const SceneBenchOptions& o) {
               "train %.1f (Adam %.1f)\n",
               F.graph_ms, F.encoder_ms, F.encoder_body_ms, F.attention_ms, F.attention_edges_ms, F.attention_inter_ms,
               F.ffn_ms, F.decoder_ms, F.total_ms, f_in, f_tr, f_adam);
+  // Noise floor: savings smaller than the full run's own interquartile spread are not resolved.
+  const double iqr_inf = quantile(f.infer, 0.75) - quantile(f.infer, 0.25), iqr_tr = quantile(f.train, 0.75) - quantile(f.train, 0.25);
+  std::printf("full run's spread (interquartile, %zu iterations): infer %.1f ms (%.1f%%), train %.1f ms (%.1f%%): "
+              "smaller savings are within the noise of this machine\n",
+              f.infer.size(), iqr_inf, f_inf > 0 ? 100 * iqr_inf / f_inf : 0.0, iqr_tr, f_tr > 0 ? 100 * iqr_tr / f_tr : 0.0);
   std::printf("\n%-12s %6s %5s %5s %4s %7s %7s %7s | %8s %15s %15s | %8s %15s %15s\n", "config", "N", "P", "U", "T",
               "E_world", "E_inter", "E_mesh", "infer_ms", "saved (meas.)", "saved (exp.)", "train_ms", "saved (meas.)",
               "saved (exp.)");
   nlohmann::json out = {{"vertices", o.vertices}, {"threads", o.threads}, {"passes", o.passes}, {"iters", o.iters},
-                        {"omp_wait_policy", wait ? wait : ""}, {"configs", nlohmann::json::array()}};
+                        {"omp_wait_policy", wait ? wait : ""}, {"full_infer_iqr_ms", iqr_inf},
+                        {"full_train_iqr_ms", iqr_tr}, {"configs", nlohmann::json::array()}};
   for (const auto& c : cs) {
     const auto& m = c.med;
     const double inf = median(c.infer), tr = median(c.train);
