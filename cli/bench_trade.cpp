@@ -186,6 +186,7 @@ void read_train_metrics(const fs::path& run, json& train) {
     const json e = json::parse(line, nullptr, false);
     if (e.is_discarded() || e.value("event", "") != "stop") continue;
     train["updates"] = e.value("updates", 0);
+    train["epochs"] = e.value("epoch", 0);
     if (e.value("samples_per_s", 0.0) > 0) train["samples_per_s"] = e["samples_per_s"];
   }
 }
@@ -256,12 +257,18 @@ json run_variant(const Variant& v, const TradeOptions& o, const fs::path& out, b
   }
   // A record of a smaller budget: continue that training to this budget (exact resume: the
   // same parameters as training this budget from scratch) and evaluate again.
-  const int had = rec.value("budget_epochs", budget);
+  int had = rec.value("budget_epochs", -1);
+  if (had < 0 && fs::exists(dir / "metrics.jsonl")) {  // a record of an older layersnet: ask the run
+    json m;
+    read_train_metrics(dir, m);
+    had = m.value("epochs", budget);
+  }
+  if (had < 0) had = budget;
   if (had > budget)
     throw std::runtime_error((dir / "variant.json").string() + ": trained for " + std::to_string(had) +
                              " epochs, more than --budget-epochs " + std::to_string(budget) + "; use another --out");
-  if (had < budget && !v.bf16) {
-    if (rec.contains("train")) rec["train_before"] = rec["train"];
+  if (had < budget) {  // (bf16: the default variant's checkpoint changed, evaluate again)
+    if (rec.contains("train") && !v.bf16) rec["train_before"] = rec["train"];
     rec.erase("train");
     rec.erase("eval");
     rec.erase("status");
