@@ -23,6 +23,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <ctime>
 #include <fstream>
 #include <memory>
 #include <random>
@@ -54,11 +55,20 @@ struct Result {
   double relu_separate_ms = 0, relu_fused_ms = 0;  // linear + relu, forward + backward
   double bf16_ms = 0, min_bf16_speedup = 0;        // bf16 forward (no recording); fwd0 / bf16 of the fastest
   double bf16_rel_err = 0;                         // max |y_bf16 - y_float| / max |y_float|
+  double cpu_fwd0_ms = 0, cpu_bf16_ms = 0;          // process CPU time (all threads), medians
 };
 
 double median(std::vector<double> t) {
   std::sort(t.begin(), t.end());
   return t[t.size() / 2];
+}
+
+// CPU time of the whole process (every thread), ms: less sensitive than wall time to other
+// jobs on a shared machine (waiting for a core costs no CPU time; OpenMP waits passively).
+double process_cpu_ms() {
+  timespec t{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
+  return 1e3 * static_cast<double>(t.tv_sec) + 1e-6 * static_cast<double>(t.tv_nsec);
 }
 
 template <class Fn>
@@ -94,29 +104,34 @@ Result bench_shape(const Shape& s, int threads, const LinearBenchOptions& o) {
     return std::array<Var<float>, 3>{tape.leaf(xs.data(), s.n, s.cin), tape.leaf(ws.data(), s.cout, s.cin),
                                      tape.leaf(bs.data(), 1, s.cout)};
   };
-  std::vector<double> gemm, fwd, fwd0, bwd, relu_separate, relu_fused, bf16;
+  std::vector<double> gemm, fwd, fwd0, bwd, relu_separate, relu_fused, bf16, cpu_fwd0, cpu_bf16;
   for (int rep = 0; rep < o.warmup + o.reps; ++rep) {
     const bool keep = rep >= o.warmup;
     const double t_gemm = time_ms([&] { C.noalias() = A * B.transpose(); });
-    double t_fwd0;
+    double t_fwd0, c_fwd0;
     {
       const auto v = setup();
       NoRecord<float> off(tape);
+      const double c0 = process_cpu_ms();
       t_fwd0 = time_ms([&] { linear(tape, v[0], v[1], v[2]); });
+      c_fwd0 = process_cpu_ms() - c0;
     }
-    double t_bf16;
+    double t_bf16, c_bf16;
     {
       const auto v = setup();
       NoRecord<float> off(tape);
       MatmulPrecisionScope<float> low(tape, MatmulPrecision::kBFloat16);
+      const double c0 = process_cpu_ms();
       t_bf16 = time_ms([&] { linear(tape, v[0], v[1], v[2]); });
+      c_bf16 = process_cpu_ms() - c0;
     }
     const auto v = setup();
     Var<float> y;
     const double t_fwd = time_ms([&] { y = linear(tape, v[0], v[1], v[2]); });
     std::memcpy(y.grad, dys.data(), sizeof(float) * dys.size());
     const double t_bwd = time_ms([&] { tape.backward_seeded(); });
-    if (keep) gemm.push_back(t_gemm), fwd.push_back(t_fwd), fwd0.push_back(t_fwd0), bwd.push_back(t_bwd), bf16.push_back(t_bf16);
+    if (keep) gemm.push_back(t_gemm), fwd.push_back(t_fwd), fwd0.push_back(t_fwd0), bwd.push_back(t_bwd), bf16.push_back(t_bf16),
+                  cpu_fwd0.push_back(c_fwd0), cpu_bf16.push_back(c_bf16);
     if (o.relu) {  // relu(linear(x)) as two ops, then fused; forward + backward each
       for (bool fused : {false, true}) {
         const auto u = setup();
@@ -135,6 +150,8 @@ Result bench_shape(const Shape& s, int threads, const LinearBenchOptions& o) {
   r.min_bwd_over_fwd = min_of(bwd) / min_of(fwd);
   r.bf16_ms = median(bf16);
   r.min_bf16_speedup = min_of(fwd0) / min_of(bf16);
+  r.cpu_fwd0_ms = median(cpu_fwd0);
+  r.cpu_bf16_ms = median(cpu_bf16);
   if (o.relu) r.relu_separate_ms = median(relu_separate), r.relu_fused_ms = median(relu_fused);
   // The result must be the GEMM's plus the bias (guards against timing a broken kernel).
   {
@@ -195,18 +212,19 @@ int run_bench(const LinearBenchOptions& o) {
   }
   std::printf("\ngoals: fwd/gemm (rate ratio) >= 0.8, bwd/fwd (time ratio) <= 2.2\n");
   std::printf("\nbf16 products (inference, kernel: %s) against the float forward without recording (fwd0);\n"
-              "err = max |y_bf16 - y_float| / max |y_float|; goal fwd0/bf16 >= 1.5 at 1 thread\n",
+              "err = max |y_bf16 - y_float| / max |y_float|; goal fwd0/bf16 >= 1.5 at 1 thread;\n"
+              "cpu = process CPU time of all threads (robust to other jobs: waiting for a core costs none)\n",
               bf16_kernel_name());
-  std::printf("%-18s %3s | %8s %8s | %7s %7s | %9s %9s | %9s\n", "shape N x Cin>Cout", "thr", "fwd0 ms", "bf16 ms",
-              "GF fwd0", "GF bf16", "fwd0/bf16", "min ratio", "err");
+  std::printf("%-18s %3s | %8s %8s | %7s %7s | %9s %9s | %8s %8s %9s | %9s\n", "shape N x Cin>Cout", "thr", "fwd0 ms",
+              "bf16 ms", "GF fwd0", "GF bf16", "fwd0/bf16", "min ratio", "cpu fwd0", "cpu bf16", "cpu ratio", "err");
   for (const Result& r : results) {
     const double gf = 2e-6 * static_cast<double>(r.shape.n * r.shape.cin * r.shape.cout);
     char name[32];
     std::snprintf(name, sizeof name, "%ldx%ld>%ld", static_cast<long>(r.shape.n), static_cast<long>(r.shape.cin),
                   static_cast<long>(r.shape.cout));
-    std::printf("%-18s %3d | %8.2f %8.2f | %7.1f %7.1f | %9.3f %9.3f | %9.2e\n", name, r.threads, r.fwd_norecord_ms,
-                r.bf16_ms, gf / r.fwd_norecord_ms, gf / r.bf16_ms, r.fwd_norecord_ms / r.bf16_ms, r.min_bf16_speedup,
-                r.bf16_rel_err);
+    std::printf("%-18s %3d | %8.2f %8.2f | %7.1f %7.1f | %9.3f %9.3f | %8.2f %8.2f %9.3f | %9.2e\n", name, r.threads,
+                r.fwd_norecord_ms, r.bf16_ms, gf / r.fwd_norecord_ms, gf / r.bf16_ms, r.fwd_norecord_ms / r.bf16_ms,
+                r.min_bf16_speedup, r.cpu_fwd0_ms, r.cpu_bf16_ms, r.cpu_fwd0_ms / r.cpu_bf16_ms, r.bf16_rel_err);
   }
   print_load("after");
   if (o.relu) {
@@ -231,7 +249,8 @@ int run_bench(const LinearBenchOptions& o) {
         << ", \"backward_over_forward\": " << r.bwd_ms / r.fwd_ms << ", \"min_forward_rate_vs_gemm\": " << r.min_fwd_rate
         << ", \"min_backward_over_forward\": " << r.min_bwd_over_fwd << ", \"bf16_ms\": " << r.bf16_ms
         << ", \"bf16_speedup_vs_forward_norecord\": " << r.fwd_norecord_ms / r.bf16_ms
-        << ", \"min_bf16_speedup\": " << r.min_bf16_speedup << ", \"bf16_max_rel_error\": " << r.bf16_rel_err;
+        << ", \"min_bf16_speedup\": " << r.min_bf16_speedup << ", \"bf16_max_rel_error\": " << r.bf16_rel_err
+        << ", \"cpu_forward_norecord_ms\": " << r.cpu_fwd0_ms << ", \"cpu_bf16_ms\": " << r.cpu_bf16_ms;
       if (o.relu) f << ", \"relu_separate_ms\": " << r.relu_separate_ms << ", \"relu_fused_ms\": " << r.relu_fused_ms;
       f << "}" << (k + 1 < results.size() ? "," : "")
         << "\n";
