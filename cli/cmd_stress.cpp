@@ -122,9 +122,12 @@ int run_stress(const StressCliOptions& o) {
   }
   std::printf("bound per garment (units):");
   for (double b : results.empty() ? std::vector<double>{} : results[0].bounds) std::printf(" %.3f", b);
-  std::printf("  (c_g + %.1f x rest graph diameter; eval/stress.h)\n", eval::kStretchAllowance);
+  const double data_ratio = eval::data_bound_ratio(source, first);
+  std::printf("  (c_g + %.1f x rest graph diameter; eval/stress.h); the data's own max dist / bound over frames %d..%d: %.3f\n",
+              eval::kStretchAllowance, first, source.info.num_frames - 1, data_ratio);
 
-  json j = {{"checkpoint", o.checkpoint}, {"dataset", root}, {"sequence", id}, {"runs", json::array()}};
+  json j = {{"checkpoint", o.checkpoint}, {"dataset", root},        {"sequence", id},
+            {"runs", json::array()},     {"data_bound_ratio", data_ratio}};
   for (const auto& r : results) j["runs"].push_back(result_json(r));
   if (o.precision_frames > 0) {
     const eval::PrecisionResult p = eval::compare_precision(m.config, m.params, stats, source, o.precision_frames, first);

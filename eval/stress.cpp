@@ -194,6 +194,19 @@ std::vector<double> garment_distance_bounds(const dataset::Sequence& seq) {
   return out;
 }
 
+double data_bound_ratio(const dataset::Sequence& source, int first) {
+  StressScene scene;
+  scene.frames = 4;
+  scene.first = first;
+  const std::vector<double> bounds = garment_distance_bounds(make_stress_sequence(source, scene));
+  double worst = 0;
+  for (int t = first; t < source.info.num_frames; ++t) {
+    const std::vector<double> d = garment_body_distances(source, t, garments_at(source, t));
+    for (size_t g = 0; g < d.size(); ++g) worst = std::max(worst, d[g] / bounds[g]);
+  }
+  return worst;
+}
+
 StressResult stress_rollout(Predictor& predictor, const dataset::Sequence& source, const StressScene& scene,
                             const std::string& label) {
   const dataset::Sequence seq = make_stress_sequence(source, scene);
@@ -216,7 +229,8 @@ StressResult stress_rollout(Predictor& predictor, const dataset::Sequence& sourc
       if (res.first_bad_frame < 0) res.first_bad_frame = k;
       break;
     }
-    res.max_vertex_speed = std::max(res.max_vertex_speed, static_cast<double>((x - prev).rowwise().norm().maxCoeff()));
+    // In double: a blown-up rollout near the float range would overflow the difference.
+    res.max_vertex_speed = std::max(res.max_vertex_speed, (x.cast<double>() - prev.cast<double>()).rowwise().norm().maxCoeff());
     prev = x;
     const std::vector<double> d = garment_body_distances(seq, r.first_frame + k, x);
     for (size_t g = 0; g < d.size(); ++g) {

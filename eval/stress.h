@@ -67,6 +67,10 @@ std::vector<double> garment_distance_bounds(const dataset::Sequence& seq);
 // `seq`: x (N, 3) world in layer order -> (G,), scene units; NaN if x has a NaN.
 std::vector<double> garment_body_distances(const dataset::Sequence& seq, int t, const Points& x);
 
+// The data's own max over frames first..T−1 and garments of dist / B_g (B_g from frame
+// `first`, as a stress scene starting there uses): how much room the bound leaves real cloth.
+double data_bound_ratio(const dataset::Sequence& source, int first);
+
 struct StressResult {
   std::string label;            // e.g. "wind 2000", "speed 5x"
   StressScene scene;

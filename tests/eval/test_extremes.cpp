@@ -165,6 +165,9 @@ TEST(StressScene, TheBoundPassesClothCarriedByTheBodyAndCatchesDrift) {
     EXPECT_LT(r.max_bound_ratio, 0.5);
     EXPECT_GT(r.max_body_speed, 0.0);
   }
+  // The data itself stays well inside the bound.
+  EXPECT_LT(data_bound_ratio(src, 0), 0.5);
+  EXPECT_GT(data_bound_ratio(src, 0), 0.0);
   Drifting drift;
   const StressResult r = stress_rollout(drift, src, {120, 1.0, 0}, "drift");
   EXPECT_TRUE(r.finite);
