@@ -176,7 +176,7 @@ LAYERSNET_COMMAND(eval, "Roll out checkpoints and baselines over a split; error,
                     sub.add_option("--precision", o->precision,
                                    "linear products of the models: float32, bf16 (inference-only bfloat16; names "
                                    "get '[bf16] '), or float32,bf16 (every model both ways)")
-                        ->check(CLI::IsMember({"float32", "bf16", "float32,bf16", "bf16,float32"}));
+                        ->type_name("float32|bf16|float32,bf16");  // checked by ad::parse_matmul_precision
                     return [o] {
                       if (o->checkpoints.empty() && o->runs.empty() && o->dataset.empty()) {
                         std::fprintf(stderr, "layersnet eval: give --run or --checkpoint (or --dataset for baselines only)\n");
