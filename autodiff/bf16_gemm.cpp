@@ -129,9 +129,12 @@ void check_shapes(const char* fn, int64_t n, int64_t cin, const Bf16PackedWeight
 
 }  // namespace
 
-// GCC 12.2 at -O3 -march=native (AVX-512) miscompiles the in-order float reduction over p
-// below when it vectorizes the loop (wrong sums, caught by tests/autodiff/test_bf16.cpp);
-// the reference path is not about speed, so it is kept unvectorized.
+// Kept unvectorized: Debian 12's GCC 12.2 vectorizes a float reduction that adds element
+// 2p+1 before 2p into one accumulator into WRONG sums, even at plain -O2 (a 6-line loop
+// summing exact integers returns 272 instead of 208; adding 2p first is fine; it looks like
+// GCC PR 110381, fixed in later releases). Our order is VDPBF16PS's, so the loop keeps it
+// and gives up vectorization; the reference path is not about speed. Caught by
+// tests/autodiff/test_bf16.cpp.
 #if defined(__GNUC__) && !defined(__clang__)
 __attribute__((optimize("no-tree-vectorize")))
 #endif
