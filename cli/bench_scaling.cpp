@@ -423,7 +423,7 @@ void write_png(const std::string& path, const std::map<std::pair<std::string, in
     ++index;
   }
   char ref[256];
-  std::snprintf(ref, sizeof ref, "%g*x/%g with lines lc 'gray' dt 3 title 'linear (through the lowest first infer point)'", y0, n0);
+  std::snprintf(ref, sizeof ref, "%g*x/%g with lines lc 'gray40' dt 3 title 'linear (through the lowest first infer point)'", y0, n0);
   plot += ref;
   if (train && t0 > 0) {
     std::snprintf(ref, sizeof ref, ", %g*x/%g with lines lc 'black' dt 3 title 'linear (through the lowest first train point)'", t0, n0);
@@ -431,9 +431,9 @@ void write_png(const std::string& path, const std::map<std::pair<std::string, in
   }
   const std::string script = path + ".gp";
   std::ofstream g(script);
-  g << "set terminal pngcairo size 1200,700\nset output '" << path << "'\nset logscale xy\nset grid\n"
+  g << "set terminal pngcairo size 1000,750\nset output '" << path << "'\nset logscale xy\nset grid\n"
     << "set xlabel 'garment vertices N'\nset ylabel 'ms per frame / per training step'\n"
-    << "set title 'LayersNet cost vs garment resolution (same outfit re-meshed)'\nset key outside right\n"
+    << "set title 'LayersNet cost vs garment resolution (same outfit re-meshed)'\nset key left top inside font \",9\" box opaque\n"
     << "set xrange [" << 0.8 * n_min << ":" << 1.25 * n_max << "]\n"
     << "plot " << plot << "\n";
   g.close();
