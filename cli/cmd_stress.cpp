@@ -30,6 +30,7 @@ struct StressCliOptions {
   int frames = 600;
   std::vector<double> winds = {0, 400, 2000};
   double speed = 5;
+  bool speed_factor = false;  // --speed is the time factor s itself, not a multiple of the top speed
   int precision_frames = 100;
   int first_frame = -1;
   int threads = 0;
@@ -104,11 +105,18 @@ int run_stress(const StressCliOptions& o) {
   if (o.speed > 0) {
     eval::StressScene s;
     s.frames = o.frames;
-    s.speed = o.speed;
+    s.speed = o.speed_factor ? o.speed : eval::speed_factor_for_top_speed(source, first, o.speed, o.frames);
     s.first = first;
     char label[64];
-    std::snprintf(label, sizeof label, "speed %gx", o.speed);
+    if (o.speed_factor)
+      std::snprintf(label, sizeof label, "speed %gx", o.speed);
+    else
+      std::snprintf(label, sizeof label, "top speed %gx (s=%.2f)", o.speed, s.speed);
     run_one(s, label);
+    std::printf("  body top speed %.1f mm/frame = %.2fx the data's %.1f (time factor s = %.2f)\n",
+                results.back().max_body_speed * 1000.0 / source.info.scale,
+                results.back().max_body_speed / eval::body_top_speed(source, first, 1.0, o.frames),
+                eval::body_top_speed(source, first, 1.0, o.frames) * 1000.0 / source.info.scale, s.speed);
   }
   const double mm = 1000.0 / source.info.scale;
   std::printf("\n| run | frames | finite | first bad | max dist / bound | max dist / D | max speed mm/f (body) | ms/frame | |\n");
@@ -174,7 +182,10 @@ LAYERSNET_COMMAND(stress, "Long rollouts at extreme wind and body speed, and flo
                                    "the file's rest_frames + ramp_frames; 0 without them)");
                     sub.add_option("--frames", o->frames, "frames of each stress sequence (rollout: frames - 3)");
                     sub.add_option("--winds", o->winds, "constant wind strengths, one run each")->delimiter(',');
-                    sub.add_option("--speed", o->speed, "body speed factor of the extra run (0 = none)");
+                    sub.add_option("--speed", o->speed,
+                                   "extra run with the body's top speed this multiple of the data's (0 = none)");
+                    sub.add_flag("--speed-factor", o->speed_factor,
+                                 "--speed is the time factor s (every body velocity x s) instead");
                     sub.add_option("--precision-frames", o->precision_frames, "frames of the float32/float64 comparison (0 = skip)");
                     sub.add_option("--threads", o->threads, "OpenMP threads (0 = all)");
                     sub.add_option("--json", o->json_path, "write the results as JSON to this file");

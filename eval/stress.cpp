@@ -109,6 +109,32 @@ dataset::Sequence make_stress_sequence(const dataset::Sequence& source, const St
   return out;
 }
 
+double body_top_speed(const dataset::Sequence& source, int first, double speed, int frames) {
+  const int T = source.info.num_frames, B = source.info.num_body_vertices;
+  Points prev = interpolate(source.frames.body, B, T, first);
+  double top = 0;
+  for (int t = 1; t < frames; ++t) {
+    Points x = interpolate(source.frames.body, B, T, first + pingpong(speed * t, T - first));
+    top = std::max(top, (x - prev).rowwise().norm().maxCoeff() * 1.0);
+    prev = std::move(x);
+  }
+  return top;
+}
+
+double speed_factor_for_top_speed(const dataset::Sequence& source, int first, double multiple, int frames) {
+  // Not monotone in s (strides alias with the ping-pong), so a scan: the smallest s on a
+  // grid of step 0.05·multiple that reaches the target, else the grid's fastest.
+  const double target = multiple * body_top_speed(source, first, 1.0, frames);
+  double best_s = multiple, best = -1;
+  for (int k = 0; k <= 60; ++k) {
+    const double s = multiple * (1 + 0.05 * k);
+    const double top = body_top_speed(source, first, s, frames);
+    if (top >= target) return s;
+    if (top > best) best = top, best_s = s;
+  }
+  return best_s;
+}
+
 int settled_frame(const std::string& sequence_path) {
   const dataset::h5::Handle file = dataset::h5::open_file(sequence_path);
   const dataset::h5::Where where{sequence_path, "/"};

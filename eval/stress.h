@@ -49,6 +49,17 @@ struct StressScene {
   int first = 0;                // f0: first source frame played (0 <= f0 <= T − 2)
 };
 
+// Largest body vertex speed (scene units per frame) of the stress sequence with this speed
+// factor over `frames` frames (computed without building it).
+double body_top_speed(const dataset::Sequence& source, int first, double speed, int frames);
+// The speed factor s whose stress body's top speed is `multiple` × the data's (s = 1) top
+// speed over the same frames. Body velocity × s everywhere does not give top speed × s: one
+// stress frame then spans s source frames, averaging their velocities. The smallest s on a
+// grid over [multiple, 4·multiple] (step 0.05·multiple) that reaches it; when none does (a
+// short source: any two of its poses are close), the grid's fastest — callers report the
+// top speed reached.
+double speed_factor_for_top_speed(const dataset::Sequence& source, int first, double multiple, int frames);
+
 // First frame after the generator's rest and ramp: the root attributes rest_frames +
 // ramp_frames that `layersnet generate` writes; 0 when the file has neither.
 int settled_frame(const std::string& sequence_path);

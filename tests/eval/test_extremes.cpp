@@ -126,6 +126,19 @@ TEST(StressScene, PingPongsAndScalesTheBodyAndHoldsTheWind) {
   EXPECT_EQ(looped.garment_at(0, 0), src.garment_at(0, 4));
   EXPECT_THROW(make_stress_sequence(src, {20, 1.0, 0.0, 11}), std::invalid_argument);
   EXPECT_THROW(make_stress_sequence(src, {3, 1.0, 0.0}), std::invalid_argument);
+  // Top speed: computed without the sequence equals the built sequence's; the factor for 5x
+  // the top speed is >= 5 and reaches 5x, or (this 12-frame source cannot) is at least as fast
+  // as any factor up to 20.
+  const dataset::Sequence fast = make_stress_sequence(src, {40, 2.5, 0.0});
+  double top = 0;
+  for (int t = 1; t < 40; ++t) top = std::max(top, static_cast<double>((fast.body_at(t) - fast.body_at(t - 1)).rowwise().norm().maxCoeff()));
+  EXPECT_NEAR(body_top_speed(src, 0, 2.5, 40), top, 1e-5);
+  const double s5 = speed_factor_for_top_speed(src, 0, 5.0, 40);
+  EXPECT_GE(s5, 5.0);
+  double reachable = 0;
+  for (double f = 5; f <= 20; f += 0.25) reachable = std::max(reachable, body_top_speed(src, 0, f, 40));
+  EXPECT_GE(body_top_speed(src, 0, s5, 40),
+            std::min(5.0 * body_top_speed(src, 0, 1.0, 40), reachable) * (1 - 1e-6));
   EXPECT_THROW(make_stress_sequence(src, {10, 0.0, 0.0}), std::invalid_argument);
 }
 
@@ -403,7 +416,7 @@ TEST_F(Extremes, StressCommandPrintsTheTableAndWritesJson) {
                                &code);
   ASSERT_TRUE(code == 0 || code == 1) << text;
   EXPECT_NE(text.find("| wind 2000 |"), std::string::npos) << text;
-  EXPECT_NE(text.find("| speed 5x |"), std::string::npos) << text;
+  EXPECT_NE(text.find("| top speed 5x (s="), std::string::npos) << text;
   EXPECT_NE(text.find("float32 vs float64 over 20 frames"), std::string::npos) << text;
   std::ifstream in(json_path);
   const auto j = nlohmann::json::parse(in);
