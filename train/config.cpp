@@ -305,7 +305,12 @@ Config parse_config_text(const std::string& toml_text, const std::string& origin
   if (table.contains("include")) throw ConfigError(origin + ": 'include' is not allowed in an embedded config");
   Config config;
   apply_table(config, table, "", origin);
+  apply_saved_config_defaults(config, toml_text);
   return config;
+}
+
+void apply_saved_config_defaults(Config& config, const std::string& saved_toml_text) {
+  if (saved_toml_text.find("decoder_ret_channels") == std::string::npos) config.model.decoder_ret_channels = 1;
 }
 
 void apply_override(Config& config, const std::string& assignment) {

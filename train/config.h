@@ -70,6 +70,9 @@ void apply_config_file(Config& config, const std::string& path);
 // A config from TOML text (e.g. the copy inside a checkpoint); `origin` names it in errors.
 // Includes are not allowed here: the text must be self-contained (to_toml() output is).
 Config parse_config_text(const std::string& toml_text, const std::string& origin);
+// A saved config (run config.toml, checkpoint copy) written before a key whose default later
+// changed: gives that key its old value. model.decoder_ret_channels: 1 before it existed.
+void apply_saved_config_defaults(Config& config, const std::string& saved_toml_text);
 // Applies one "section.key=value" (value in TOML syntax; a bare word is a string).
 void apply_override(Config& config, const std::string& assignment);
 

@@ -18,6 +18,8 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <iostream>
 #include <memory>
 #include <optional>
@@ -48,7 +50,11 @@ Config run_config(const std::string& run_dir, const std::vector<std::string>& ov
   if (!fs::exists(path))
     throw ConfigError(path + ": not found; " + run_dir +
                       " does not hold a run to resume (start one with `layersnet train --config F --run " + run_dir + "`)");
-  return load_config({path}, overrides);
+  Config config = load_config({path});
+  std::ifstream in(path);
+  apply_saved_config_defaults(config, std::string(std::istreambuf_iterator<char>(in), {}));
+  for (const auto& o : overrides) apply_override(config, o);
+  return config;
 }
 
 namespace {

@@ -3,6 +3,8 @@
 
 #include <gtest/gtest.h>
 
+#include <sstream>
+
 #include <filesystem>
 #include <fstream>
 
@@ -110,6 +112,21 @@ TEST_F(ConfigTest, ResolvedTomlRoundTrips) {
   EXPECT_EQ(b.train.learning_rate, a.train.learning_rate);  // bit-exact: 17 digits
   EXPECT_EQ(b.data.dataset, "a \"b\"");
   EXPECT_TRUE(b.train.lr_decay_epochs.empty());
+}
+
+// Runs and checkpoints saved before model.decoder_ret_channels existed used the official
+// rank-3 decoder map (k = 1); they must load as such, not with today's default.
+TEST_F(ConfigTest, SavedConfigWithoutDecoderChannelsMeansTheOfficialMap) {
+  Config fresh;
+  ASSERT_NE(fresh.model.decoder_ret_channels, 1);
+  std::string text = to_toml(fresh);
+  EXPECT_EQ(parse_config_text(text, "now").model.decoder_ret_channels, fresh.model.decoder_ret_channels);
+  std::string old;
+  std::istringstream lines(text);
+  for (std::string line; std::getline(lines, line);)
+    if (line.find("decoder_ret_channels") == std::string::npos) old += line + "\n";
+  EXPECT_EQ(parse_config_text(old, "old").model.decoder_ret_channels, 1);
+  EXPECT_EQ(parse_config_text(old, "old").model.width, fresh.model.width);
 }
 
 TEST_F(ConfigTest, EveryShippedConfigLoads) {
