@@ -25,6 +25,10 @@ if [ ! -x "$bin" ]; then
   echo "extremes: $bin not found; build first: bash scripts/setup.sh (or set LAYERSNET_BIN)" >&2
   exit 2
 fi
+if ! "$bin" --help 2>/dev/null | grep -qE "^  stress( |$)"; then
+  echo "extremes: $bin has no 'stress' subcommand; rebuild it: cmake --build build -j2 --target layersnet" >&2
+  exit 2
+fi
 if [ ! -f "$checkpoint" ] || [ ! -f data/default/stats.h5 ]; then
   echo "extremes: needs the default model and data ($checkpoint, data/default/stats.h5);" >&2
   echo "          run the main job first: bash scripts/run_default.sh" >&2
