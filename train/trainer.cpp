@@ -188,8 +188,13 @@ void Run::restore(const std::string& path) {
 }
 
 void Run::save(const std::string& path) {
-  if (!all_finite(params_.values()) || !all_finite(params_.moment1()) || !all_finite(params_.moment2()))
-    throw TrainingStopped(path + ": not written: the parameters or Adam moments hold non-finite values");
+  if (!all_finite(params_.values()) || !all_finite(params_.moment1()) || !all_finite(params_.moment2())) {
+    const auto kept = list_checkpoints(options_.run_dir);
+    throw TrainingStopped(path + ": not written: the parameters or Adam moments hold non-finite values (the updates "
+                          "diverged); stopped. The last valid checkpoint is " +
+                          (kept.empty() ? std::string("none (no checkpoint was written yet)") : kept.back()) +
+                          ". Lower train.learning_rate or set train.grad_clip, then resume or restart.");
+  }
   Checkpoint cp;
   cp.config_toml = to_toml(config_);
   cp.state = state_;
