@@ -27,6 +27,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <ctime>
 #include <filesystem>
@@ -50,6 +51,7 @@ struct TradeOptions {
   int budget_epochs = -1;              // -1 = the base config's train.epochs
   int frames = -1, speed_frames = -1, max_sequences = -1, eval_threads = -1;  // -1 = eval's defaults
   double tolerance = 0.10;
+  int speed_passes = 3;  // interleaved speed re-measurements of all variants (0 = the per-variant evals' figures)
   bool list = false;
 };
 
@@ -441,7 +443,12 @@ std::string trade_markdown(const json& t) {
     << ", finished " << t["finished"].get<std::string>() << ", " << fmt("%.1f", t["wall_s"].get<double>() / 60.0)
     << " min wall; load average " << s["load_average_start"].get<std::string>() << " at the start, "
     << t["load_average_end"].get<std::string>() << " at the end"
-    << " (ms/frame measured on a shared machine are noisy: compare them within one run).\n\n";
+    << " (ms/frame measured on a shared machine are noisy: compare them within one run).";
+  if (t.contains("speed"))
+    o << " ms/frame: the fastest of " << t["speed"]["passes"].get<int>()
+      << " passes that time all variants back to back after the sweep (`speed/`; each variant's own eval ran minutes "
+         "apart under a different load: its figure is kept in trade.json as `*_variant_eval`).";
+  o << "\n\n";
   o << "| variant | change | params | error mm | H-coll % | L-coll % ÷ outer | L-near % | ms/f 1 thr | ms/f 2 thr | "
        "train samples/s | train s | train peak MB | eval peak MB | front |\n"
        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
@@ -530,7 +537,9 @@ void write_reports(json& t, const TradeOptions& o, const fs::path& out, int budg
     }
     const json& rec = t["variants"][static_cast<std::size_t>(idx)];
     t["presets"][name] = {{"variant", p.name}, {"why", why}, {"keys", keys_of(rec)}, {"sets", rec["sets"]}};
-    write_text(presets_dir / (std::string(name) + ".toml"), preset_toml(name, rec, base_name, why));
+    const std::string measured = why + "\n# Measured " + now_utc() + ", " + std::to_string(budget) + " epoch(s) per variant: `" +
+                                 t["command"].get<std::string>() + "`";
+    write_text(presets_dir / (std::string(name) + ".toml"), preset_toml(name, rec, base_name, measured));
   }
   t["finished"] = now_utc();
   t["wall_s"] = std::chrono::duration<double>(Clock::now() - t0).count();
@@ -548,6 +557,86 @@ void write_reports(json& t, const TradeOptions& o, const fs::path& out, int budg
     std::printf("  %-9s %-11s %s\n", name.c_str(), c["variant"].get<std::string>().c_str(), c["keys"].get<std::string>().c_str());
   std::printf("wrote %s, %s%s in %.1f min\n", (out / "trade.json").string().c_str(), (out / "trade.md").string().c_str(),
               plot_msg.empty() ? (", " + (out / "trade.png").string()).c_str() : "", t["wall_s"].get<double>() / 60.0);
+}
+
+// The per-variant evals run minutes apart, and on a shared machine the load changes in
+// between (the same checkpoint measured 105 and 24 ms/frame an hour apart). So after the
+// sweep all finished variants are timed again back to back, `speed_passes` times (one
+// `layersnet eval` child per pass over every float32 variant, one more for bf16, each on
+// one sequence), and each variant keeps its fastest pass: the least disturbed measurement.
+// Cached in OUT/speed/speed.json while the variants, budget and passes stay the same.
+void speed_passes(json& t, const TradeOptions& o, const fs::path& out, int budget) {
+  std::vector<std::string> names;
+  std::vector<std::size_t> idx;
+  std::size_t bf16 = SIZE_MAX;
+  for (std::size_t i = 0; i < t["variants"].size(); ++i) {
+    const json& v = t["variants"][i];
+    if (!v.contains("result")) continue;
+    if (v.value("bf16", false)) bf16 = i;
+    else {
+      names.push_back(v["name"].get<std::string>());
+      idx.push_back(i);
+    }
+  }
+  if (names.empty()) return;
+  const fs::path dir = out / "speed";
+  fs::create_directories(dir);
+  json key = {{"variants", names}, {"bf16", bf16 != SIZE_MAX}, {"budget_epochs", budget}, {"passes", o.speed_passes},
+              {"speed_frames", o.speed_frames}};
+  json cache = fs::exists(dir / "speed.json") ? json::parse(slurp(dir / "speed.json"), nullptr, false) : json();
+  bool reuse = cache.is_object() && cache.contains("key") && cache["key"] == key;
+  for (const auto& v : t["variants"]) reuse = reuse && v.value("reused", false);  // a variant ran again: measure again
+  if (!reuse) {
+    cache = {{"key", key}, {"ms_1thread", json::object()}, {"ms_2threads", json::object()}};
+    for (int p = 0; p < o.speed_passes; ++p) {
+      for (int part = 0; part < (bf16 != SIZE_MAX ? 2 : 1); ++part) {
+        const fs::path pass = dir / ("pass" + std::to_string(p + 1) + (part ? "_bf16" : ""));
+        std::vector<std::string> args = {"eval"};
+        const std::vector<std::string> runs = part ? std::vector<std::string>{"default"} : names;
+        for (const auto& n : runs) args.insert(args.end(), {"--run", (out / "variants" / n).string()});
+        if (part) args.insert(args.end(), {"--precision", "bf16"});
+        args.insert(args.end(), {"--max-sequences", "1", "--frames", "1", "--threads", "1", "--out", pass.string()});
+        if (o.speed_frames > 0) args.insert(args.end(), {"--speed-frames", std::to_string(o.speed_frames)});
+        std::printf("speed pass %d/%d%s: %zu model(s)\n", p + 1, o.speed_passes, part ? " (bf16)" : "", runs.size());
+        const ChildResult c = run_child(args, pass.string() + ".log", "speed pass");
+        if (c.exit_code != 0) {
+          std::printf("      speed pass failed (exit %d, see %s.log): keeping the per-variant figures\n", c.exit_code,
+                      pass.string().c_str());
+          return;
+        }
+        const json j = json::parse(slurp(pass / "eval.json"));
+        std::size_t m = 0;
+        for (const auto& method : j["methods"]) {
+          if (method.value("kind", "") != "model") continue;
+          const std::string n = part ? "bf16" : runs.at(m);
+          ++m;
+          for (const char* k : {"ms_1thread", "ms_2threads"})
+            cache[k][n].push_back(method.value(std::string("ms_per_frame_") + (k[3] == '1' ? "1thread" : "2threads"), NAN));
+        }
+      }
+    }
+    cache["load_average_end"] = load_average();
+    write_text(dir / "speed.json", cache.dump(2));
+  } else {
+    std::printf("speed: reused %s\n", (dir / "speed.json").string().c_str());
+  }
+  if (bf16 != SIZE_MAX) idx.push_back(bf16);
+  for (std::size_t i : idx) {
+    json& r = t["variants"][i]["result"];
+    const std::string n = t["variants"][i]["name"];
+    for (const char* k : {"ms_1thread", "ms_2threads"}) {
+      if (!cache[k].contains(n)) continue;
+      double best = INFINITY;
+      for (const auto& x : cache[k][n])
+        if (x.is_number() && x.get<double>() > 0) best = std::min(best, x.get<double>());
+      const std::string field = std::string("ms_per_frame_") + (k[3] == '1' ? "1thread" : "2threads");
+      r[field + "_variant_eval"] = r[field];
+      r[field] = std::isfinite(best) ? best : NAN;
+      r[field + "_passes"] = cache[k][n];
+    }
+  }
+  t["speed"] = {{"passes", o.speed_passes}, {"estimator", "fastest of the back-to-back passes"},
+                {"folder", dir.string()}};
 }
 
 int run_trade(const TradeOptions& o) {
@@ -617,8 +706,10 @@ int run_trade(const TradeOptions& o) {
     rec["params"] = static_cast<double>(ps.total_size());
     t["variants"].push_back(rec);
     // Reports after every variant: an interrupted sweep still leaves its table and plot.
-    write_reports(t, o, out, budget, t0, i + 1 == variants.size());
+    write_reports(t, o, out, budget, t0, false);
   }
+  if (o.speed_passes > 0) speed_passes(t, o, out, budget);
+  write_reports(t, o, out, budget, t0, true);
   return 0;
 }
 }  // namespace
@@ -637,6 +728,9 @@ LAYERSNET_BENCH(trade, "Train and evaluate model variants (patch, width, layers,
                   sub.add_option("--max-sequences", o->max_sequences, "eval: first N sequences of the split (0 = all)");
                   sub.add_option("--eval-threads", o->eval_threads, "eval: threads of the accuracy rollouts (speed is always 1 and 2)");
                   sub.add_option("--tolerance", o->tolerance, "fast preset: error within (1 + tolerance) x the default's (default 0.10)");
+                  sub.add_option("--speed-passes", o->speed_passes,
+                                 "after the sweep, measure the speed of all variants back to back this many times and keep "
+                                 "each one's fastest (0 = each variant's own eval figure)");
                   sub.add_flag("--list", o->list, "list the variants and exit");
                   return [o] { return run_trade(*o); };
                 });

@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 #include <unistd.h>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdio>
@@ -118,6 +119,16 @@ TEST(BenchTrade, TwoVariantsEndToEndThenReused) {
   EXPECT_EQ(j["variants"][1]["sets"][0], "model.layers=2");
   // tiny.toml has 1 layer: the 2-layer variant has more parameters.
   EXPECT_GT(j["variants"][1]["params"].get<double>(), j["variants"][0]["params"].get<double>());
+  // Speed re-measured back to back after the sweep (3 passes): the table uses the fastest.
+  ASSERT_TRUE(j.contains("speed"));
+  for (const auto& v : j["variants"]) {
+    const auto& passes = v["result"]["ms_per_frame_1thread_passes"];
+    ASSERT_EQ(passes.size(), 3u);
+    double best = 1e300;
+    for (const auto& x : passes) best = std::min(best, x.get<double>());
+    EXPECT_EQ(v["result"]["ms_per_frame_1thread"].get<double>(), best);
+  }
+  EXPECT_TRUE(fs::exists(out / "speed" / "pass3" / "eval.json"));
   ASSERT_GE(j["front"].size(), 1u);
   for (const char* p : {"fast", "balanced", "accurate"}) {
     ASSERT_TRUE(j["presets"].contains(p)) << p;
@@ -137,6 +148,7 @@ TEST(BenchTrade, TwoVariantsEndToEndThenReused) {
   ASSERT_EQ(code, 0) << again;
   EXPECT_NE(again.find("reused"), std::string::npos) << again;
   EXPECT_EQ(again.find("train: layersnet"), std::string::npos) << again;
+  EXPECT_NE(again.find("speed: reused"), std::string::npos) << again;
 
   // A larger budget continues both trainings (train --resume to 2 epochs) and evaluates again.
   std::string args2 = args;
