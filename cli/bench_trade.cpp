@@ -379,7 +379,7 @@ std::string preset_toml(const std::string& preset, const json& rec, const std::s
 }
 
 std::string plot_trade(const fs::path& out, const std::vector<layersnet::eval::TradePoint>& pts,
-                       const std::vector<std::size_t>& front, const std::string& title) {
+                       const std::vector<std::size_t>& front, const std::string& title, const json& baselines) {
   std::ostringstream all, fr;
   double lo = INFINITY, hi = 0;
   for (const auto& p : pts)
@@ -394,6 +394,16 @@ std::string plot_trade(const fs::path& out, const std::vector<layersnet::eval::T
   gp << "set terminal png size 1000,620\nset output '" << (out / "trade.png").string() << "'\n"
      << "set termoption noenhanced\nset title '" << title << "'\nset ylabel 'rollout error (mm)'\nset grid\nset key top right\n"
      << "set offsets graph 0.08, graph 0.15, graph 0.08, graph 0.08\n";
+  // Baselines (no model) as dashed horizontal lines: a variant above them has not learnt much.
+  int tag = 1;
+  for (const auto& [name, e] : baselines.items()) {
+    if (!e.is_number() || !std::isfinite(e.get<double>())) continue;
+    const std::string y = fmt("%.6g", e.get<double>());
+    gp << "set arrow " << tag << " from graph 0, first " << y << " to graph 1, first " << y
+       << " nohead dt 2 lc rgb '#777777'\nset label " << tag << " '" << name << "' at graph 0.01, first " << y
+       << " offset 0,0.6 tc rgb '#777777' font ',9'\n";
+    ++tag;
+  }
   if (hi > 4 * lo) gp << "set logscale x\nset xlabel 'ms per frame, 1 thread (log scale)'\n";
   else gp << "set xlabel 'ms per frame, 1 thread'\n";
   gp << "plot '" << (out / "trade_front.dat").string() << "' using 1:2 with linespoints lw 2 pt 7 ps 2 lc rgb '#d62728' "
@@ -545,7 +555,8 @@ void write_reports(json& t, const TradeOptions& o, const fs::path& out, int budg
   t["wall_s"] = std::chrono::duration<double>(Clock::now() - t0).count();
   t["load_average_end"] = load_average();
   const std::string plot_msg = plot_trade(out, pts, front,
-                                          "Rollout error against speed, " + std::to_string(budget) + " epoch(s) per variant");
+                                          "Rollout error against speed, " + std::to_string(budget) + " epoch(s) per variant",
+                                          t.value("baselines", json::object()));
   write_text(out / "trade.json", t.dump(2));
   std::string md = trade_markdown(t);
   if (!plot_msg.empty()) md += "\n" + plot_msg + "\n";
