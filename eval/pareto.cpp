@@ -49,10 +49,29 @@ PresetChoice choose_presets(const std::vector<TradePoint>& points, int reference
   for (std::size_t i : front)
     if (points[i].error < points[acc].error) acc = i;
   c.accurate = static_cast<int>(acc);
-  std::size_t bal = front.front();
-  for (std::size_t i : front) {
-    const double v = points[i].error * points[i].ms, best = points[bal].error * points[bal].ms;
-    if (v < best || (v == best && points[i].error < points[bal].error)) bal = i;
+  // Balanced: among the front points from fast to accurate (the front is sorted by ms, so
+  // they are a contiguous run), the one farthest below the chord fast–accurate in
+  // log(ms)–log(error) axes: the knee.
+  const auto pos = [&](std::size_t i) { return std::find(front.begin(), front.end(), i) - front.begin(); };
+  const auto a = pos(static_cast<std::size_t>(c.fast)), b = pos(acc);
+  const auto lo = std::min(a, b), hi = std::max(a, b);
+  const double x0 = std::log(points[front[lo]].ms), y0 = std::log(points[front[lo]].error);
+  const double x1 = std::log(points[front[hi]].ms), y1 = std::log(points[front[hi]].error);
+  std::size_t bal = front[lo];
+  double best_below = 0;
+  for (auto k = lo + 1; k < hi; ++k) {
+    const TradePoint& q = points[front[k]];
+    if (!(q.error > 0) || x1 <= x0) break;
+    const double t = (std::log(q.ms) - x0) / (x1 - x0);
+    const double below = (y0 + t * (y1 - y0)) - std::log(q.error);  // vertical gap under the chord
+    if (below > best_below) best_below = below, bal = front[k];
+  }
+  if (best_below <= 0) {  // no knee (straight or bulging front): the lowest error × ms in the run
+    for (auto k = lo; k <= hi; ++k) {
+      const std::size_t i = front[k];
+      const double v = points[i].error * points[i].ms, best = points[bal].error * points[bal].ms;
+      if (v < best || (v == best && points[i].error < points[bal].error)) bal = i;
+    }
   }
   c.balanced = static_cast<int>(bal);
   return c;

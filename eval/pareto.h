@@ -30,9 +30,12 @@ std::vector<std::size_t> pareto_front(const std::vector<TradePoint>& points);
 //              reference's error (the reference: the default config); when the reference
 //              is not valid, the fastest front point.
 //   accurate = the front point with the lowest error (ties: the faster).
-//   balanced = the front point with the lowest error · ms: equal relative changes in speed
-//              and error weigh the same (the knee of the front in log-log axes). Ties: the
-//              lower error.
+//   balanced = the knee between them: of the front points from fast to accurate (by ms),
+//              the one farthest below the straight line fast–accurate in log(ms)–log(error)
+//              axes (the most error saved per speed given up, relative to a straight trade).
+//              When none lies below that line, the one with the lowest error · ms (equal
+//              relative changes in speed and error weigh the same; ties: the lower error).
+//              So ms(fast) ≤ ms(balanced) ≤ ms(accurate).
 // Two presets can be the same point (e.g. a variant both fastest and most accurate).
 struct PresetChoice {
   int fast = -1, balanced = -1, accurate = -1;

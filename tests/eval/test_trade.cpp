@@ -49,12 +49,19 @@ TEST(Pareto, PresetsFollowTheirDefinitions) {
   const PresetChoice c = choose_presets(p, 2, 0.10);
   EXPECT_EQ(c.fast, 1);      // fastest within 110 mm (tiny is faster but 200 mm)
   EXPECT_EQ(c.accurate, 3);  // lowest error
-  // error × ms: 1000, 1296, 4000, 14400 -> tiny.
-  EXPECT_EQ(c.balanced, 0);
+  // Between fast (small) and accurate (big) only "default", above the log-log chord: no
+  // knee, so the lowest error × ms of small 1296, default 4000, big 14400 -> small.
+  EXPECT_EQ(c.balanced, 1);
   // A tighter tolerance excludes "small" (108 > 105): the default itself is the fast preset.
   EXPECT_EQ(choose_presets(p, 2, 0.05).fast, 2);
   // No valid reference: fast = the fastest front point.
   EXPECT_EQ(choose_presets(p, -1, 0.10).fast, 0);
+  // A knee: b lies 0.027 (log units) below the chord a–c, although a has the lowest error × ms.
+  const Points k = {{"a", 10, 200}, {"b", 50, 120}, {"c", 100, 100}};
+  const PresetChoice ck = choose_presets(k, 0, 0.10);
+  EXPECT_EQ(ck.fast, 0);
+  EXPECT_EQ(ck.accurate, 2);
+  EXPECT_EQ(ck.balanced, 1);
   const PresetChoice none = choose_presets({{"x", NAN, NAN}}, 0, 0.1);
   EXPECT_EQ(none.fast, -1);
   EXPECT_EQ(none.balanced, -1);
