@@ -451,7 +451,7 @@ std::string trade_markdown(const json& t) {
     << "-split rollouts (eval/README.md), mm; collision rates in %; ms/frame: median rollout step at 1 / 2 threads. "
     << "Peak memory: the child process's maximum resident set (wait4 ru_maxrss). Started " << s["started"].get<std::string>()
     << ", finished " << t["finished"].get<std::string>() << ", " << fmt("%.1f", t["wall_s"].get<double>() / 60.0)
-    << " min wall; load average " << s["load_average_start"].get<std::string>() << " at the start, "
+    << " min wall in this invocation (reused variants keep the times of the run that made them); load average " << s["load_average_start"].get<std::string>() << " at the start, "
     << t["load_average_end"].get<std::string>() << " at the end"
     << " (ms/frame measured on a shared machine are noisy: compare them within one run).";
   if (t.contains("speed"))
