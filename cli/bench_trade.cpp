@@ -87,6 +87,8 @@ std::vector<Variant> all_variants() {
           one_key("cand_2", "model.decoder_patch_candidates", "2"),
           one_key("cand_8", "model.decoder_patch_candidates", "8"),
           one_key("k_32", "model.body_neighbors", "32"),
+          // The official rank-3 decoder RET map against our default 8 channels (model/README.md).
+          one_key("dec_ret_1", "model.decoder_ret_channels", "1"),
           one_key("patch_0.05", "model.patch_size", "0.05"),
           one_key("layers_6", "model.layers", "6"),
           width_variant(256),
