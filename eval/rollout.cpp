@@ -87,14 +87,11 @@ ModelPredictor::ModelPredictor(std::string name, Config config, ad::ParamStore<f
       stats_(std::move(stats)),
       sample_options_(sample_options_for(config_.model)) {}
 
-void ModelPredictor::begin(const dataset::Sequence& seq) {
-  structure_ = dataset::build_structure(seq.info, sample_options_.patch_size);
-}
-
-Points ModelPredictor::step(const dataset::Sequence& seq, int t, const Points& x_prev2, const Points& x_prev,
-                            const Points& x_now) {
+dataset::TrainingSample rollout_sample(const dataset::Sequence& seq, int t, const Points& x_prev2, const Points& x_prev,
+                                       const Points& x_now, const dataset::NormalisationStats& stats,
+                                       const std::shared_ptr<const dataset::SequenceStructure>& structure,
+                                       const dataset::SampleOptions& options) {
   const dataset::SequenceInfo& info = seq.info;
-  if (!structure_) begin(seq);
   // The window t-2..t+1: body from the data, garments from the rollout (t+1 is only the
   // sample's unused target, so the ground truth fills it).
   dataset::FrameWindow w;
@@ -112,7 +109,18 @@ Points ModelPredictor::step(const dataset::Sequence& seq, int t, const Points& x
     w.garments.push_back(std::move(x));
     offset += n;
   }
-  const dataset::TrainingSample sample = dataset::build_sample(info, w, t, stats_, structure_, sample_options_);
+  return dataset::build_sample(info, w, t, stats, structure, options);
+}
+
+void ModelPredictor::begin(const dataset::Sequence& seq) {
+  structure_ = dataset::build_structure(seq.info, sample_options_.patch_size);
+}
+
+Points ModelPredictor::step(const dataset::Sequence& seq, int t, const Points& x_prev2, const Points& x_prev,
+                            const Points& x_now) {
+  if (!structure_) begin(seq);
+  const dataset::TrainingSample sample =
+      rollout_sample(seq, t, x_prev2, x_prev, x_now, stats_, structure_, sample_options_);
   const model::ModelInput<float> input = model::model_input_from_sample(sample, stats_, config_.model);
   tape_.reset();
   ad::NoRecord<float> off(tape_);

@@ -66,6 +66,13 @@ bool stats_from_checkpoint(const std::map<std::string, std::vector<double>>& sto
 std::map<std::string, std::vector<double>> stats_to_checkpoint(const dataset::NormalisationStats& stats);
 
 
+// The dataset sample of a rollout step: the window t-2..t+1 with the body from the data and the
+// garments from the rollout (x_prev2, x_prev, x_now at t-2..t; t+1, the unused target, from the data).
+dataset::TrainingSample rollout_sample(const dataset::Sequence& seq, int t, const Points& x_prev2, const Points& x_prev,
+                                       const Points& x_now, const dataset::NormalisationStats& stats,
+                                       const std::shared_ptr<const dataset::SequenceStructure>& structure,
+                                       const dataset::SampleOptions& options);
+
 // The learned simulator: builds the dataset sample of the rollout's window, the model input,
 // runs forward without recording; world x_{t+1} = predicted root-relative x + r_{t+1}.
 class ModelPredictor : public Predictor {

@@ -288,27 +288,12 @@ void DoubleModelPredictor::begin(const dataset::Sequence& seq) {
   structure_ = dataset::build_structure(seq.info, sample_options_.patch_size);
 }
 
-// The same window as ModelPredictor::step (eval/rollout.cpp); only the forward is double.
+// The same sample as ModelPredictor::step (eval/rollout.h rollout_sample); only the forward is double.
 Points DoubleModelPredictor::step(const dataset::Sequence& seq, int t, const Points& x_prev2, const Points& x_prev,
                                   const Points& x_now) {
-  const dataset::SequenceInfo& info = seq.info;
   if (!structure_) begin(seq);
-  dataset::FrameWindow w;
-  w.first = t - 2;
-  w.count = 4;
-  const int B = info.num_body_vertices;
-  w.body = seq.frames.body.middleRows(static_cast<Eigen::Index>(t - 2) * B, 4 * static_cast<Eigen::Index>(B));
-  const Points* hist[3] = {&x_prev2, &x_prev, &x_now};
-  Eigen::Index offset = 0;
-  for (int g = 0; g < info.num_garments(); ++g) {
-    const int n = info.garments[g].num_vertices;
-    Points x(4 * static_cast<Eigen::Index>(n), 3);
-    for (int k = 0; k < 3; ++k) x.middleRows(k * n, n) = hist[k]->middleRows(offset, n);
-    x.middleRows(3 * n, n) = seq.garment_at(g, t + 1);
-    w.garments.push_back(std::move(x));
-    offset += n;
-  }
-  const dataset::TrainingSample sample = dataset::build_sample(info, w, t, stats_, structure_, sample_options_);
+  const dataset::TrainingSample sample =
+      rollout_sample(seq, t, x_prev2, x_prev, x_now, stats_, structure_, sample_options_);
   const model::ModelInput<double> input =
       model::cast_input<double>(model::model_input_from_sample(sample, stats_, config_.model));
   tape_.reset();
