@@ -8,6 +8,8 @@
 #include "train/checkpoint.h"
 #include "train/config.h"
 
+#include "tests/eval/cli_test_util.h"
+
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -23,22 +25,8 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::string run(const std::string& args, int* code) {
-  const std::string cmd = std::string(LAYERSNET_BINARY) + " " + args + " 2>&1";
-  std::FILE* p = popen(cmd.c_str(), "r");
-  std::string out;
-  std::array<char, 4096> buf;
-  while (std::fgets(buf.data(), buf.size(), p)) out += buf.data();
-  *code = pclose(p);
-  return out;
-}
-
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
+std::string run(const std::string& args, int* code) { return cli_test::run_cli(args, code); }
+using cli_test::slurp;
 
 class EvalCli : public ::testing::Test {
  protected:

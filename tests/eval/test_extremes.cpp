@@ -19,6 +19,8 @@
 #include "train/run_dir.h"
 #include "train/trainer.h"
 
+#include "tests/eval/cli_test_util.h"
+
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 #include <sys/wait.h>
@@ -393,16 +395,7 @@ TEST_F(Extremes, TenTimesTheLearningRateConvergesOrStopsCleanly) {
 
 // ---- the command ---------------------------------------------------------------------------------------
 
-std::string run(const std::string& args, int* code) {
-  const std::string cmd = std::string(LAYERSNET_BINARY) + " " + args + " 2>&1";
-  std::FILE* p = popen(cmd.c_str(), "r");
-  std::string out;
-  std::array<char, 4096> buf;
-  while (std::fgets(buf.data(), buf.size(), p)) out += buf.data();
-  const int status = pclose(p);
-  *code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return out;
-}
+std::string run(const std::string& args, int* code) { return cli_test::run_cli(args, code); }
 
 TEST_F(Extremes, StressCommandPrintsTheTableAndWritesJson) {
   int code = 0;

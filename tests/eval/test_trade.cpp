@@ -4,6 +4,8 @@
 #include "dataset/synthetic.h"
 #include "eval/pareto.h"
 
+#include "tests/eval/cli_test_util.h"
+
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 #include <unistd.h>
@@ -68,22 +70,8 @@ TEST(Pareto, PresetsFollowTheirDefinitions) {
   EXPECT_EQ(none.accurate, -1);
 }
 
-std::string run(const std::string& args, int* code) {
-  const std::string cmd = std::string(LAYERSNET_BINARY) + " " + args + " 2>&1";
-  std::FILE* p = popen(cmd.c_str(), "r");
-  std::string out;
-  std::array<char, 4096> buf;
-  while (std::fgets(buf.data(), buf.size(), p)) out += buf.data();
-  *code = pclose(p);
-  return out;
-}
-
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
+std::string run(const std::string& args, int* code) { return cli_test::run_cli(args, code); }
+using cli_test::slurp;
 
 TEST(BenchTrade, TwoVariantsEndToEndThenReused) {
   const fs::path root = fs::temp_directory_path() / ("layersnet_trade_test_" + std::to_string(::getpid()));
