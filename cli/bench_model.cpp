@@ -9,6 +9,7 @@
 // GFLOP/s use the reference's FLOP count (`flops_forward.total`, train step = 3x forward), so
 // FLOPs our formulation skips (e.g. the factored decoder) show up as a higher rate.
 #include "autodiff/optim.h"
+#include "cli/bench_util.h"
 #include "cli/command_registry.h"
 #include "losses/losses.h"
 #include "model/input_builder.h"
@@ -78,14 +79,8 @@ model::SyntheticSceneOptions reference_scene(const std::string& size) {
   return o;
 }
 
-double now_ms() {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  const std::size_t n = v.size();
-  return n == 0 ? 0 : n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
+using bench::median;
+using bench::now_ms;
 double load_average() {
   std::ifstream f("/proc/loadavg");
   double l = 0;

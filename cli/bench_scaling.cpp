@@ -18,6 +18,7 @@
 // step = forward + losses + backward + Adam. Interleaved passes over all sizes (foreign load
 // spreads over every size); medians over all passes' iterations after the first pass's warm-up.
 #include "autodiff/optim.h"
+#include "cli/bench_util.h"
 #include "cli/command_registry.h"
 #include "dataset/neighbours.h"
 #include "losses/losses.h"
@@ -65,23 +66,10 @@ struct OutfitGarment {
 };
 constexpr OutfitGarment kOutfit[2] = {{5.0, 4.0, 1.235, 0.0}, {6.25, 4.75, 1.26, -0.2}};
 
-double now_ms() {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
-double median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  const std::size_t n = v.size();
-  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
-std::string uptime_load() {
-  std::ifstream f("/proc/loadavg");
-  double a = 0, b = 0, c = 0;
-  f >> a >> b >> c;
-  char buf[64];
-  std::snprintf(buf, sizeof buf, "%.2f %.2f %.2f", a, b, c);
-  return buf;
-}
+using bench::median;
+using bench::median_times;
+using bench::now_ms;
+using bench::uptime_load;
 template <class T>
 std::vector<T> parse_list(const std::string& list, const char* what) {
   std::vector<T> out;
@@ -239,20 +227,6 @@ struct Row {
   double train_ms = 0, train_forward_ms = 0, losses_ms = 0, backward_ms = 0, adam_ms = 0;
 };
 
-model::StageTimes median_times(const std::vector<model::StageTimes>& v) {
-  model::StageTimes m = v.empty() ? model::StageTimes{} : v.front();
-  auto med = [&](double model::StageTimes::*f) {
-    std::vector<double> x;
-    for (const auto& t : v) x.push_back(t.*f);
-    m.*f = median(x);
-  };
-  for (auto f : {&model::StageTimes::graph_ms, &model::StageTimes::encoder_ms, &model::StageTimes::encoder_body_ms,
-                 &model::StageTimes::attention_ms, &model::StageTimes::attention_edges_ms,
-                 &model::StageTimes::attention_inter_ms, &model::StageTimes::ffn_ms, &model::StageTimes::decoder_ms,
-                 &model::StageTimes::total_ms})
-    med(f);
-  return m;
-}
 
 // One (mode, size): the scene, its input and loss target (built once), and the timings of
 // every pass per thread count.
@@ -279,21 +253,10 @@ void measure(Case& c, const ModelConfig& mc, int threads, int skip, int n, bool 
   Samples& s = c.by_threads[threads];
   for (int it = 0; it < skip + n; ++it) {
     const SearchMs sm = time_searches(c.scene, mc);
-    double t0 = now_ms();
-    const auto in = model::cast_input<float>(model::build_model_input(c.scene, mc));
-    const double t_in = now_ms() - t0;
-    model::StageTimes t;
-    model::ForwardOptions fo;
-    fo.times = &t;
-    t0 = now_ms();
-    {
-      tape.reset();
-      ad::NoRecord<float> off(tape);
-      model::forward(tape, ps, mc, in, fo);
-    }
-    const double t_fwd = now_ms() - t0;
+    const bench::InferenceTiming t = bench::time_inference(c.scene, mc, ps, tape);
     if (it >= skip) {
-      s.input.push_back(t_in), s.fwd.push_back(t_fwd), s.infer.push_back(t_in + t_fwd), s.stages.push_back(t);
+      s.input.push_back(t.input_ms), s.fwd.push_back(t.forward_ms), s.infer.push_back(t.input_ms + t.forward_ms);
+      s.stages.push_back(t.stages);
       s.search[0].push_back(sm.world), s.search[1].push_back(sm.body), s.search[2].push_back(sm.nearest);
       s.search[3].push_back(sm.candidates);
     }

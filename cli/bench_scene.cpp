@@ -17,6 +17,7 @@
 //   input build             N + P (the body/wind searches still run)
 //   train step              (train - Adam) x expected forward share (backward assumed ∝ forward)
 #include "autodiff/optim.h"
+#include "cli/bench_util.h"
 #include "cli/command_registry.h"
 #include "losses/losses.h"
 #include "model/input_builder.h"
@@ -50,15 +51,10 @@ struct SceneBenchOptions {
   std::string json;
 };
 
-double now_ms() {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
-double median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  const std::size_t n = v.size();
-  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
+using bench::median;
+using bench::median_times;
+using bench::now_ms;
+using bench::uptime_load;
 // q-quantile by linear interpolation (q in [0, 1]).
 double quantile(std::vector<double> v, double q) {
   if (v.empty()) return 0;
@@ -66,14 +62,6 @@ double quantile(std::vector<double> v, double q) {
   const double x = q * static_cast<double>(v.size() - 1);
   const std::size_t i = static_cast<std::size_t>(x);
   return i + 1 < v.size() ? v[i] + (x - static_cast<double>(i)) * (v[i + 1] - v[i]) : v.back();
-}
-std::string uptime_load() {
-  std::ifstream f("/proc/loadavg");
-  double a = 0, b = 0, c = 0;
-  f >> a >> b >> c;
-  char buf[64];
-  std::snprintf(buf, sizeof buf, "%.2f %.2f %.2f", a, b, c);
-  return buf;
 }
 
 // The outfit of bench scaling (inner 5.0 x 4.0, outer 6.25 x 4.75 scene units) at ~`target`
@@ -107,18 +95,6 @@ struct Config {
   model::StageTimes med;  // medians of the stage times, counts of the input
 };
 
-model::StageTimes median_times(const std::vector<model::StageTimes>& v) {
-  model::StageTimes m = v.front();
-  for (auto f : {&model::StageTimes::graph_ms, &model::StageTimes::encoder_ms, &model::StageTimes::encoder_body_ms,
-                 &model::StageTimes::attention_ms, &model::StageTimes::attention_edges_ms,
-                 &model::StageTimes::attention_inter_ms, &model::StageTimes::ffn_ms, &model::StageTimes::decoder_ms,
-                 &model::StageTimes::total_ms}) {
-    std::vector<double> x;
-    for (const auto& t : v) x.push_back(t.*f);
-    m.*f = median(x);
-  }
-  return m;
-}
 
 // Expected forward saving (ms) of a variant with work counts `v`, from the full run's stage
 // times and counts `f` (see the file comment for the rows of each stage).
@@ -183,20 +159,10 @@ int run_bench_scene(const SceneBenchOptions& o) {
     for (auto& c : cs) {
       for (int it = 0; it < (pass == 0 ? o.warmup : 0) + o.iters; ++it) {
         const bool keep = !(pass == 0 && it < o.warmup);
-        double t0 = now_ms();
-        const auto in = model::cast_input<float>(model::build_model_input(c.scene, mc));
-        const double t_in = now_ms() - t0;
-        model::StageTimes st;
-        model::ForwardOptions fo;
-        fo.times = &st;
-        t0 = now_ms();
-        {
-          tape.reset();
-          ad::NoRecord<float> off(tape);
-          model::forward(tape, ps, mc, in, fo);
-        }
-        const double t_fwd = now_ms() - t0;
-        t0 = now_ms();
+        const bench::InferenceTiming inf = bench::time_inference(c.scene, mc, ps, tape);
+        const double t_in = inf.input_ms, t_fwd = inf.forward_ms;
+        const model::StageTimes& st = inf.stages;
+        const double t0 = now_ms();
         tape.reset();
         ps.zero_grads();
         const auto pred = model::forward(tape, ps, mc, c.input);
