@@ -9,6 +9,7 @@
 #include <chrono>
 #include <limits>
 #include <stdexcept>
+#include <type_traits>
 
 namespace layersnet::eval {
 
@@ -121,16 +122,28 @@ Points ModelPredictor::step(const dataset::Sequence& seq, int t, const Points& x
   if (!structure_) begin(seq);
   const dataset::TrainingSample sample =
       rollout_sample(seq, t, x_prev2, x_prev, x_now, stats_, structure_, sample_options_);
-  const model::ModelInput<float> input = model::model_input_from_sample(sample, stats_, config_.model);
-  tape_.reset();
-  ad::NoRecord<float> off(tape_);
-  const model::Predictions<float> pred = model::forward(tape_, params_, config_.model, input);
-  const auto v = pred.vertex.val();
-  Points x(v.rows(), 3);
-  x = v.leftCols(3);
+  return predict_positions(tape_, params_, config_, sample, stats_);
+}
+
+template <class T>
+Points predict_positions(ad::Tape<T>& tape, ad::ParamStore<T>& params, const Config& config,
+                         const dataset::TrainingSample& sample, const dataset::NormalisationStats& stats) {
+  model::ModelInput<float> input = model::model_input_from_sample(sample, stats, config.model);
+  tape.reset();
+  ad::NoRecord<T> off(tape);
+  model::Predictions<T> pred;
+  if constexpr (std::is_same_v<T, float>)
+    pred = model::forward(tape, params, config.model, input);  // no copy on the float rollout path
+  else
+    pred = model::forward(tape, params, config.model, model::cast_input<T>(input));
+  Points x = pred.vertex.val().leftCols(3).template cast<float>();
   x.rowwise() += sample.root_translation_next.transpose();
   return x;
 }
+template Points predict_positions(ad::Tape<float>&, ad::ParamStore<float>&, const Config&, const dataset::TrainingSample&,
+                                  const dataset::NormalisationStats&);
+template Points predict_positions(ad::Tape<double>&, ad::ParamStore<double>&, const Config&,
+                                  const dataset::TrainingSample&, const dataset::NormalisationStats&);
 
 std::unique_ptr<ModelPredictor> load_model_predictor(const std::string& path, const std::string& name,
                                                      const dataset::NormalisationStats* fallback_stats) {

@@ -73,6 +73,12 @@ dataset::TrainingSample rollout_sample(const dataset::Sequence& seq, int t, cons
                                        const std::shared_ptr<const dataset::SequenceStructure>& structure,
                                        const dataset::SampleOptions& options);
 
+// World x_{t+1} (N, 3) from a rollout sample: the model input in precision T, forward without
+// recording on `tape`, predicted root-relative position + r_{t+1}.
+template <class T>
+Points predict_positions(ad::Tape<T>& tape, ad::ParamStore<T>& params, const Config& config,
+                         const dataset::TrainingSample& sample, const dataset::NormalisationStats& stats);
+
 // The learned simulator: builds the dataset sample of the rollout's window, the model input,
 // runs forward without recording; world x_{t+1} = predicted root-relative x + r_{t+1}.
 class ModelPredictor : public Predictor {

@@ -294,15 +294,7 @@ Points DoubleModelPredictor::step(const dataset::Sequence& seq, int t, const Poi
   if (!structure_) begin(seq);
   const dataset::TrainingSample sample =
       rollout_sample(seq, t, x_prev2, x_prev, x_now, stats_, structure_, sample_options_);
-  const model::ModelInput<double> input =
-      model::cast_input<double>(model::model_input_from_sample(sample, stats_, config_.model));
-  tape_.reset();
-  ad::NoRecord<double> off(tape_);
-  const model::Predictions<double> pred = model::forward(tape_, params_, config_.model, input);
-  const auto v = pred.vertex.val();
-  Points x = v.leftCols(3).cast<float>();
-  x.rowwise() += sample.root_translation_next.transpose();
-  return x;
+  return predict_positions(tape_, params_, config_, sample, stats_);
 }
 
 double PrecisionResult::worst_mean() const {
