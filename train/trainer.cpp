@@ -59,6 +59,13 @@ Config run_config(const std::string& run_dir, const std::vector<std::string>& ov
 
 namespace {
 
+// What a diverged run leaves and how to go on (both stop messages end with it).
+std::string divergence_advice(const std::string& run_dir) {
+  const auto kept = list_checkpoints(run_dir);
+  return "The last valid checkpoint is " + (kept.empty() ? std::string("none (no checkpoint was written yet)") : kept.back()) +
+         ". Lower train.learning_rate or set train.grad_clip, then resume or restart.";
+}
+
 double seconds(Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double>(b - a).count(); }
 
 std::string json_number(double x) {
@@ -188,13 +195,9 @@ void Run::restore(const std::string& path) {
 }
 
 void Run::save(const std::string& path) {
-  if (!all_finite(params_.values()) || !all_finite(params_.moment1()) || !all_finite(params_.moment2())) {
-    const auto kept = list_checkpoints(options_.run_dir);
+  if (!all_finite(params_.values()) || !all_finite(params_.moment1()) || !all_finite(params_.moment2()))
     throw TrainingStopped(path + ": not written: the parameters or Adam moments hold non-finite values (the updates "
-                          "diverged); stopped. The last valid checkpoint is " +
-                          (kept.empty() ? std::string("none (no checkpoint was written yet)") : kept.back()) +
-                          ". Lower train.learning_rate or set train.grad_clip, then resume or restart.");
-  }
+                          "diverged); stopped. " + divergence_advice(options_.run_dir));
   Checkpoint cp;
   cp.config_toml = to_toml(config_);
   cp.state = state_;
@@ -391,12 +394,10 @@ bool Run::run_batch(int epoch, int ngs, const std::vector<int64_t>& order) {
            std::to_string(state_.nonfinite_in_row) + ",\"grad_norm\":" + json_number(norm) + ",\"samples\":[" +
            json.str() + "]}");
     if (state_.nonfinite_in_row >= tc.max_nonfinite_in_row) {
-      const auto kept = list_checkpoints(options_.run_dir);
       throw TrainingStopped(std::to_string(state_.nonfinite_in_row) +
                             " updates in a row had a non-finite loss or gradient (train.max_nonfinite_in_row = " +
-                            std::to_string(tc.max_nonfinite_in_row) + "); stopped. The last valid checkpoint is " +
-                            (kept.empty() ? std::string("none (no checkpoint was written yet)") : kept.back()) +
-                            ". Lower train.learning_rate or set train.grad_clip, then resume or restart.");
+                            std::to_string(tc.max_nonfinite_in_row) + "); stopped. " +
+                            divergence_advice(options_.run_dir));
     }
   } else {
     state_.nonfinite_in_row = 0;
