@@ -50,7 +50,9 @@ json result_json(const eval::StressResult& r) {
           {"max_vertex_speed_units_per_frame", r.max_vertex_speed},
           {"max_body_speed_units_per_frame", r.max_body_speed},
           {"ms_per_frame", r.ms_per_frame},
-          {"passed", r.passed()}};
+          {"passed", r.passed()},
+          {"per_frame", {{"distance_over_bound", r.bound_ratio_per_frame},
+                         {"max_vertex_speed_units_per_frame", r.vertex_speed_per_frame}}}};
 }
 
 int run_stress(const StressCliOptions& o) {

@@ -256,12 +256,16 @@ StressResult stress_rollout(Predictor& predictor, const dataset::Sequence& sourc
       break;
     }
     // In double: a blown-up rollout near the float range would overflow the difference.
-    res.max_vertex_speed = std::max(res.max_vertex_speed, (x.cast<double>() - prev.cast<double>()).rowwise().norm().maxCoeff());
+    const double speed = (x.cast<double>() - prev.cast<double>()).rowwise().norm().maxCoeff();
+    res.max_vertex_speed = std::max(res.max_vertex_speed, speed);
+    res.vertex_speed_per_frame.push_back(speed);
     prev = x;
     const std::vector<double> d = garment_body_distances(seq, r.first_frame + k, x);
+    res.bound_ratio_per_frame.push_back(0.0);
     for (size_t g = 0; g < d.size(); ++g) {
       const double ratio = d[g] / res.bounds[g];
       res.max_bound_ratio = std::max(res.max_bound_ratio, ratio);
+      res.bound_ratio_per_frame.back() = std::max(res.bound_ratio_per_frame.back(), ratio);
       if (diameters[g] > 0) res.max_diameter_ratio = std::max(res.max_diameter_ratio, d[g] / diameters[g]);
       if (ratio > 1 && res.first_bad_frame < 0) res.first_bad_frame = k;
     }

@@ -94,6 +94,8 @@ struct StressResult {
   double max_body_speed = 0;    // body vertices in the stress sequence, scene units per frame
   double ms_per_frame = 0;      // median prediction time
   std::vector<double> bounds;   // (G,) B_g
+  std::vector<double> bound_ratio_per_frame;   // (frames,) max over garments of dist / B_g
+  std::vector<double> vertex_speed_per_frame;  // (frames,) max garment vertex speed, units per frame
   bool passed() const { return finite && first_bad_frame < 0; }
 };
 

@@ -190,6 +190,7 @@ const Schema& schema() {
     k.add("train.adam_eps", [](Config& c) -> double& { return c.train.adam_eps; }, "Adam epsilon", {0, 1, {}});
     k.add("train.grad_clip", [](Config& c) -> double& { return c.train.grad_clip; }, "global gradient norm clip (0 = off)", {0, 1e9, {}});
     k.add("train.rollout_steps", [](Config& c) -> std::vector<int>& { return c.train.rollout_steps; }, "max self-fed steps T_n per epoch", {0, 1000, {}});
+    k.add("train.input_noise", [](Config& c) -> double& { return c.train.input_noise; }, "std of noise on the input garment positions (scene units, 0 = off)", {0, 1e3, {}});
     k.add("train.seed", [](Config& c) -> int64_t& { return c.train.seed; }, "random seed", {0, 9.0e15, {}});
     k.add("train.threads", [](Config& c) -> int& { return c.train.threads; }, "OpenMP threads (0 = all)", {0, 1024, {}});
     k.add("train.keep_checkpoints", [](Config& c) -> int& { return c.train.keep_checkpoints; }, "last N checkpoints kept", positive);

@@ -33,6 +33,8 @@ struct TrainConfig {
   double adam_eps = 1e-8;
   double grad_clip = 0.0;               // global L2 norm; 0 = off (official)
   std::vector<int> rollout_steps = {0, 1, 2, 3, 4, 5, 7, 7, 8, 9};  // max T_n per epoch (last repeats)
+  double input_noise = 0.0;             // std of Gaussian noise on the input garment positions at t
+                                        // (scene units; target stays the truth); 0 = off (official)
   int64_t seed = 0;
   int threads = 0;                      // 0 = all cores
   int keep_checkpoints = 3;             // last N kept, plus the best by validation error

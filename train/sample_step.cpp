@@ -53,6 +53,7 @@ SampleOutcome train_sample(const TrainData& data, Window& window, int t, int sel
     out.model_seconds += seconds_since(start);
     window.set_garments_relative(f + 1, predicted.data());
   }
+  window.add_input_noise(t);
   auto start = clock::now();
   const dataset::TrainingSample s = data.build(window, t);
   const model::ModelInput<float> input = model::model_input_from_sample(s, data.stats(), config.model);

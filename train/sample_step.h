@@ -31,8 +31,8 @@ struct SampleOutcome {
 };
 
 // Runs the self-fed rollout (T_n = self_fed steps from t − self_fed, no recording), then the
-// recorded step at t: params.grads() is zeroed and receives d loss / d params. `window`
-// must hold frames t − self_fed − 2 .. t + 1; its garment frames are overwritten.
+// recorded step at t on that state plus window.input_noise: params.grads() is zeroed and
+// receives d loss / d params. `window` must hold frames t − self_fed − 2 .. t + 1; its garment frames are overwritten.
 SampleOutcome train_sample(const TrainData& data, Window& window, int t, int self_fed, const Config& config,
                            ad::Tape<float>& tape, ad::ParamStore<float>& params);
 

@@ -16,6 +16,18 @@ void Window::set_garments_relative(int f, const float* relative) {
   }
 }
 
+void Window::add_input_noise(int f) {
+  if (input_noise.empty()) return;
+  int64_t row = 0;
+  for (int g = 0; g < info->num_garments(); ++g) {
+    const int n = info->garments[static_cast<std::size_t>(g)].num_vertices;
+    auto rows = frames.garments[static_cast<std::size_t>(g)].middleRows(
+        static_cast<Eigen::Index>(f - frames.first) * n, n);
+    for (int v = 0; v < n; ++v, ++row)
+      for (int c = 0; c < 3; ++c) rows(v, c) += input_noise[static_cast<std::size_t>(row * 3 + c)];
+  }
+}
+
 dataset::SampleOptions sample_options_for(const ModelConfig& m) {
   dataset::SampleOptions o;
   o.patch_size = static_cast<float>(m.patch_size);

@@ -33,9 +33,14 @@ struct Window {
   std::shared_ptr<const dataset::SequenceInfo> info;
   std::shared_ptr<const dataset::SequenceStructure> structure;
   dataset::FrameWindow frames;
+  // (N·3,) world offsets (scene units) added to the garments of the sample's input frame t
+  // after the self-fed steps (train.input_noise); empty = none.
+  std::vector<float> input_noise;
   // Sets garment positions of frame f (world, scene units) from root-relative predictions
   // x̃ (N, 3) row-major: x = x̃ + r_f.
   void set_garments_relative(int f, const float* relative);
+  // Adds input_noise to the garments of frame f.
+  void add_input_noise(int f);
 };
 
 class TrainData {

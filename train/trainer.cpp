@@ -11,6 +11,7 @@
 #include "train/sample_step.h"
 #include "train/train_data.h"
 
+#include <gsl/gsl_randist.h>
 #include <omp.h>
 
 #include <algorithm>
@@ -333,6 +334,11 @@ bool Run::run_batch(int epoch, int ngs, const std::vector<int64_t>& order) {
     const int n = std::min(drawn, r.t - train_->first_t(r.sequence));  // no rollout before the first sample frame
     self_fed[static_cast<std::size_t>(i)] = n;
     windows.push_back(train_->read_window(r.sequence, r.t - n, r.t));
+    if (tc.input_noise > 0) {  // drawn here, in sample order: the same numbers for any thread count
+      Window& w = windows.back();
+      w.input_noise.resize(static_cast<std::size_t>(w.info->total_garment_vertices()) * 3);
+      for (float& e : w.input_noise) e = static_cast<float>(gsl_ran_gaussian(rollout_rng_.get(), tc.input_noise));
+    }
   }
   for (int i = 0; i < nb; ++i) {
     auto dst = slots_[static_cast<std::size_t>(i)]->values();

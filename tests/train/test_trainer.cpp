@@ -185,6 +185,27 @@ TEST_F(TrainerTest, SameSeedAndThreadsGiveIdenticalParameters) {
   EXPECT_LE(list_checkpoints((dir_ / "a").string()).size(), static_cast<std::size_t>(c.train.keep_checkpoints));
 }
 
+TEST_F(TrainerTest, InputNoiseIsSeededAndReachesTheModel) {
+  const std::string data = make_dataset(2, 1, 7);
+  // T_n = 0 always: the noise's draws cannot change anything but the noise itself.
+  const std::vector<std::string> sets = {"train.epochs=1", "train.rollout_steps=[0]", "train.threads=2"};
+  auto with = [&](std::vector<std::string> extra) {
+    std::vector<std::string> all = sets;
+    all.insert(all.end(), extra.begin(), extra.end());
+    return tiny_config(data, all);
+  };
+  const Config noisy = with({"train.input_noise=0.05"});
+  train(noisy, options("a"));
+  train(noisy, options("b"));
+  train(with({}), options("clean"));
+  const auto wa = final_weights(dir_ / "a", noisy), wb = final_weights(dir_ / "b", noisy);
+  const auto wc = final_weights(dir_ / "clean", noisy);
+  ASSERT_FALSE(wa.empty());
+  ASSERT_EQ(wa.size(), wc.size());
+  EXPECT_EQ(std::memcmp(wa.data(), wb.data(), wa.size() * sizeof(float)), 0) << "same seed, same noise";
+  EXPECT_NE(std::memcmp(wa.data(), wc.data(), wa.size() * sizeof(float)), 0) << "noise changed nothing";
+}
+
 TEST_F(TrainerTest, NonFiniteGradientSkipsTheUpdateAndStopsAfterKInARow) {
   const std::string data = make_dataset(2, 0, 7);
   {  // One bad batch: skipped, logged with its samples, the run goes on.
