@@ -13,6 +13,7 @@
 #include <nlohmann/json.hpp>
 #include <omp.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -52,7 +53,9 @@ json result_json(const eval::StressResult& r) {
           {"ms_per_frame", r.ms_per_frame},
           {"passed", r.passed()},
           {"per_frame", {{"distance_over_bound", r.bound_ratio_per_frame},
-                         {"max_vertex_speed_units_per_frame", r.vertex_speed_per_frame}}}};
+                         {"max_vertex_speed_units_per_frame", r.vertex_speed_per_frame},
+                         {"nearest_vertex_to_body_units", r.nearest_per_frame},
+                         {"max_edge_stretch", r.edge_stretch_per_frame}}}};
 }
 
 int run_stress(const StressCliOptions& o) {
@@ -121,13 +124,18 @@ int run_stress(const StressCliOptions& o) {
                 eval::body_top_speed(source, first, 1.0, o.frames) * 1000.0 / source.info.scale, s.speed);
   }
   const double mm = 1000.0 / source.info.scale;
-  std::printf("\n| run | frames | finite | first bad | max dist / bound | max dist / D | max speed mm/f (body) | ms/frame | |\n");
-  std::printf("|---|---|---|---|---|---|---|---|---|\n");
+  // gap: the garment's nearest vertex to the body (grows when cloth comes off); stretch: edge
+  // length / rest length (grows when cloth tears apart) — which of the two broke a failed run.
+  std::printf("\n| run | frames | finite | first bad | max dist / bound | max dist / D | max gap mm | max stretch "
+              "| max speed mm/f (body) | ms/frame | |\n");
+  std::printf("|---|---|---|---|---|---|---|---|---|---|---|\n");
   bool ok = true;
+  const auto largest = [](const std::vector<double>& v) { return v.empty() ? 0.0 : *std::max_element(v.begin(), v.end()); };
   for (const auto& r : results) {
-    std::printf("| %s | %d | %s | %d | %.3f | %.3f | %.1f (%.1f) | %.1f | %s |\n", r.label.c_str(), r.frames,
+    std::printf("| %s | %d | %s | %d | %.3f | %.3f | %.0f | %.2f | %.1f (%.1f) | %.1f | %s |\n", r.label.c_str(), r.frames,
                 r.finite ? "yes" : "NO", r.first_bad_frame, r.max_bound_ratio, r.max_diameter_ratio,
-                r.max_vertex_speed * mm, r.max_body_speed * mm, r.ms_per_frame, r.passed() ? "ok" : "FAIL");
+                largest(r.nearest_per_frame) * mm, largest(r.edge_stretch_per_frame), r.max_vertex_speed * mm,
+                r.max_body_speed * mm, r.ms_per_frame, r.passed() ? "ok" : "FAIL");
     ok = ok && r.passed();
   }
   std::printf("bound per garment (units):");

@@ -15,6 +15,7 @@
 #include <functional>
 #include <limits>
 #include <queue>
+#include <set>
 #include <stdexcept>
 
 namespace layersnet::eval {
@@ -188,8 +189,8 @@ std::vector<double> garment_graph_diameters(const dataset::Sequence& seq) {
   return out;
 }
 
-std::vector<double> garment_body_distances(const dataset::Sequence& seq, int t, const Points& x) {
-  std::vector<double> out;
+std::vector<GarmentBodyDistance> garment_body_distances(const dataset::Sequence& seq, int t, const Points& x) {
+  std::vector<GarmentBodyDistance> out;
   const Points body = seq.body_at(t);
   Eigen::Index row = 0;
   for (int g = 0; g < seq.info.num_garments(); ++g) {
@@ -197,15 +198,47 @@ std::vector<double> garment_body_distances(const dataset::Sequence& seq, int t, 
     const auto part = x.middleRows(row, n);
     row += n;
     if (!part.allFinite()) {
-      out.push_back(std::numeric_limits<double>::quiet_NaN());
+      const double nan = std::numeric_limits<double>::quiet_NaN();
+      out.push_back({nan, nan});
       continue;
     }
     const dataset::NearestBody nn = dataset::nearest_body(part, body);
-    double m = 0;
-    for (float d : nn.distance) m = std::max(m, static_cast<double>(d));
-    out.push_back(m);
+    GarmentBodyDistance d{0, std::numeric_limits<double>::infinity()};
+    for (float v : nn.distance) d.farthest = std::max(d.farthest, static_cast<double>(v)), d.nearest = std::min(d.nearest, static_cast<double>(v));
+    if (nn.distance.empty()) d.nearest = 0;
+    out.push_back(d);
   }
   return out;
+}
+
+GarmentEdges garment_edges(const dataset::Sequence& seq) {
+  GarmentEdges out;
+  Eigen::Index offset = 0;
+  for (int g = 0; g < seq.info.num_garments(); ++g) {
+    const dataset::GarmentMesh& mesh = seq.info.garments[g];
+    const int n = mesh.num_vertices;
+    const Points x = mesh.rest.rows() == n ? mesh.rest : Points(seq.garment_at(g, 0));
+    std::set<std::pair<int, int>> seen;
+    for (int f = 0; f < mesh.num_faces(); ++f)
+      for (int c = 0; c < 3; ++c) {
+        const int a = mesh.faces(f, c), b = mesh.faces(f, (c + 1) % 3);
+        if (!seen.insert({std::min(a, b), std::max(a, b)}).second) continue;
+        out.rows.push_back({offset + a, offset + b});
+        out.rest.push_back((x.row(a) - x.row(b)).cast<double>().norm());
+      }
+    offset += n;
+  }
+  return out;
+}
+
+double max_edge_stretch(const GarmentEdges& edges, const Points& x) {
+  double worst = 0;
+  for (size_t e = 0; e < edges.rows.size(); ++e)
+    if (edges.rest[e] > 0) {
+      const auto [a, b] = edges.rows[e];
+      worst = std::max(worst, (x.row(a) - x.row(b)).cast<double>().norm() / edges.rest[e]);
+    }
+  return worst;
 }
 
 std::vector<double> garment_distance_bounds(const dataset::Sequence& seq) {
@@ -227,8 +260,8 @@ double data_bound_ratio(const dataset::Sequence& source, int first) {
   const std::vector<double> bounds = garment_distance_bounds(make_stress_sequence(source, scene));
   double worst = 0;
   for (int t = first; t < source.info.num_frames; ++t) {
-    const std::vector<double> d = garment_body_distances(source, t, garments_at(source, t));
-    for (size_t g = 0; g < d.size(); ++g) worst = std::max(worst, d[g] / bounds[g]);
+    const std::vector<GarmentBodyDistance> d = garment_body_distances(source, t, garments_at(source, t));
+    for (size_t g = 0; g < d.size(); ++g) worst = std::max(worst, d[g].farthest / bounds[g]);
   }
   return worst;
 }
@@ -241,6 +274,7 @@ StressResult stress_rollout(Predictor& predictor, const dataset::Sequence& sourc
   res.scene = scene;
   res.bounds = garment_distance_bounds(seq);
   const std::vector<double> diameters = garment_graph_diameters(seq);
+  const GarmentEdges edges = garment_edges(seq);
   for (int t = 1; t < seq.info.num_frames; ++t) {
     const auto v = seq.body_at(t) - seq.body_at(t - 1);
     res.max_body_speed = std::max(res.max_body_speed, static_cast<double>(v.rowwise().norm().maxCoeff()));
@@ -260,13 +294,16 @@ StressResult stress_rollout(Predictor& predictor, const dataset::Sequence& sourc
     res.max_vertex_speed = std::max(res.max_vertex_speed, speed);
     res.vertex_speed_per_frame.push_back(speed);
     prev = x;
-    const std::vector<double> d = garment_body_distances(seq, r.first_frame + k, x);
+    const std::vector<GarmentBodyDistance> d = garment_body_distances(seq, r.first_frame + k, x);
     res.bound_ratio_per_frame.push_back(0.0);
+    res.nearest_per_frame.push_back(0.0);
+    res.edge_stretch_per_frame.push_back(max_edge_stretch(edges, x));
     for (size_t g = 0; g < d.size(); ++g) {
-      const double ratio = d[g] / res.bounds[g];
+      res.nearest_per_frame.back() = std::max(res.nearest_per_frame.back(), d[g].nearest);
+      const double ratio = d[g].farthest / res.bounds[g];
       res.max_bound_ratio = std::max(res.max_bound_ratio, ratio);
       res.bound_ratio_per_frame.back() = std::max(res.bound_ratio_per_frame.back(), ratio);
-      if (diameters[g] > 0) res.max_diameter_ratio = std::max(res.max_diameter_ratio, d[g] / diameters[g]);
+      if (diameters[g] > 0) res.max_diameter_ratio = std::max(res.max_diameter_ratio, d[g].farthest / diameters[g]);
       if (ratio > 1 && res.first_bad_frame < 0) res.first_bad_frame = k;
     }
   }

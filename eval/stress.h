@@ -74,9 +74,24 @@ std::vector<double> garment_graph_diameters(const dataset::Sequence& seq);
 // Per garment (G,): B_g = c_g + kStretchAllowance · D_g (see above), from frame 0.
 std::vector<double> garment_distance_bounds(const dataset::Sequence& seq);
 
-// Largest distance of each garment's vertices to their nearest body vertex at frame t of
-// `seq`: x (N, 3) world in layer order -> (G,), scene units; NaN if x has a NaN.
-std::vector<double> garment_body_distances(const dataset::Sequence& seq, int t, const Points& x);
+// Per garment, its vertices' distances to their nearest body vertex at frame t of `seq`:
+// the largest (what the bound limits) and the smallest (grows when cloth comes off the body).
+struct GarmentBodyDistance {
+  double farthest = 0;
+  double nearest = 0;
+};
+// x (N, 3) world in layer order -> (G,), scene units; NaN if the garment's rows hold a NaN.
+std::vector<GarmentBodyDistance> garment_body_distances(const dataset::Sequence& seq, int t, const Points& x);
+
+// Every mesh edge once, as rows of the layer-ordered garment points, with its rest length
+// (the file's /rest template, else frame 0).
+struct GarmentEdges {
+  std::vector<std::pair<Eigen::Index, Eigen::Index>> rows;
+  std::vector<double> rest;
+};
+GarmentEdges garment_edges(const dataset::Sequence& seq);
+// max over edges of length / rest length (edges of zero rest length skipped).
+double max_edge_stretch(const GarmentEdges& edges, const Points& x);
 
 // The data's own max over frames first..T−1 and garments of dist / B_g (B_g from frame
 // `first`, as a stress scene starting there uses): how much room the bound leaves real cloth.
@@ -94,8 +109,12 @@ struct StressResult {
   double max_body_speed = 0;    // body vertices in the stress sequence, scene units per frame
   double ms_per_frame = 0;      // median prediction time
   std::vector<double> bounds;   // (G,) B_g
-  std::vector<double> bound_ratio_per_frame;   // (frames,) max over garments of dist / B_g
-  std::vector<double> vertex_speed_per_frame;  // (frames,) max garment vertex speed, units per frame
+  // Per predicted frame (frames,): what went wrong when a run fails.
+  std::vector<double> bound_ratio_per_frame;   // max over garments of dist / B_g
+  std::vector<double> vertex_speed_per_frame;  // max garment vertex speed, units per frame
+  std::vector<double> nearest_per_frame;       // max over garments of the nearest vertex's distance
+                                               // to the body, units (cloth leaving the body)
+  std::vector<double> edge_stretch_per_frame;  // max edge length / rest length (cloth stretching)
   bool passed() const { return finite && first_bad_frame < 0; }
 };
 

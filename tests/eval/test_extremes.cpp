@@ -191,6 +191,36 @@ TEST(StressScene, TheBoundPassesClothCarriedByTheBodyAndCatchesDrift) {
   EXPECT_GT(r.first_bad_frame, 0);
   EXPECT_LT(r.first_bad_frame, 60);
   EXPECT_NEAR(r.max_vertex_speed, 0.5, 1e-4);
+  // The per-frame trace tells a rigid drift from stretching: the nearest vertex leaves the
+  // body, edges keep the length they had at the start.
+  ASSERT_EQ(r.bound_ratio_per_frame.size(), static_cast<size_t>(r.frames));
+  ASSERT_EQ(r.nearest_per_frame.size(), static_cast<size_t>(r.frames));
+  ASSERT_EQ(r.edge_stretch_per_frame.size(), static_cast<size_t>(r.frames));
+  EXPECT_DOUBLE_EQ(*std::max_element(r.bound_ratio_per_frame.begin(), r.bound_ratio_per_frame.end()), r.max_bound_ratio);
+  EXPECT_GT(r.nearest_per_frame.back(), r.nearest_per_frame.front() + 20);  // 58 units of drift
+  EXPECT_NEAR(r.edge_stretch_per_frame.back(), r.edge_stretch_per_frame.front(), 1e-3);
+}
+
+TEST(StressScene, EdgeStretchIsLengthOverRestLength) {
+  const dataset::Sequence src = dataset::make_synthetic_sequence(synthetic_options());
+  const GarmentEdges edges = garment_edges(src);
+  ASSERT_FALSE(edges.rows.empty());
+  int faces = 0;
+  for (const auto& g : src.info.garments) faces += g.num_faces();
+  EXPECT_LT(edges.rows.size(), static_cast<size_t>(3 * faces));  // shared edges counted once
+  dataset::Points rest(src.info.total_garment_vertices(), 3);
+  Eigen::Index row = 0;
+  for (int g = 0; g < src.info.num_garments(); ++g) {
+    const auto& mesh = src.info.garments[g];
+    rest.middleRows(row, mesh.num_vertices) =
+        mesh.rest.rows() == mesh.num_vertices ? mesh.rest : dataset::Points(src.garment_at(g, 0));
+    row += mesh.num_vertices;
+  }
+  EXPECT_NEAR(max_edge_stretch(edges, rest), 1.0, 1e-5);
+  EXPECT_NEAR(max_edge_stretch(edges, dataset::Points(rest * 3.0f)), 3.0, 1e-5);
+  dataset::Points pulled = rest;
+  pulled.row(edges.rows[0].second) += 2.0f * (rest.row(edges.rows[0].second) - rest.row(edges.rows[0].first));
+  EXPECT_GE(max_edge_stretch(edges, pulled), 3.0 - 1e-5);
 }
 
 // ---- the trained tiny model at the extremes -----------------------------------------------------
