@@ -20,15 +20,15 @@
 // Bound on every predicted vertex (scene units). A worn garment touches the body (or the
 // layer under it, which touches the body), so its nearest vertex is within c_g of the body,
 // c_g = the garment's smallest vertex-to-body distance at frame 0 (the layer gap). Every
-// other vertex is joined to that one by a path of mesh edges; at most kStretchAllowance
-// times its rest length (the generator's data stretches edges by at most 18 %, its
-// q_max_edge_stretch), a path is never longer than the mesh's graph diameter D_g (longest
-// shortest edge path, rest lengths). Hence, for every vertex v of garment g at every frame:
+// other vertex lies within the garment's Euclidean extent of that one, and the extent of
+// real cloth stays below its rest graph diameter D_g (longest shortest edge path, rest
+// lengths): the generated data reach at most 0.89 D_g in any frame of any garment
+// (scripts/garment_extent.py; single short edges do stretch up to 6x, whole paths do not).
+// With kStretchAllowance = 1.2 for headroom, for every vertex v of garment g at every frame:
 //   dist(v, body_t) <= B_g = c_g + kStretchAllowance · D_g.
 // dist is to the nearest body VERTEX (an upper bound of the distance to the body surface).
-// D_g is an upper bound of the garment's Euclidean diameter in any unstretched pose, so the
-// bound holds for cloth blown straight out by wind, and fails only for cloth that came off
-// the body or stretched by more than the allowance — i.e. an unstable rollout.
+// It holds for cloth blown straight out by wind, and fails only for cloth that came off
+// the body or spread 35 % beyond anything the simulator produced — an unstable rollout.
 #include "autodiff/params.h"
 #include "dataset/sequence.h"
 #include "dataset/stats.h"
@@ -40,7 +40,7 @@
 
 namespace layersnet::eval {
 
-inline constexpr double kStretchAllowance = 1.2;  // edge length / rest length allowed (data: <= 1.18)
+inline constexpr double kStretchAllowance = 1.2;  // garment extent / D_g allowed (data: <= 0.89)
 
 struct StressScene {
   int frames = 600;             // F: frames of the built sequence (D-LAYERS' longest: 600)
