@@ -42,7 +42,7 @@ int run_train(const TrainCliOptions& o) {
   try {
     const auto s = layersnet::train(config, options);
     std::cout << "done: " << s.updates << " updates";
-    if (s.best_val_error >= 0) std::cout << ", best validation one-step error " << s.best_val_error;
+    if (s.best_val_error >= 0) std::cout << ", best validation error " << s.best_val_error;
     std::cout << "; last checkpoint " << s.last_checkpoint << "\n";
     return 0;
   } catch (const layersnet::TrainingStopped& e) {

@@ -42,6 +42,9 @@ struct TrainConfig {
   bool epoch_checkpoints = true;        // a checkpoint at each epoch end (else only at the run's end)
   bool validate = true;                 // one-step error on the val split after each epoch
   int val_samples = 0;                  // val samples used (evenly spaced); 0 = all
+  int val_rollout_frames = 0;           // > 0: validate (and pick best.h5) by the mean error of a
+                                        // self-fed rollout of this many frames per val sequence
+                                        // from its first sample frame; 0 = one-step error (official)
   int max_steps = 0;                    // stop after this many updates in total (benchmarks); 0 = no limit
   int max_nonfinite_in_row = 10;        // stop after this many skipped updates in a row
   int log_every = 10;                   // steps between progress lines

@@ -80,8 +80,12 @@ SampleOutcome train_sample(const TrainData& data, Window& window, int t, int sel
   return out;
 }
 
-double one_step_error(const TrainData& data, const Window& window, int t, const Config& config, ad::Tape<float>& tape,
-                      ad::ParamStore<float>& params) {
+namespace {
+
+// Mean ‖x̂ − x‖ of a sample's prediction against its target; `predicted` receives x̂ (N·3,
+// root-relative, row-major).
+double predict_and_score(const TrainData& data, const Window& window, int t, const Config& config,
+                         ad::Tape<float>& tape, ad::ParamStore<float>& params, std::vector<float>* predicted) {
   const dataset::TrainingSample s = data.build(window, t);
   const model::ModelInput<float> input = model::model_input_from_sample(s, data.stats(), config.model);
   tape.reset();
@@ -89,16 +93,38 @@ double one_step_error(const TrainData& data, const Window& window, int t, const 
   const auto pred = model::forward(tape, params, config.model, input);
   double sum = 0;
   const int64_t n = pred.vertex.rows;
+  if (predicted) predicted->resize(static_cast<std::size_t>(n) * 3);
   for (int64_t v = 0; v < n; ++v) {
     double d2 = 0;
     for (int c = 0; c < 3; ++c) {
-      const double d = static_cast<double>(pred.vertex.value[v * 9 + c]) - s.target(v, c);
+      const float x = pred.vertex.value[v * 9 + c];
+      if (predicted) (*predicted)[static_cast<std::size_t>(v * 3 + c)] = x;
+      const double d = static_cast<double>(x) - s.target(v, c);
       d2 += d * d;
     }
     sum += std::sqrt(d2);
   }
   tape.reset();
   return n > 0 ? sum / static_cast<double>(n) : 0.0;
+}
+
+}  // namespace
+
+double one_step_error(const TrainData& data, const Window& window, int t, const Config& config, ad::Tape<float>& tape,
+                      ad::ParamStore<float>& params) {
+  return predict_and_score(data, window, t, config, tape, params, nullptr);
+}
+
+double rollout_error(const TrainData& data, Window& window, int t0, int steps, const Config& config,
+                     ad::Tape<float>& tape, ad::ParamStore<float>& params) {
+  std::vector<float> predicted;
+  double sum = 0;
+  for (int f = t0; f < t0 + steps; ++f) {
+    // Scored against frame f + 1 while the window still holds its truth, then fed back.
+    sum += predict_and_score(data, window, f, config, tape, params, &predicted);
+    window.set_garments_relative(f + 1, predicted.data());
+  }
+  return steps > 0 ? sum / steps : 0.0;
 }
 
 }  // namespace layersnet

@@ -41,4 +41,11 @@ SampleOutcome train_sample(const TrainData& data, Window& window, int t, int sel
 double one_step_error(const TrainData& data, const Window& window, int t, const Config& config, ad::Tape<float>& tape,
                       ad::ParamStore<float>& params);
 
+// Mean per-vertex Euclidean error (scene units) over a self-fed rollout of `steps` steps from
+// the ground-truth state at t0: each step's prediction is compared with the truth at its
+// frame, then fed back. `window` must hold frames t0 − 2 .. t0 + steps; its garment frames
+// are overwritten.
+double rollout_error(const TrainData& data, Window& window, int t0, int steps, const Config& config,
+                     ad::Tape<float>& tape, ad::ParamStore<float>& params);
+
 }  // namespace layersnet

@@ -120,6 +120,7 @@ class Run {
   void run_epoch(int epoch);
   bool run_batch(int epoch, int ngs, const std::vector<int64_t>& order);  // false: max_steps reached
   double validate();
+  double validate_rollouts();  // train.val_rollout_frames > 0
   void save(const std::string& path);
   void save_step_checkpoint();
   void log_progress(int epoch);
@@ -304,10 +305,12 @@ void Run::run_epoch(int epoch) {
     best = state_.best_val_error < 0 || val < state_.best_val_error;
     if (best) state_.best_val_error = val;
     summary_.best_val_error = state_.best_val_error;
-    out_ << "epoch " << epoch + 1 << " validation: one-step error " << val << " (best " << state_.best_val_error
-         << ")\n";
+    const bool by_rollout = config_.train.val_rollout_frames > 0;
+    out_ << "epoch " << epoch + 1 << " validation: " << (by_rollout ? "rollout" : "one-step") << " error " << val
+         << " (best " << state_.best_val_error << ")\n";
     metric("{\"event\":\"val\",\"epoch\":" + std::to_string(epoch + 1) + ",\"step\":" +
-           std::to_string(adam_->step_count()) + ",\"one_step_error\":" + json_number(val) + ",\"best\":" +
+           std::to_string(adam_->step_count()) + (by_rollout ? ",\"rollout_error\":" : ",\"one_step_error\":") +
+           json_number(val) + ",\"best\":" +
            (best ? "true" : "false") + "}");
   }
   // best.h5 first: a kill between the two writes resumes from the previous checkpoint and
@@ -470,6 +473,7 @@ void Run::log_progress(int epoch) {
 
 double Run::validate() {
   if (!val_ || val_->num_samples() == 0) return -1;
+  if (config_.train.val_rollout_frames > 0) return validate_rollouts();
   const auto start = Clock::now();
   // Evenly spaced subset when val_samples limits it (deterministic, no generator).
   const int64_t total = val_->num_samples();
@@ -505,6 +509,44 @@ double Run::validate() {
   }
   out_ << "validation on " << n << " samples took " << duration_text(seconds(start, Clock::now())) << "\n";
   return sum / static_cast<double>(n);
+}
+
+double Run::validate_rollouts() {
+  const auto start = Clock::now();
+  const int count = static_cast<int>(val_->ids().size());
+  std::vector<int> last_t(static_cast<std::size_t>(count), -1);
+  for (const SampleRef& r : val_->samples())
+    last_t[static_cast<std::size_t>(r.sequence)] = std::max(last_t[static_cast<std::size_t>(r.sequence)], r.t);
+  std::vector<Window> windows;
+  std::vector<int> t0, steps;
+  for (int i = 0; i < count; ++i) {
+    if (last_t[static_cast<std::size_t>(i)] < 0) continue;
+    const int first = val_->first_t(i);
+    const int n = std::min(config_.train.val_rollout_frames, last_t[static_cast<std::size_t>(i)] - first + 1);
+    windows.push_back(val_->read_window(i, first, first + n - 1));
+    t0.push_back(first);
+    steps.push_back(n);
+  }
+  const int m = static_cast<int>(windows.size());
+  std::vector<double> errs(static_cast<std::size_t>(m));
+  std::vector<std::string> errors(static_cast<std::size_t>(m));
+#pragma omp parallel for schedule(dynamic, 1) if (m > 1)
+  for (int i = 0; i < m; ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    try {
+      errs[k] = rollout_error(*val_, windows[k], t0[k], steps[k], config_,
+                              *tapes_[static_cast<std::size_t>(omp_get_thread_num())], params_);
+    } catch (const std::exception& e) {
+      errors[k] = e.what();
+    }
+  }
+  for (const auto& e : errors)
+    if (!e.empty()) throw std::runtime_error(e);
+  double sum = 0;
+  for (double e : errs) sum += e;
+  out_ << "validation: rollouts of up to " << config_.train.val_rollout_frames << " frames on " << m
+       << " sequences took " << duration_text(seconds(start, Clock::now())) << "\n";
+  return m > 0 ? sum / m : -1;
 }
 
 }  // namespace

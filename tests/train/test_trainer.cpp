@@ -1,13 +1,19 @@
 // The training loop on tiny synthetic data sets: schedule, refusal without stats or over an
 // existing run, overfitting one batch, bit-identical reruns, non-finite updates, and an
-// interrupted (SIGKILL) run resumed to bit-identical parameters.
+// interrupted (SIGKILL) run resumed to bit-identical parameters; input noise; validation by rollouts.
 #include "train/trainer.h"
 
+#include "autodiff/tape.h"
+#include "dataset/manifest.h"
 #include "dataset/stats.h"
 #include "dataset/synthetic.h"
+#include "model/layersnet.h"
 #include "model/params_layout.h"
+#include "model/sample_input.h"
 #include "train/checkpoint.h"
 #include "train/run_dir.h"
+#include "train/sample_step.h"
+#include "train/train_data.h"
 
 #include <gtest/gtest.h>
 #include <fcntl.h>
@@ -204,6 +210,51 @@ TEST_F(TrainerTest, InputNoiseIsSeededAndReachesTheModel) {
   ASSERT_EQ(wa.size(), wc.size());
   EXPECT_EQ(std::memcmp(wa.data(), wb.data(), wa.size() * sizeof(float)), 0) << "same seed, same noise";
   EXPECT_NE(std::memcmp(wa.data(), wc.data(), wa.size() * sizeof(float)), 0) << "noise changed nothing";
+}
+
+TEST_F(TrainerTest, RolloutValidationFeedsPredictionsBackAndPicksBestByIt) {
+  const std::string data = make_dataset(2, 1, 9);
+  const Config c = tiny_config(data, {"train.epochs=2", "train.rollout_steps=[0]", "train.threads=2",
+                                      "train.val_rollout_frames=4"});
+  // One rollout step is the one-step error; longer rollouts feed the model's own output back.
+  const dataset::DatasetManifest manifest = dataset::read_manifest(data);
+  const dataset::NormalisationStats stats = dataset::read_stats(manifest.stats_path());
+  TrainData val(manifest, "val", stats, c);
+  ad::ParamStore<float> params;
+  model::register_params(params, c.model);
+  model::init_params(params, c.model, 3);
+  ad::Tape<float> tape;
+  const int t0 = val.first_t(0);
+  Window w1 = val.read_window(0, t0, t0);
+  const double one = one_step_error(val, w1, t0, c, tape, params);
+  Window w1b = val.read_window(0, t0, t0);
+  EXPECT_DOUBLE_EQ(rollout_error(val, w1b, t0, 1, c, tape, params), one);
+  // By hand: step by step, scoring each against the truth before feeding it back.
+  Window w4 = val.read_window(0, t0, t0 + 3);
+  const double four = rollout_error(val, w4, t0, 4, c, tape, params);
+  Window truth = val.read_window(0, t0, t0 + 3), fed = truth;
+  double sum = 0;
+  for (int f = t0; f < t0 + 4; ++f) {
+    sum += one_step_error(val, fed, f, c, tape, params);
+    const dataset::TrainingSample s = val.build(fed, f);
+    const auto input = model::model_input_from_sample(s, val.stats(), c.model);
+    ad::NoRecord<float> off(tape);
+    const auto pred = model::forward(tape, params, c.model, input);
+    std::vector<float> x(static_cast<std::size_t>(pred.vertex.rows) * 3);
+    for (int64_t v = 0; v < pred.vertex.rows; ++v)
+      for (int k = 0; k < 3; ++k) x[static_cast<std::size_t>(v * 3 + k)] = pred.vertex.value[v * 9 + k];
+    tape.reset();
+    fed.set_garments_relative(f + 1, x.data());
+  }
+  EXPECT_NEAR(four, sum / 4, 1e-12 + 1e-6 * four);
+  EXPECT_GT(four, one);  // an untrained model's errors compound
+  // The training loop validates (and keeps best.h5) by it.
+  const TrainSummary summary = train(c, options("run"));
+  EXPECT_GT(summary.best_val_error, 0.0);
+  const std::string metrics = read_text(dir_ / "run" / "metrics.jsonl");
+  EXPECT_NE(metrics.find("\"rollout_error\""), std::string::npos);
+  EXPECT_EQ(metrics.find("\"one_step_error\""), std::string::npos);
+  EXPECT_TRUE(fs::exists(dir_ / "run" / "best.h5"));
 }
 
 TEST_F(TrainerTest, NonFiniteGradientSkipsTheUpdateAndStopsAfterKInARow) {
