@@ -4,28 +4,32 @@
 
 namespace layersnet {
 
+namespace {
+
+// Calls set(x, i) for every coordinate x of the garments of frame f, i = its index in the
+// layer-ordered (N·3,) row-major layout.
+template <class Set>
+void for_each_garment_coordinate(Window& w, int f, Set&& set) {
+  int64_t row = 0;
+  for (int g = 0; g < w.info->num_garments(); ++g) {
+    const int n = w.info->garments[static_cast<std::size_t>(g)].num_vertices;
+    auto rows = w.frames.garments[static_cast<std::size_t>(g)].middleRows(
+        static_cast<Eigen::Index>(f - w.frames.first) * n, n);
+    for (int v = 0; v < n; ++v, ++row)
+      for (int c = 0; c < 3; ++c) set(rows(v, c), static_cast<std::size_t>(row * 3 + c));
+  }
+}
+
+}  // namespace
+
 void Window::set_garments_relative(int f, const float* relative) {
   const Eigen::Vector3f r = info->translation.row(f).transpose();
-  int64_t row = 0;
-  for (int g = 0; g < info->num_garments(); ++g) {
-    const int n = info->garments[static_cast<std::size_t>(g)].num_vertices;
-    auto rows = frames.garments[static_cast<std::size_t>(g)].middleRows(
-        static_cast<Eigen::Index>(f - frames.first) * n, n);
-    for (int v = 0; v < n; ++v, ++row)
-      for (int c = 0; c < 3; ++c) rows(v, c) = relative[row * 3 + c] + r[c];
-  }
+  for_each_garment_coordinate(*this, f, [&](float& x, std::size_t i) { x = relative[i] + r[static_cast<int>(i % 3)]; });
 }
 
 void Window::add_input_noise(int f) {
   if (input_noise.empty()) return;
-  int64_t row = 0;
-  for (int g = 0; g < info->num_garments(); ++g) {
-    const int n = info->garments[static_cast<std::size_t>(g)].num_vertices;
-    auto rows = frames.garments[static_cast<std::size_t>(g)].middleRows(
-        static_cast<Eigen::Index>(f - frames.first) * n, n);
-    for (int v = 0; v < n; ++v, ++row)
-      for (int c = 0; c < 3; ++c) rows(v, c) += input_noise[static_cast<std::size_t>(row * 3 + c)];
-  }
+  for_each_garment_coordinate(*this, f, [&](float& x, std::size_t i) { x += input_noise[i]; });
 }
 
 dataset::SampleOptions sample_options_for(const ModelConfig& m) {
