@@ -203,9 +203,11 @@ std::vector<GarmentBodyDistance> garment_body_distances(const dataset::Sequence&
       continue;
     }
     const dataset::NearestBody nn = dataset::nearest_body(part, body);
-    GarmentBodyDistance d{0, std::numeric_limits<double>::infinity()};
-    for (float v : nn.distance) d.farthest = std::max(d.farthest, static_cast<double>(v)), d.nearest = std::min(d.nearest, static_cast<double>(v));
-    if (nn.distance.empty()) d.nearest = 0;
+    GarmentBodyDistance d;
+    if (!nn.distance.empty()) {
+      const auto [lo, hi] = std::minmax_element(nn.distance.begin(), nn.distance.end());
+      d = {static_cast<double>(*hi), static_cast<double>(*lo)};
+    }
     out.push_back(d);
   }
   return out;
