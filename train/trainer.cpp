@@ -273,6 +273,12 @@ TrainSummary Run::execute() {
     if (tc.max_steps > 0 && summary_.batches >= tc.max_steps) break;
     run_epoch(static_cast<int>(state_.epoch));
   }
+  // A max_steps stop inside an epoch keeps its work: a checkpoint of where it stopped, from
+  // which --resume continues (an epoch end has written its own).
+  if (state_.epoch < tc.epochs && state_.position > 0) {
+    const int64_t batches = state_.epoch * batches_per_epoch_ + (state_.position + tc.batch_size - 1) / tc.batch_size;
+    if (!fs::exists(checkpoint_path(options_.run_dir, batches))) save_step_checkpoint();
+  }
   summary_.updates = adam_->step_count();
   summary_.samples_per_second = total_wall_s_ > 0 ? static_cast<double>(total_samples_) / total_wall_s_ : 0;
   metric("{\"event\":\"stop\",\"updates\":" + std::to_string(summary_.updates) + ",\"epoch\":" +

@@ -257,6 +257,35 @@ TEST_F(TrainerTest, RolloutValidationFeedsPredictionsBackAndPicksBestByIt) {
   EXPECT_TRUE(fs::exists(dir_ / "run" / "best.h5"));
 }
 
+TEST_F(TrainerTest, MaxStepsStopInsideAnEpochLeavesAResumableCheckpoint) {
+  const std::string data = make_dataset(3, 1, 8);
+  const std::vector<std::string> common = {"train.epochs=2", "train.rollout_steps=[0, 1]", "train.threads=2",
+                                           "train.checkpoint_every=0"};
+  auto with = [&](std::vector<std::string> extra) {
+    std::vector<std::string> all = common;
+    all.insert(all.end(), extra.begin(), extra.end());
+    return tiny_config(data, all);
+  };
+  const Config whole = with({});
+  const TrainSummary full = train(whole, options("whole"));
+  ASSERT_GT(full.updates, 3);
+  const Config limited = with({"train.max_steps=3"});
+  const TrainSummary part = train(limited, options("part"));
+  EXPECT_EQ(part.updates, 3);
+  int64_t step = 0;
+  ASSERT_FALSE(final_weights(dir_ / "part", limited, &step).empty());
+  EXPECT_EQ(step, 3);  // written where it stopped, not at an epoch end
+  // Resumed without the limit, it ends where the uninterrupted run ends.
+  TrainOptions resume = options("part");
+  resume.resume = true;
+  train(whole, resume);
+  int64_t step_whole = 0, step_part = 0;
+  const auto a = final_weights(dir_ / "whole", whole, &step_whole), b = final_weights(dir_ / "part", whole, &step_part);
+  EXPECT_EQ(step_whole, step_part);
+  ASSERT_EQ(a.size(), b.size());
+  EXPECT_EQ(std::memcmp(a.data(), b.data(), a.size() * sizeof(float)), 0);
+}
+
 TEST_F(TrainerTest, NonFiniteGradientSkipsTheUpdateAndStopsAfterKInARow) {
   const std::string data = make_dataset(2, 0, 7);
   {  // One bad batch: skipped, logged with its samples, the run goes on.
