@@ -11,6 +11,8 @@
 #include "eval/report.h"
 #include "train/checkpoint.h"
 
+#include <Eigen/Core>
+
 #include <omp.h>
 
 #include <algorithm>
@@ -114,6 +116,7 @@ int run_eval(EvalCliOptions o) {
   for (auto& p : owned) predictors.push_back(p.get());
 
   if (o.threads > 0) omp_set_num_threads(o.threads);  // the evaluation rollouts (speed sets its own)
+  Eigen::setNbThreads(1);  // the ops own the threads (as bench model); nested GEMM threads only contend
   std::printf("eval: %s split '%s', %zu method(s) + 2 baselines, up to %d frames from input frame %d, %d thread(s), "
               "products %s%s%s\n",
               root.c_str(), eo.split.c_str(), owned.size() - 3, eo.frames, eo.start_frame, omp_get_max_threads(),
