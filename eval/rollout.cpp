@@ -80,13 +80,16 @@ std::map<std::string, std::vector<double>> stats_to_checkpoint(const dataset::No
   return out;
 }
 
-ModelPredictor::ModelPredictor(std::string name, Config config, ad::ParamStore<float> params,
-                               dataset::NormalisationStats stats)
-    : name_(std::move(name)),
-      config_(std::move(config)),
+template <class T>
+NetworkPredictor<T>::NetworkPredictor(Config config, ad::ParamStore<T> params, dataset::NormalisationStats stats)
+    : config_(std::move(config)),
       params_(std::move(params)),
       stats_(std::move(stats)),
       sample_options_(sample_options_for(config_.model)) {}
+
+ModelPredictor::ModelPredictor(std::string name, Config config, ad::ParamStore<float> params,
+                               dataset::NormalisationStats stats)
+    : NetworkPredictor<float>(std::move(config), std::move(params), std::move(stats)), name_(std::move(name)) {}
 
 dataset::TrainingSample rollout_sample(const dataset::Sequence& seq, int t, const Points& x_prev2, const Points& x_prev,
                                        const Points& x_now, const dataset::NormalisationStats& stats,
@@ -113,12 +116,14 @@ dataset::TrainingSample rollout_sample(const dataset::Sequence& seq, int t, cons
   return dataset::build_sample(info, w, t, stats, structure, options);
 }
 
-void ModelPredictor::begin(const dataset::Sequence& seq) {
+template <class T>
+void NetworkPredictor<T>::begin(const dataset::Sequence& seq) {
   structure_ = dataset::build_structure(seq.info, sample_options_.patch_size);
 }
 
-Points ModelPredictor::step(const dataset::Sequence& seq, int t, const Points& x_prev2, const Points& x_prev,
-                            const Points& x_now) {
+template <class T>
+Points NetworkPredictor<T>::step(const dataset::Sequence& seq, int t, const Points& x_prev2, const Points& x_prev,
+                                 const Points& x_now) {
   if (!structure_) begin(seq);
   const dataset::TrainingSample sample =
       rollout_sample(seq, t, x_prev2, x_prev, x_now, stats_, structure_, sample_options_);
@@ -190,5 +195,8 @@ Rollout rollout(Predictor& predictor, const dataset::Sequence& seq, int t0, int 
   }
   return r;
 }
+
+template class NetworkPredictor<float>;
+template class NetworkPredictor<double>;
 
 }  // namespace layersnet::eval

@@ -79,9 +79,33 @@ template <class T>
 Points predict_positions(ad::Tape<T>& tape, ad::ParamStore<T>& params, const Config& config,
                          const dataset::TrainingSample& sample, const dataset::NormalisationStats& stats);
 
-// The learned simulator: builds the dataset sample of the rollout's window, the model input,
-// runs forward without recording; world x_{t+1} = predicted root-relative x + r_{t+1}.
-class ModelPredictor : public Predictor {
+// The network as a predictor, in precision T (float, or double for the precision check):
+// builds the dataset sample of the rollout's window (rollout_sample), the model input, runs
+// forward without recording; world x_{t+1} = predicted root-relative x + r_{t+1}.
+template <class T>
+class NetworkPredictor : public Predictor {
+ public:
+  void begin(const dataset::Sequence& seq) override;
+  Points step(const dataset::Sequence& seq, int t, const Points& x_prev2, const Points& x_prev,
+              const Points& x_now) override;
+  const Config& config() const { return config_; }
+
+ protected:
+  NetworkPredictor(Config config, ad::ParamStore<T> params, dataset::NormalisationStats stats);
+  ad::Tape<T> tape_;
+
+ private:
+  Config config_;
+  ad::ParamStore<T> params_;
+  dataset::NormalisationStats stats_;
+  dataset::SampleOptions sample_options_;
+  std::shared_ptr<const dataset::SequenceStructure> structure_;
+};
+extern template class NetworkPredictor<float>;
+extern template class NetworkPredictor<double>;
+
+// The learned simulator in float32 (products optionally in bfloat16).
+class ModelPredictor : public NetworkPredictor<float> {
  public:
   ModelPredictor(std::string name, Config config, ad::ParamStore<float> params, dataset::NormalisationStats stats);
   // The name, with "[bf16] " in front when the products run in bfloat16 (in front: tables
@@ -91,19 +115,9 @@ class ModelPredictor : public Predictor {
   }
   // Precision of the linear layers' products (autodiff/bf16_gemm.h; default float32).
   void set_matmul_precision(ad::MatmulPrecision p) { tape_.set_matmul_precision(p); }
-  void begin(const dataset::Sequence& seq) override;
-  Points step(const dataset::Sequence& seq, int t, const Points& x_prev2, const Points& x_prev,
-              const Points& x_now) override;
-  const Config& config() const { return config_; }
 
  private:
   std::string name_;
-  Config config_;
-  ad::ParamStore<float> params_;
-  dataset::NormalisationStats stats_;
-  dataset::SampleOptions sample_options_;
-  std::shared_ptr<const dataset::SequenceStructure> structure_;
-  ad::Tape<float> tape_;
 };
 
 // Loads a checkpoint into a ModelPredictor. Statistics: the checkpoint's own when present,

@@ -316,29 +316,25 @@ StressResult stress_rollout(Predictor& predictor, const dataset::Sequence& sourc
   return res;
 }
 
+namespace {
+
+// The float32 parameters converted to double, in the layout of `model` (throws on a mismatch).
+ad::ParamStore<double> to_double(const ModelConfig& model, const ad::ParamStore<float>& params) {
+  ad::ParamStore<double> out;
+  model::register_params(out, model);
+  if (out.total_size() != params.total_size())
+    throw std::invalid_argument("float64 model: the float32 parameters hold " + std::to_string(params.total_size()) +
+                                " values, the config's layout " + std::to_string(out.total_size()) +
+                                "; pass the parameters loaded with the same config");
+  std::copy(params.values().begin(), params.values().end(), out.values().begin());
+  return out;
+}
+
+}  // namespace
+
 DoubleModelPredictor::DoubleModelPredictor(Config config, const ad::ParamStore<float>& params,
                                            dataset::NormalisationStats stats)
-    : config_(std::move(config)), stats_(std::move(stats)), sample_options_(sample_options_for(config_.model)) {
-  model::register_params(params_, config_.model);
-  if (params_.total_size() != params.total_size())
-    throw std::invalid_argument("float64 model: the float32 parameters hold " + std::to_string(params.total_size()) +
-                                " values, the config's layout " + std::to_string(params_.total_size()) +
-                                "; pass the parameters loaded with the same config");
-  std::copy(params.values().begin(), params.values().end(), params_.values().begin());
-}
-
-void DoubleModelPredictor::begin(const dataset::Sequence& seq) {
-  structure_ = dataset::build_structure(seq.info, sample_options_.patch_size);
-}
-
-// The same sample as ModelPredictor::step (eval/rollout.h rollout_sample); only the forward is double.
-Points DoubleModelPredictor::step(const dataset::Sequence& seq, int t, const Points& x_prev2, const Points& x_prev,
-                                  const Points& x_now) {
-  if (!structure_) begin(seq);
-  const dataset::TrainingSample sample =
-      rollout_sample(seq, t, x_prev2, x_prev, x_now, stats_, structure_, sample_options_);
-  return predict_positions(tape_, params_, config_, sample, stats_);
-}
+    : NetworkPredictor<double>(config, to_double(config.model, params), std::move(stats)) {}
 
 double PrecisionResult::worst_mean() const {
   double m = 0;

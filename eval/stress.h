@@ -125,21 +125,10 @@ StressResult stress_rollout(Predictor& predictor, const dataset::Sequence& sourc
 // The model predictor in float64: the same checkpoint's parameters converted to double, the
 // same samples (built in float32 by the data layer, as for the float model) cast with
 // model::cast_input; only the network's arithmetic differs.
-class DoubleModelPredictor : public Predictor {
+class DoubleModelPredictor : public NetworkPredictor<double> {
  public:
   DoubleModelPredictor(Config config, const ad::ParamStore<float>& params, dataset::NormalisationStats stats);
   std::string name() const override { return "float64"; }
-  void begin(const dataset::Sequence& seq) override;
-  Points step(const dataset::Sequence& seq, int t, const Points& x_prev2, const Points& x_prev,
-              const Points& x_now) override;
-
- private:
-  Config config_;
-  ad::ParamStore<double> params_;
-  dataset::NormalisationStats stats_;
-  dataset::SampleOptions sample_options_;
-  std::shared_ptr<const dataset::SequenceStructure> structure_;
-  ad::Tape<double> tape_;
 };
 
 // float32 vs float64 rollouts of one checkpoint over `frames` frames of the stress sequence
