@@ -244,7 +244,10 @@ double max_edge_stretch(const GarmentEdges& edges, const Points& x) {
 }
 
 std::vector<double> garment_distance_bounds(const dataset::Sequence& seq) {
-  const std::vector<double> diameters = garment_graph_diameters(seq);
+  return garment_distance_bounds(seq, garment_graph_diameters(seq));
+}
+
+std::vector<double> garment_distance_bounds(const dataset::Sequence& seq, const std::vector<double>& diameters) {
   std::vector<double> out;
   const Points body = seq.body_at(0);
   for (int g = 0; g < seq.info.num_garments(); ++g) {
@@ -274,8 +277,8 @@ StressResult stress_rollout(Predictor& predictor, const dataset::Sequence& sourc
   StressResult res;
   res.label = label;
   res.scene = scene;
-  res.bounds = garment_distance_bounds(seq);
   const std::vector<double> diameters = garment_graph_diameters(seq);
+  res.bounds = garment_distance_bounds(seq, diameters);
   const GarmentEdges edges = garment_edges(seq);
   for (int t = 1; t < seq.info.num_frames; ++t) {
     const auto v = seq.body_at(t) - seq.body_at(t - 1);

@@ -73,6 +73,8 @@ dataset::Sequence make_stress_sequence(const dataset::Sequence& source, const St
 std::vector<double> garment_graph_diameters(const dataset::Sequence& seq);
 // Per garment (G,): B_g = c_g + kStretchAllowance · D_g (see above), from frame 0.
 std::vector<double> garment_distance_bounds(const dataset::Sequence& seq);
+// The same from diameters already computed (garment_graph_diameters(seq)).
+std::vector<double> garment_distance_bounds(const dataset::Sequence& seq, const std::vector<double>& diameters);
 
 // Per garment, its vertices' distances to their nearest body vertex at frame t of `seq`:
 // the largest (what the bound limits) and the smallest (grows when cloth comes off the body).

@@ -477,6 +477,28 @@ void Run::log_progress(int epoch) {
   window_grad_norm_ = window_data_s_ = window_build_s_ = window_model_s_ = window_optim_s_ = window_wall_s_ = 0;
 }
 
+// sum + score(0, tape) + ... + score(m − 1, tape), the scores computed on the OpenMP threads,
+// each on its own tape (tapes[thread]); the additions run in index order after the loop, and
+// the first error (by index) is rethrown there.
+template <class Score>
+double sum_in_parallel(double sum, int m, const std::vector<std::unique_ptr<ad::Tape<float>>>& tapes, Score&& score) {
+  std::vector<double> values(static_cast<std::size_t>(m));
+  std::vector<std::string> errors(static_cast<std::size_t>(m));
+#pragma omp parallel for schedule(dynamic, 1) if (m > 1)
+  for (int i = 0; i < m; ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    try {
+      values[k] = score(k, *tapes[static_cast<std::size_t>(omp_get_thread_num())]);
+    } catch (const std::exception& e) {
+      errors[k] = e.what();
+    }
+  }
+  for (const auto& e : errors)
+    if (!e.empty()) throw std::runtime_error(e);
+  for (double v : values) sum += v;
+  return sum;
+}
+
 double Run::validate() {
   if (!val_ || val_->num_samples() == 0) return -1;
   if (config_.train.val_rollout_frames > 0) return validate_rollouts();
@@ -497,21 +519,9 @@ double Run::validate() {
       windows.push_back(val_->read_window(r.sequence, r.t, r.t));
       ts.push_back(r.t);
     }
-    std::vector<double> errs(static_cast<std::size_t>(m));
-    std::vector<std::string> errors(static_cast<std::size_t>(m));
-#pragma omp parallel for schedule(dynamic, 1) if (m > 1)
-    for (int i = 0; i < m; ++i) {
-      try {
-        const auto k = static_cast<std::size_t>(i);
-        errs[k] = one_step_error(*val_, windows[k], ts[k], config_, *tapes_[static_cast<std::size_t>(omp_get_thread_num())],
-                                 params_);
-      } catch (const std::exception& e) {
-        errors[static_cast<std::size_t>(i)] = e.what();
-      }
-    }
-    for (const auto& e : errors)
-      if (!e.empty()) throw std::runtime_error(e);
-    for (double e : errs) sum += e;
+    sum = sum_in_parallel(sum, m, tapes_, [&](std::size_t k, ad::Tape<float>& tape) {
+      return one_step_error(*val_, windows[k], ts[k], config_, tape, params_);
+    });
   }
   out_ << "validation on " << n << " samples took " << duration_text(seconds(start, Clock::now())) << "\n";
   return sum / static_cast<double>(n);
@@ -534,22 +544,9 @@ double Run::validate_rollouts() {
     steps.push_back(n);
   }
   const int m = static_cast<int>(windows.size());
-  std::vector<double> errs(static_cast<std::size_t>(m));
-  std::vector<std::string> errors(static_cast<std::size_t>(m));
-#pragma omp parallel for schedule(dynamic, 1) if (m > 1)
-  for (int i = 0; i < m; ++i) {
-    const auto k = static_cast<std::size_t>(i);
-    try {
-      errs[k] = rollout_error(*val_, windows[k], t0[k], steps[k], config_,
-                              *tapes_[static_cast<std::size_t>(omp_get_thread_num())], params_);
-    } catch (const std::exception& e) {
-      errors[k] = e.what();
-    }
-  }
-  for (const auto& e : errors)
-    if (!e.empty()) throw std::runtime_error(e);
-  double sum = 0;
-  for (double e : errs) sum += e;
+  const double sum = sum_in_parallel(0.0, m, tapes_, [&](std::size_t k, ad::Tape<float>& tape) {
+    return rollout_error(*val_, windows[k], t0[k], steps[k], config_, tape, params_);
+  });
   out_ << "validation: rollouts of up to " << config_.train.val_rollout_frames << " frames on " << m
        << " sequences took " << duration_text(seconds(start, Clock::now())) << "\n";
   return m > 0 ? sum / m : -1;
