@@ -37,6 +37,7 @@ struct EvalCliOptions {
   int threads = 0;
   std::string out = "eval_out";
   std::string precision = "float32";  // of the models' linear products: float32 | bf16 | float32,bf16
+  std::vector<double> tethers;        // patch tether factors (eval/tether.h); empty: each checkpoint's own
 };
 
 // The checkpoint of a run directory (train/trainer.h): best.h5, else the newest
@@ -97,13 +98,18 @@ int run_eval(EvalCliOptions o) {
   for (size_t i = 0; i < o.checkpoints.size(); ++i) {
     const Config c = parse_config_text(read_checkpoint_config(o.checkpoints[i]), o.checkpoints[i]);
     const std::string name = i < o.names.size() ? o.names[i] : default_name(o.checkpoints[i], c);
-    for (const ad::MatmulPrecision precision : precisions) {
-      auto model = eval::load_model_predictor(o.checkpoints[i], name, fallback.get());
-      model->set_matmul_precision(precision);  // bf16: the name gets "[bf16] " in front
-      owned.push_back(std::move(model));
-      kinds.push_back("model");
-      paths.push_back(o.checkpoints[i]);
-    }
+    const std::vector<double> tethers = o.tethers.empty() ? std::vector<double>{c.eval.patch_tether} : o.tethers;
+    for (const double tether : tethers)
+      for (const ad::MatmulPrecision precision : precisions) {
+        char prefix[48] = "";  // in front: tables cut long names
+        if (o.tethers.size() > 1) std::snprintf(prefix, sizeof prefix, "[t%g] ", tether);
+        auto model = eval::load_model_predictor(o.checkpoints[i], prefix + name, fallback.get());
+        model->set_matmul_precision(precision);  // bf16: the name gets "[bf16] " in front
+        model->set_patch_tether(tether);
+        owned.push_back(std::move(model));
+        kinds.push_back("model");
+        paths.push_back(o.checkpoints[i]);
+      }
   }
   owned.push_back(std::make_unique<eval::ConstantVelocity>());
   owned.push_back(std::make_unique<eval::FollowBody>());
@@ -174,6 +180,9 @@ LAYERSNET_COMMAND(eval, "Roll out checkpoints and baselines over a split; error,
                     sub.add_option("--start-frame", o->start_frame, "input frame t0 of the first prediction (default: data.first_frame)");
                     sub.add_option("--max-sequences", o->max_sequences, "evaluate only the first N sequences (0 = all)");
                     sub.add_option("--speed-frames", o->speed_frames, "frames of the 1- and 2-thread speed rollouts");
+                    sub.add_option("--tether", o->tethers,
+                                   "patch tether factors, e.g. 0,3: every model once per factor (default: each checkpoint's eval.patch_tether)")
+                        ->delimiter(',');
                     sub.add_option("--threads", o->threads, "OpenMP threads of the evaluation rollouts (0 = all; speed is measured at 1 and 2)");
                     sub.add_option("--out", o->out, "output folder for eval.json, eval.md and plots");
                     sub.add_option("--precision", o->precision,

@@ -6,6 +6,7 @@
 #include "dataset/manifest.h"
 #include "dataset/stats.h"
 #include "eval/stress.h"
+#include "eval/tether.h"
 #include "train/checkpoint.h"
 
 #include <Eigen/Core>
@@ -35,6 +36,7 @@ struct StressCliOptions {
   int precision_frames = 100;
   int first_frame = -1;
   int threads = 0;
+  double tether = -1;  // < 0: the checkpoint config's eval.patch_tether
   std::string json_path;
 };
 
@@ -62,6 +64,7 @@ int run_stress(const StressCliOptions& o) {
   if (o.threads > 0) omp_set_num_threads(o.threads);
   Eigen::setNbThreads(1);  // the ops own the threads (as bench model); nested GEMM threads only contend
   LoadedModel m = load_model(o.checkpoint);
+  if (o.tether >= 0) m.config.eval.patch_tether = o.tether;
   const std::string root = o.dataset.empty() ? m.config.data.dataset : o.dataset;
   const dataset::DatasetManifest manifest = dataset::read_manifest(root);
   dataset::NormalisationStats stats;
@@ -88,6 +91,13 @@ int run_stress(const StressCliOptions& o) {
               static_cast<long long>(source.info.total_garment_vertices()), o.frames, first, source.info.num_frames - 1,
               omp_get_max_threads());
 
+  const double data_tether = eval::data_tether_ratio(source, *dataset::build_structure(source.info, static_cast<float>(m.config.model.patch_size)), first);
+  if (m.config.eval.patch_tether > 0)
+    std::printf("patch tether on: every vertex within %.2f rest patch radii of its patch centre (eval/tether.h); "
+                "the data's own max over frames %d..%d: %.3f\n",
+                m.config.eval.patch_tether, first, source.info.num_frames - 1, data_tether);
+  else
+    std::printf("patch tether off (eval.patch_tether = 0); the data's own max offset / rest patch radius: %.3f\n", data_tether);
   eval::ModelPredictor predictor("model", m.config, m.params, stats);
   std::vector<eval::StressResult> results;
   const auto run_one = [&](const eval::StressScene& s, const std::string& label) {
@@ -145,7 +155,8 @@ int run_stress(const StressCliOptions& o) {
               eval::kStretchAllowance, first, source.info.num_frames - 1, data_ratio);
 
   json j = {{"checkpoint", o.checkpoint}, {"dataset", root},        {"sequence", id},
-            {"runs", json::array()},     {"data_bound_ratio", data_ratio}};
+            {"runs", json::array()},     {"data_bound_ratio", data_ratio},
+            {"patch_tether", m.config.eval.patch_tether}, {"data_tether_ratio", data_tether}};
   for (const auto& r : results) j["runs"].push_back(result_json(r));
   if (o.precision_frames > 0) {
     const eval::PrecisionResult p = eval::compare_precision(m.config, m.params, stats, source, o.precision_frames, first);
@@ -198,6 +209,8 @@ LAYERSNET_COMMAND(stress, "Long rollouts at extreme wind and body speed, and flo
                                  "--speed is the time factor s (every body velocity x s) instead");
                     sub.add_option("--precision-frames", o->precision_frames, "frames of the float32/float64 comparison (0 = skip)");
                     sub.add_option("--threads", o->threads, "OpenMP threads (0 = all)");
+                    sub.add_option("--tether", o->tether,
+                                   "patch tether factor for these rollouts (0 = off; default: the checkpoint's eval.patch_tether)");
                     sub.add_option("--json", o->json_path, "write the results as JSON to this file");
                     return [o] { return run_stress(*o); };
                   });

@@ -1,6 +1,8 @@
 // Rollouts and predictors (see rollout.h).
 #include "eval/rollout.h"
 
+#include "eval/tether.h"
+
 #include "model/layersnet.h"
 #include "model/sample_input.h"
 #include "train/checkpoint.h"
@@ -20,6 +22,16 @@ Points garments_at(const dataset::Sequence& seq, int t) {
     const int n = seq.info.garments[g].num_vertices;
     x.middleRows(row, n) = seq.garment_at(g, t);
     row += n;
+  }
+  return x;
+}
+
+Points rest_garments(const dataset::Sequence& seq) {
+  Points x = garments_at(seq, 0);
+  Eigen::Index row = 0;
+  for (const auto& mesh : seq.info.garments) {
+    if (mesh.rest.rows() == mesh.num_vertices) x.middleRows(row, mesh.num_vertices) = mesh.rest;
+    row += mesh.num_vertices;
   }
   return x;
 }
@@ -119,6 +131,8 @@ dataset::TrainingSample rollout_sample(const dataset::Sequence& seq, int t, cons
 template <class T>
 void NetworkPredictor<T>::begin(const dataset::Sequence& seq) {
   structure_ = dataset::build_structure(seq.info, sample_options_.patch_size);
+  tether_limit_.clear();
+  if (config_.eval.patch_tether > 0) tether_limit_ = tether_limits(seq, *structure_, config_.eval.patch_tether);
 }
 
 template <class T>
@@ -127,7 +141,9 @@ Points NetworkPredictor<T>::step(const dataset::Sequence& seq, int t, const Poin
   if (!structure_) begin(seq);
   const dataset::TrainingSample sample =
       rollout_sample(seq, t, x_prev2, x_prev, x_now, stats_, structure_, sample_options_);
-  return predict_positions(tape_, params_, config_, sample, stats_);
+  Points x = predict_positions(tape_, params_, config_, sample, stats_);
+  if (!tether_limit_.empty()) apply_tether(structure_->all, tether_limit_, x);
+  return x;
 }
 
 template <class T>

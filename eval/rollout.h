@@ -26,6 +26,8 @@ using dataset::Points;
 
 // Garment positions of frame t concatenated in layer order: (N, 3), world.
 Points garments_at(const dataset::Sequence& seq, int t);
+// Rest shapes (the file's /garments/<name>/rest; frame 0 for a garment without one), (N, 3).
+Points rest_garments(const dataset::Sequence& seq);
 
 // Predicts x_{t+1} (world, (N, 3)) from the three latest garment frames and the data.
 class Predictor {
@@ -81,7 +83,8 @@ Points predict_positions(ad::Tape<T>& tape, ad::ParamStore<T>& params, const Con
 
 // The network as a predictor, in precision T (float, or double for the precision check):
 // builds the dataset sample of the rollout's window (rollout_sample), the model input, runs
-// forward without recording; world x_{t+1} = predicted root-relative x + r_{t+1}.
+// forward without recording; world x_{t+1} = predicted root-relative x + r_{t+1}, then the
+// patch tether when the config's eval.patch_tether > 0 (eval/tether.h).
 template <class T>
 class NetworkPredictor : public Predictor {
  public:
@@ -89,6 +92,8 @@ class NetworkPredictor : public Predictor {
   Points step(const dataset::Sequence& seq, int t, const Points& x_prev2, const Points& x_prev,
               const Points& x_now) override;
   const Config& config() const { return config_; }
+  // Patch tether factor of the following sequences (eval.patch_tether; 0 = off).
+  void set_patch_tether(double factor) { config_.eval.patch_tether = factor; structure_.reset(); }
 
  protected:
   NetworkPredictor(Config config, ad::ParamStore<T> params, dataset::NormalisationStats stats);
@@ -100,6 +105,7 @@ class NetworkPredictor : public Predictor {
   dataset::NormalisationStats stats_;
   dataset::SampleOptions sample_options_;
   std::shared_ptr<const dataset::SequenceStructure> structure_;
+  std::vector<float> tether_limit_;  // (N,) eval.patch_tether > 0 only
 };
 extern template class NetworkPredictor<float>;
 extern template class NetworkPredictor<double>;

@@ -208,14 +208,7 @@ TEST(StressScene, EdgeStretchIsLengthOverRestLength) {
   int faces = 0;
   for (const auto& g : src.info.garments) faces += g.num_faces();
   EXPECT_LT(edges.rows.size(), static_cast<size_t>(3 * faces));  // shared edges counted once
-  dataset::Points rest(src.info.total_garment_vertices(), 3);
-  Eigen::Index row = 0;
-  for (int g = 0; g < src.info.num_garments(); ++g) {
-    const auto& mesh = src.info.garments[g];
-    rest.middleRows(row, mesh.num_vertices) =
-        mesh.rest.rows() == mesh.num_vertices ? mesh.rest : dataset::Points(src.garment_at(g, 0));
-    row += mesh.num_vertices;
-  }
+  const dataset::Points rest = rest_garments(src);
   EXPECT_NEAR(max_edge_stretch(edges, rest), 1.0, 1e-5);
   EXPECT_NEAR(max_edge_stretch(edges, dataset::Points(rest * 3.0f)), 3.0, 1e-5);
   dataset::Points pulled = rest;
