@@ -1,6 +1,6 @@
 // `layersnet bench trade`: speed against accuracy over the model knobs (issue 8 point 1).
 //
-// One-at-a-time variation around a base config (configs/default.toml): each variant is
+// One-at-a-time variation around a base config (configs/quick.toml): each variant is
 // trained with the same budget (`--budget-epochs`, default: the base config's epochs, so
 // every variant sees the same samples) and evaluated, each step a child process of this
 // same binary (`layersnet train ...`, `layersnet eval ...`) so that its peak memory is its
@@ -44,7 +44,7 @@ using nlohmann::json;
 using Clock = std::chrono::steady_clock;
 
 struct TradeOptions {
-  std::string config = "configs/default.toml";
+  std::string config = "configs/quick.toml";
   std::string out = "runs/trade";
   std::vector<std::string> variants;  // names; empty = all
   std::vector<std::string> overrides;  // --set for every training
@@ -731,7 +731,7 @@ int run_trade(const TradeOptions& o) {
 LAYERSNET_BENCH(trade, "Train and evaluate model variants (patch, width, layers, K, candidates, bf16): error vs speed, Pareto front, presets",
                 [](CLI::App& sub) {
                   auto o = std::make_shared<TradeOptions>();
-                  sub.add_option("--config,-c", o->config, "base config (default configs/default.toml)");
+                  sub.add_option("--config,-c", o->config, "base config (default configs/quick.toml)");
                   sub.add_option("--out", o->out, "output folder (default runs/trade); rerunning reuses finished variants");
                   sub.add_option("--variants", o->variants, "variants to run, comma separated (default: all; --list shows them)")
                       ->delimiter(',');

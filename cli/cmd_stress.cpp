@@ -31,6 +31,7 @@ struct StressCliOptions {
   std::string sequence;
   int frames = 600;
   std::vector<double> winds = {0, 400, 2000};
+  bool no_winds = false;  // --no-winds: only the speed run
   double speed = 5;
   bool speed_factor = false;  // --speed is the time factor s itself, not a multiple of the top speed
   int precision_frames = 100;
@@ -108,7 +109,7 @@ int run_stress(const StressCliOptions& o) {
                 results.back().passed() ? "within bound" : "OUT OF BOUND");
     std::fflush(stdout);
   };
-  for (double w : o.winds) {
+  for (double w : o.no_winds ? std::vector<double>{} : o.winds) {
     eval::StressScene s;
     s.frames = o.frames;
     s.wind_strength = w;
@@ -203,6 +204,7 @@ LAYERSNET_COMMAND(stress, "Long rollouts at extreme wind and body speed, and flo
                                    "the file's rest_frames + ramp_frames; 0 without them)");
                     sub.add_option("--frames", o->frames, "frames of each stress sequence (rollout: frames - 3)");
                     sub.add_option("--winds", o->winds, "constant wind strengths, one run each")->delimiter(',');
+                    sub.add_flag("--no-winds", o->no_winds, "skip the wind runs (only the speed run)");
                     sub.add_option("--speed", o->speed,
                                    "extra run with the body's top speed this multiple of the data's (0 = none)");
                     sub.add_flag("--speed-factor", o->speed_factor,

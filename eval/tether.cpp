@@ -71,7 +71,10 @@ std::vector<float> tether_limits(const dataset::Sequence& seq, const dataset::Se
   return limit;
 }
 
-int apply_tether(const dataset::PatchStructure& s, const std::vector<float>& limit, dataset::Points& x) {
+namespace {
+
+// One pass of apply_tether; returns how many vertices it moved.
+int tether_pass(const dataset::PatchStructure& s, const std::vector<float>& limit, dataset::Points& x) {
   PatchSums sums(s, x);
   // Worst first, one at a time, the sums kept current: a runaway vertex is moved before its
   // patch mates are looked at, so its pull on their centres is gone by then.
@@ -97,15 +100,34 @@ int apply_tether(const dataset::PatchStructure& s, const std::vector<float>& lim
   return moved;
 }
 
-double data_tether_ratio(const dataset::Sequence& seq, const dataset::SequenceStructure& structure, int first) {
-  const dataset::PatchStructure& s = structure.all;
-  const std::vector<double> radius = patch_radii(s, rest_garments(seq));
-  double worst = 0;
-  for (int t = std::max(first, 0); t < seq.info.num_frames; ++t) {
-    const std::vector<double> distance = mates_distances(s, garments_at(seq, t));
-    for (int v = 0; v < s.num_vertices; ++v)
-      if (s.own_patch[v] >= 0 && radius[s.own_patch[v]] > 0) worst = std::max(worst, distance[v] / radius[s.own_patch[v]]);
+}  // namespace
+
+int apply_tether(const dataset::PatchStructure& s, const std::vector<float>& limit, dataset::Points& x) {
+  // A move shifts its mates' centres a little, so a pass can leave a vertex just beyond;
+  // passes repeat until none moves (the first does nearly all the work).
+  constexpr int kMaxPasses = 8;
+  int moved = 0;
+  for (int pass = 0; pass < kMaxPasses; ++pass) {
+    const int n = tether_pass(s, limit, x);
+    moved += n;
+    if (n == 0) break;
   }
+  return moved;
+}
+
+double tether_ratio(const dataset::PatchStructure& s, const std::vector<float>& limit, const dataset::Points& x) {
+  const std::vector<double> distance = mates_distances(s, x);
+  double worst = 0;
+  for (int v = 0; v < s.num_vertices; ++v)
+    if (limit[v] > 0.f) worst = std::max(worst, distance[v] / limit[v]);
+  return worst;
+}
+
+double data_tether_ratio(const dataset::Sequence& seq, const dataset::SequenceStructure& structure, int first) {
+  const std::vector<float> radius = tether_limits(seq, structure, 1.0);
+  double worst = 0;
+  for (int t = std::max(first, 0); t < seq.info.num_frames; ++t)
+    worst = std::max(worst, tether_ratio(structure.all, radius, garments_at(seq, t)));
   return worst;
 }
 

@@ -7,9 +7,10 @@
 //   (the file's /garments/<name>/rest, else frame 0), at least the median over patches,
 //   scene units.
 // Why: cloth barely stretches, so a vertex never leaves its patch (the generated data stay
-// within data_tether_ratio ≈ 1.1–2.4 of ρ); a learned step can, because the decoder's vertex
-// branch integrates each vertex's offset to its patch from the previous output, and an
-// offset it never saw feeds itself (single vertices running away, issue 8 point 4).
+// within data_tether_ratio = 1.06–2.41 of ρ over 24 sequences); a learned step can, because
+// the decoder's vertex branch integrates each vertex's offset to its patch from the previous
+// output, and an offset it never saw feeds itself (single vertices running away, issue 8
+// point 4).
 // The centre leaves v out, and the worst vertices are moved first with the centres kept
 // current, so a runaway does not drag its patch mates. Only positions change: the next
 // step's velocities are differences of positions, so the runaway velocity goes too (as in
@@ -26,9 +27,13 @@ namespace layersnet::eval {
 std::vector<float> tether_limits(const dataset::Sequence& seq, const dataset::SequenceStructure& structure,
                                  double factor);
 
-// Projects x (N, 3, world) in place, worst first; returns how many vertices were moved.
+// Projects x (N, 3, world) in place, worst first, in passes until none moves (at most 8);
+// returns how many moves were made.
 // Vertices whose own patch has no other member are never moved; non-finite rows stay as they are.
 int apply_tether(const dataset::PatchStructure& patches, const std::vector<float>& limit, dataset::Points& x);
+
+// Largest |x_v − c_v| / L_v over the vertices with mates and a limit (<= 1 after apply_tether).
+double tether_ratio(const dataset::PatchStructure& patches, const std::vector<float>& limit, const dataset::Points& x);
 
 // The data's own largest |x_v − c_v| / ρ_p over frames first..T−1 and vertices: the factor
 // must stay above it (real cloth is never moved).

@@ -1,9 +1,11 @@
 #!/usr/bin/env bash
 # Stability at the extremes, full version (issue 8 point 4; the short version is
 # tests/eval/test_extremes.cpp in CI):
-#   1. `layersnet stress` on the default model: 600-frame rollouts at wind 0, 400, 2000 and
-#      with the body at 5x speed (finite, every vertex within its bound, eval/stress.h), and
-#      float32 vs float64 over 100 frames (divergence below the model's own error);
+#   1. `layersnet stress` on the default model, on every test and validation sequence of the
+#      default data: 600-frame rollouts at wind 0, 400, 2000 and with the body at 5x speed
+#      (finite, every vertex within its bound, eval/stress.h; the checkpoint's
+#      eval.patch_tether applies, default 3, eval/tether.h), and float32 vs float64 over 100
+#      frames on the first (divergence below the model's own error);
 #   2. training at 10x the default learning rate on the default data for a short budget:
 #      it must either finish or be stopped by the non-finite guard (exit 1 with a message
 #      naming the fix) — never a signal — and every checkpoint it leaves must load with
@@ -37,13 +39,19 @@ fi
 mkdir -p "$out"
 status=0
 
-echo "== 1. layersnet stress ($frames frames, winds 0/400/2000, speed 5x, float32 vs float64 over 100 frames)"
-"$bin" stress --checkpoint "$checkpoint" --dataset data/default --frames "$frames" --winds 0,400,2000 --speed 5 \
-  --precision-frames 100 --json "$out/stress.json"
-rc=$?
-echo "stress exit code: $rc"
-[ "$rc" -eq 0 ] || status=1
-
+# The test and validation sequences: none of them was trained on.
+sequences=$("$python" -c 'import json,sys; s=json.load(open(sys.argv[1]))["splits"]; print(" ".join(s.get("test",[])+s.get("val",[])))' data/default/dataset.json)
+echo "== 1. layersnet stress on $sequences ($frames frames, winds 0/400/2000, speed 5x; float32 vs float64 over 100 frames on the first)"
+precision=100
+for id in $sequences; do
+  "$bin" stress --checkpoint "$checkpoint" --dataset data/default --sequence "$id" --frames "$frames" \
+    --winds 0,400,2000 --speed 5 --precision-frames "$precision" --json "$out/stress_$id.json"
+  rc=$?
+  echo "stress $id exit code: $rc"
+  [ "$rc" -eq 0 ] || status=1
+  precision=0
+  echo
+done
 echo
 echo "== 2. training at 10x the default learning rate (0.01), $lr_steps updates"
 run="$out/lr10x"

@@ -10,6 +10,7 @@
 #include "dataset/wind.h"
 #include "eval/rollout.h"
 #include "eval/stress.h"
+#include "eval/tether.h"
 #include "losses/losses.h"
 #include "model/input_builder.h"
 #include "model/layersnet.h"
@@ -232,6 +233,32 @@ TEST_F(Extremes, RolloutsOf100FramesStayFiniteAtExtremeWindAndSpeed) {
     std::printf("[ tiny    ] wind %6.0f speed %.0fx: max dist / bound %.3f, max speed %.3f units/frame, %.2f ms/frame\n",
                 s.wind_strength, s.speed, r.max_bound_ratio, r.max_vertex_speed, r.ms_per_frame);
   }
+}
+
+// The model's rollouts with the patch tether (eval.patch_tether, default 3): every predicted
+// frame has every vertex within its limit of its patch mates, at 5x body speed too; the
+// untethered rollout of the same model is printed for comparison.
+TEST_F(Extremes, TetheredModelRolloutsKeepEveryVertexNearItsPatch) {
+  const dataset::Sequence fast = make_stress_sequence(source_, {100, 5.0, -1.0});
+  const auto structure = dataset::build_structure(fast.info, static_cast<float>(model_->config.model.patch_size));
+  const std::vector<float> limit = tether_limits(fast, *structure, 3.0);
+  Config tethered_config = model_->config;
+  tethered_config.eval.patch_tether = 3.0;
+  ModelPredictor tethered("tiny", tethered_config, model_->params, stats_);
+  const Rollout held = rollout(tethered, fast, 2, 97);
+  ASSERT_EQ(held.frames.size(), 97u);
+  EXPECT_LT(held.diverged_at, 0);
+  double worst = 0;
+  for (const Points& x : held.frames) worst = std::max(worst, tether_ratio(structure->all, limit, x));
+  EXPECT_LE(worst, 1.0 + 1e-3);
+  Config free_config = model_->config;
+  free_config.eval.patch_tether = 0.0;
+  ModelPredictor free_model("tiny", free_config, model_->params, stats_);
+  const Rollout loose = rollout(free_model, fast, 2, 97);
+  double loose_worst = 0;
+  for (const Points& x : loose.frames) loose_worst = std::max(loose_worst, tether_ratio(structure->all, limit, x));
+  std::printf("[ tiny    ] 5x speed, 97 frames: worst offset / tether limit %.3f tethered, %.3f untethered\n", worst,
+              loose_worst);
 }
 
 TEST_F(Extremes, Float64AgreesWithFloat32WithinTheModelsOwnError) {

@@ -143,9 +143,14 @@ TEST(PatchTether, KeepsEveryStepOfARolloutWithinTheLimits) {
   ThrowOneVertex loose(v);
   const Rollout free_run = rollout(loose, seq, 2, 6);
   EXPECT_GT(worst_over_limit(structure->all, limit, free_run.frames.back()), 10.0);
+  EXPECT_NEAR(tether_ratio(structure->all, limit, free_run.frames.back()),
+              worst_over_limit(structure->all, limit, free_run.frames.back()), 1e-6);
   Tethered tethered(loose, structure->all, limit);
   const Rollout held = rollout(tethered, seq, 2, 6);
-  for (const Points& x : held.frames) EXPECT_LE(worst_over_limit(structure->all, limit, x), 1.0 + 1e-4);
+  for (const Points& x : held.frames) {
+    EXPECT_LE(worst_over_limit(structure->all, limit, x), 1.0 + 1e-4);
+    EXPECT_NEAR(tether_ratio(structure->all, limit, x), worst_over_limit(structure->all, limit, x), 1e-6);
+  }
 }
 
 }  // namespace
