@@ -59,20 +59,6 @@ std::vector<double> patch_radii(const dataset::PatchStructure& s, const dataset:
   return radius;
 }
 
-}  // namespace
-
-std::vector<float> tether_limits(const dataset::Sequence& seq, const dataset::SequenceStructure& structure,
-                                 double factor) {
-  const dataset::PatchStructure& s = structure.all;
-  const std::vector<double> radius = patch_radii(s, rest_garments(seq));
-  std::vector<float> limit(s.num_vertices, 0.f);
-  for (int v = 0; v < s.num_vertices; ++v)
-    if (s.own_patch[v] >= 0) limit[v] = static_cast<float>(factor * radius[s.own_patch[v]]);
-  return limit;
-}
-
-namespace {
-
 // One pass of apply_tether; returns how many vertices it moved.
 int tether_pass(const dataset::PatchStructure& s, const std::vector<float>& limit, dataset::Points& x) {
   PatchSums sums(s, x);
@@ -101,6 +87,16 @@ int tether_pass(const dataset::PatchStructure& s, const std::vector<float>& limi
 }
 
 }  // namespace
+
+std::vector<float> tether_limits(const dataset::Sequence& seq, const dataset::SequenceStructure& structure,
+                                 double factor) {
+  const dataset::PatchStructure& s = structure.all;
+  const std::vector<double> radius = patch_radii(s, rest_garments(seq));
+  std::vector<float> limit(s.num_vertices, 0.f);
+  for (int v = 0; v < s.num_vertices; ++v)
+    if (s.own_patch[v] >= 0) limit[v] = static_cast<float>(factor * radius[s.own_patch[v]]);
+  return limit;
+}
 
 int apply_tether(const dataset::PatchStructure& s, const std::vector<float>& limit, dataset::Points& x) {
   // A move shifts its mates' centres a little, so a pass can leave a vertex just beyond;
