@@ -94,7 +94,7 @@ int run_stress(const StressCliOptions& o) {
 
   const double data_tether = eval::data_tether_ratio(source, *dataset::build_structure(source.info, static_cast<float>(m.config.model.patch_size)), first);
   if (m.config.eval.patch_tether > 0)
-    std::printf("patch tether on: every vertex within %.2f rest patch radii of its patch centre (eval/tether.h); "
+    std::printf("patch tether on: every vertex within %.2f rest patch radii of its patch mates' centre (eval/tether.h); "
                 "the data's own max over frames %d..%d: %.3f\n",
                 m.config.eval.patch_tether, first, source.info.num_frames - 1, data_tether);
   else
