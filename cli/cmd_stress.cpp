@@ -92,7 +92,8 @@ int run_stress(const StressCliOptions& o) {
               static_cast<long long>(source.info.total_garment_vertices()), o.frames, first, source.info.num_frames - 1,
               omp_get_max_threads());
 
-  const double data_tether = eval::data_tether_ratio(source, *dataset::build_structure(source.info, static_cast<float>(m.config.model.patch_size)), first);
+  const auto structure = dataset::build_structure(source.info, static_cast<float>(m.config.model.patch_size));
+  const double data_tether = eval::data_tether_ratio(source, *structure, first);
   if (m.config.eval.patch_tether > 0)
     std::printf("patch tether on: every vertex within %.2f rest patch radii of its patch mates' centre (eval/tether.h); "
                 "the data's own max over frames %d..%d: %.3f\n",
