@@ -147,20 +147,23 @@ int settled_frame(const std::string& sequence_path) {
 }
 
 std::vector<double> garment_graph_diameters(const dataset::Sequence& seq) {
+  return garment_graph_diameters(seq, garment_edges(seq));
+}
+
+std::vector<double> garment_graph_diameters(const dataset::Sequence& seq, const GarmentEdges& edges) {
   std::vector<double> out;
+  size_t e = 0;
+  Eigen::Index offset = 0;
   for (int g = 0; g < seq.info.num_garments(); ++g) {
-    const dataset::GarmentMesh& mesh = seq.info.garments[g];
-    const int n = mesh.num_vertices;
-    const Points x = mesh.rest.rows() == n ? mesh.rest : Points(seq.garment_at(g, 0));
-    // Undirected edge lists with rest lengths.
+    const int n = seq.info.garments[g].num_vertices;
+    // Undirected adjacency with rest lengths, local vertex indices.
     std::vector<std::vector<std::pair<int, double>>> adj(static_cast<size_t>(n));
-    for (int f = 0; f < mesh.num_faces(); ++f)
-      for (int c = 0; c < 3; ++c) {
-        const int a = mesh.faces(f, c), b = mesh.faces(f, (c + 1) % 3);
-        const double len = (x.row(a) - x.row(b)).cast<double>().norm();
-        adj[static_cast<size_t>(a)].push_back({b, len});
-        adj[static_cast<size_t>(b)].push_back({a, len});
-      }
+    for (; e < edges.rows.size() && edges.rows[e].first < offset + n; ++e) {
+      const int a = static_cast<int>(edges.rows[e].first - offset), b = static_cast<int>(edges.rows[e].second - offset);
+      adj[static_cast<size_t>(a)].push_back({b, edges.rest[e]});
+      adj[static_cast<size_t>(b)].push_back({a, edges.rest[e]});
+    }
+    offset += n;
     double diameter = 0;
     std::vector<double> dist(static_cast<size_t>(n));
     using Item = std::pair<double, int>;
@@ -215,20 +218,18 @@ std::vector<GarmentBodyDistance> garment_body_distances(const dataset::Sequence&
 
 GarmentEdges garment_edges(const dataset::Sequence& seq) {
   GarmentEdges out;
+  const Points rest = rest_garments(seq);
   Eigen::Index offset = 0;
-  for (int g = 0; g < seq.info.num_garments(); ++g) {
-    const dataset::GarmentMesh& mesh = seq.info.garments[g];
-    const int n = mesh.num_vertices;
-    const Points x = mesh.rest.rows() == n ? mesh.rest : Points(seq.garment_at(g, 0));
+  for (const dataset::GarmentMesh& mesh : seq.info.garments) {
     std::set<std::pair<int, int>> seen;
     for (int f = 0; f < mesh.num_faces(); ++f)
       for (int c = 0; c < 3; ++c) {
         const int a = mesh.faces(f, c), b = mesh.faces(f, (c + 1) % 3);
         if (!seen.insert({std::min(a, b), std::max(a, b)}).second) continue;
         out.rows.push_back({offset + a, offset + b});
-        out.rest.push_back((x.row(a) - x.row(b)).cast<double>().norm());
+        out.rest.push_back((rest.row(offset + a) - rest.row(offset + b)).cast<double>().norm());
       }
-    offset += n;
+    offset += mesh.num_vertices;
   }
   return out;
 }
@@ -277,9 +278,9 @@ StressResult stress_rollout(Predictor& predictor, const dataset::Sequence& sourc
   StressResult res;
   res.label = label;
   res.scene = scene;
-  const std::vector<double> diameters = garment_graph_diameters(seq);
-  res.bounds = garment_distance_bounds(seq, diameters);
   const GarmentEdges edges = garment_edges(seq);
+  const std::vector<double> diameters = garment_graph_diameters(seq, edges);
+  res.bounds = garment_distance_bounds(seq, diameters);
   for (int t = 1; t < seq.info.num_frames; ++t) {
     const auto v = seq.body_at(t) - seq.body_at(t - 1);
     res.max_body_speed = std::max(res.max_body_speed, static_cast<double>(v.rowwise().norm().maxCoeff()));

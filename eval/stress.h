@@ -71,6 +71,9 @@ dataset::Sequence make_stress_sequence(const dataset::Sequence& source, const St
 // Per garment (G,): graph diameter D_g of the rest mesh (the file's /rest template, else
 // frame 0), scene units, via Dijkstra from every vertex (N_g² log N_g: fine for N_g ~ 10³).
 std::vector<double> garment_graph_diameters(const dataset::Sequence& seq);
+// The same from the edges already listed (garment_edges(seq)).
+struct GarmentEdges;
+std::vector<double> garment_graph_diameters(const dataset::Sequence& seq, const GarmentEdges& edges);
 // Per garment (G,): B_g = c_g + kStretchAllowance · D_g (see above), from frame 0.
 std::vector<double> garment_distance_bounds(const dataset::Sequence& seq);
 // The same from diameters already computed (garment_graph_diameters(seq)).
@@ -85,8 +88,8 @@ struct GarmentBodyDistance {
 // x (N, 3) world in layer order -> (G,), scene units; NaN if the garment's rows hold a NaN.
 std::vector<GarmentBodyDistance> garment_body_distances(const dataset::Sequence& seq, int t, const Points& x);
 
-// Every mesh edge once, as rows of the layer-ordered garment points, with its rest length
-// (the file's /rest template, else frame 0).
+// Every mesh edge once, as rows of the layer-ordered garment points, garment by garment, with
+// its rest length (rest_garments: the file's /rest template, else frame 0).
 struct GarmentEdges {
   std::vector<std::pair<Eigen::Index, Eigen::Index>> rows;
   std::vector<double> rest;

@@ -149,9 +149,12 @@ TEST(StressScene, GraphDiameterBoundsTheGarmentsEuclideanDiameter) {
   const dataset::Sequence src = dataset::make_synthetic_sequence(synthetic_options());
   const std::vector<double> d = garment_graph_diameters(src), b = garment_distance_bounds(src);
   ASSERT_EQ(d.size(), 2u);
+  const dataset::Points rest = rest_garments(src);
+  Eigen::Index offset = 0;
   for (int g = 0; g < 2; ++g) {
-    const auto& mesh = src.info.garments[g];
-    const dataset::Points x = mesh.rest.rows() == mesh.num_vertices ? mesh.rest : dataset::Points(src.garment_at(g, 0));
+    const int n = src.info.garments[g].num_vertices;
+    const dataset::Points x = rest.middleRows(offset, n);
+    offset += n;
     double euclid = 0;
     for (int i = 0; i < x.rows(); ++i)
       for (int j = 0; j < x.rows(); ++j) euclid = std::max(euclid, static_cast<double>((x.row(i) - x.row(j)).norm()));
