@@ -1,8 +1,9 @@
-"""The MakeHuman body from assimp-testmodels, skinned to a CMU mocap skeleton (bpy).
+"""The MakeHuman body from assimp-testmodels, skinned to a mocap skeleton (bpy).
 
 Recipe (../shared/reference/ground-truth-generation.md): import the Collada body
 (z up after import, faces -y, feet at z = 0), decimate it, scale the world x10; import
-the BVH clip; copy its armature as the rig, move the rig's joints onto the body's
+the BVH clip (CMU clips, or Boxing_Toes with its own skeleton: `Skeleton`); copy its
+armature as the rig, move the rig's joints onto the body's
 A-pose joints (landmarks measured on this mesh), bind the body with bone-heat weights,
 then drive the rig from the mocap with world-space copy-rotation constraints whose
 influence ramps 0 -> 1, so garments start around the rest-pose body.
@@ -17,11 +18,11 @@ import bpy
 import mathutils
 import numpy as np
 
+import motion_blocks
 from garments import SCENE_SCALE
 
 HUMAN_ZAE = "/usr/share/assimp/models/Collada/human.zae"
-BVH_DIR = "/usr/share/assimp/models/BVH"
-BVH_HZ = 120.0
+BVH_DIR = motion_blocks.BVH_DIR
 S = SCENE_SCALE
 
 # A-pose joint landmarks of the MakeHuman test body (metres, left side; the right side
@@ -49,7 +50,6 @@ _L = {
     "LThumb": ((0.45, -0.20, 0.99), (0.46, -0.25, 0.98)),
 }
 _REFINE = ("LeftLeg", "LeftFoot", "LeftForeArm", "LeftHand")  # heads snapped to local centroid
-ARM_BONES = ("Shoulder", "Arm", "ForeArm", "Hand", "Finger", "Thumb")
 
 
 def _mirror_name(name):
@@ -57,8 +57,72 @@ def _mirror_name(name):
         .replace("LThumb", "RThumb")
 
 
+class Skeleton:
+    """A mocap skeleton described with the CMU bones the landmarks are measured for.
+
+    landmark_of: bone -> (CMU bone giving its head, CMU bone giving its tail);
+    metres_per_unit: BVH length unit in metres on the MakeHuman body (hip to ankle 0.80 m);
+    torso: the bones that may move garment pins (pelvis and spine)."""
+
+    def __init__(self, name, left_and_centre, metres_per_unit, torso):
+        self.name, self.metres_per_unit, self.torso = name, metres_per_unit, tuple(torso)
+        self.landmark_of = dict(left_and_centre)
+        for bone, (head, tail) in left_and_centre.items():
+            if "Left" in bone:
+                self.landmark_of[bone.replace("Left", "Right")] = (_mirror_name(head), _mirror_name(tail))
+
+    def bone(self, cmu_bone):
+        """This skeleton's bone that spans exactly the CMU bone `cmu_bone` (a limb)."""
+        return next(b for b, ends in self.landmark_of.items() if ends == (cmu_bone, cmu_bone))
+
+
+CMU_SKELETON = Skeleton(
+    "cmu", {name: (name, name) for name in list(_L) + [_mirror_name(n) for n in _L]}, 0.80 / 13.8,
+    ("Hips", "LowerBack", "Spine", "Spine1"))
+# Boxing_Toes (assimp-testmodels, 100 Hz): 5 spine/head bones instead of 7, no hip joints or
+# fingers; its hip to ankle is 42.22 + 43.43 units.
+BOXING_SKELETON = Skeleton("boxing", {
+    "Hips": ("Hips", "Hips"), "Ab": ("LowerBack", "Spine"), "Chest": ("Spine1", "Spine1"),
+    "Neck": ("Neck", "Neck1"), "Head": ("Head", "Head"),
+    "LeftCollar": ("LeftShoulder", "LeftShoulder"), "LeftShoulder": ("LeftArm", "LeftArm"),
+    "LeftElbow": ("LeftForeArm", "LeftForeArm"), "LeftWrist": ("LeftHand", "LFingers"),
+    "LeftHip": ("LeftUpLeg", "LeftUpLeg"), "LeftKnee": ("LeftLeg", "LeftLeg"),
+    "LeftAnkle": ("LeftFoot", "LeftFoot"), "LeftToes": ("LeftToeBase", "LeftToeBase"),
+}, 0.80 / (42.224018 + 43.430279), ("Hips", "Ab", "Chest"))
+
+
+def bvh_joints(clip):
+    names = []
+    with open(os.path.join(BVH_DIR, clip)) as f:
+        for line in f:
+            word = line.split()
+            if word and word[0] in ("ROOT", "JOINT"):
+                names.append(word[1])
+            if word and word[0] == "MOTION":
+                break
+    return names
+
+
+def skeleton_of(clip):
+    joints = set(bvh_joints(clip))
+    for skel in (CMU_SKELETON, BOXING_SKELETON):
+        if joints == set(skel.landmark_of):
+            return skel
+    raise SystemExit(f"{clip}: unknown skeleton (joints {sorted(joints)}); add a Skeleton in body_rig.py")
+
+
+def bvh_rate(clip):
+    """Frames per second of a BVH clip, from its 'Frame Time:' line (rounded: files write
+    the frame time to few digits, e.g. .0083333 for 120 Hz)."""
+    with open(os.path.join(BVH_DIR, clip)) as f:
+        for line in f:
+            if line.startswith("Frame Time:"):
+                return round(1.0 / float(line.split()[2]), 2)
+    raise RuntimeError(f"{clip}: no 'Frame Time:' line")
+
+
 def landmarks():
-    """bone -> (head, tail) in metres for every bone of the CMU skeleton."""
+    """CMU bone -> (head, tail) in metres for every bone of the CMU skeleton."""
     out = {}
     for name, (h, t) in _L.items():
         out[name] = (np.array(h, float), np.array(t, float))
@@ -99,19 +163,18 @@ def import_body(decimate_ratio):
 
 
 def import_bvh(clip):
-    """Imports a CMU clip at the body's scale (x10). Returns the armature object."""
+    """Imports a BVH clip at the body's scale (x10). Returns the armature object."""
     import io_anim_bvh.import_bvh as import_bvh
     # This Blender's importer opens files with mode 'rU', which Python 3.11 rejects.
     import_bvh.open = lambda p, mode="r", *a, **k: builtins.open(p, mode.replace("U", ""), *a, **k)
-    # CMU/cgspeed units: hip-to-ankle 13.8 units vs 0.80 m on the MakeHuman body.
-    bpy.ops.import_anim.bvh(filepath=os.path.join(BVH_DIR, clip), global_scale=0.058 * S,
+    bpy.ops.import_anim.bvh(filepath=os.path.join(BVH_DIR, clip), global_scale=skeleton_of(clip).metres_per_unit * S,
                             rotate_mode="NATIVE", update_scene_fps=False, update_scene_duration=False)
     arm = bpy.context.view_layer.objects.active
     arm.name = "mocap"
     return arm
 
 
-def build_rig(mocap, body):
+def build_rig(mocap, body, skel):
     """A copy of the mocap armature with its joints moved onto the body's A-pose joints."""
     rig = mocap.copy()
     rig.data = mocap.data.copy()
@@ -138,6 +201,7 @@ def build_rig(mocap, body):
                       "LeftHand": "LeftForeArm"}[base]
             pname = parent if name == base else _mirror_name(parent)
             lm[pname] = (lm[pname][0], head / S)
+    lm = {bone: (lm[first][0], lm[last][1]) for bone, (first, last) in skel.landmark_of.items()}
     bpy.ops.object.select_all(action="DESELECT")
     bpy.context.view_layer.objects.active = rig
     rig.select_set(True)
@@ -159,13 +223,13 @@ def build_rig(mocap, body):
     return rig
 
 
-def _spread_legs(body, rig, deg):
+def _spread_legs(body, rig, deg, skel):
     """Turns both thighs outwards by `deg` and makes that the rest pose of body and rig:
     the MakeHuman thighs touch below the crotch, which leaves no room for trouser legs."""
     bpy.context.view_layer.objects.active = rig
     bpy.ops.object.mode_set(mode="POSE")
     for name, axis in (("LeftUpLeg", (0, -1, 0)), ("RightUpLeg", (0, 1, 0))):
-        pb = rig.pose.bones[name]
+        pb = rig.pose.bones[skel.bone(name)]
         local_axis = pb.bone.matrix_local.to_3x3().inverted() @ mathutils.Vector(axis)
         rot = mathutils.Matrix.Rotation(math.radians(deg), 3, local_axis)
         if pb.rotation_mode == "QUATERNION":
@@ -188,7 +252,7 @@ def _spread_legs(body, rig, deg):
     mod.object = rig
 
 
-def bind_body(body, rig, leg_spread_deg=0.0):
+def bind_body(body, rig, skel, leg_spread_deg=0.0):
     """Bone-heat weights; returns (B, nbones) weights and the bone names."""
     bpy.ops.object.select_all(action="DESELECT")
     body.select_set(True)
@@ -196,7 +260,7 @@ def bind_body(body, rig, leg_spread_deg=0.0):
     bpy.context.view_layer.objects.active = rig
     bpy.ops.object.parent_set(type="ARMATURE_AUTO")
     if leg_spread_deg:
-        _spread_legs(body, rig, leg_spread_deg)
+        _spread_legs(body, rig, leg_spread_deg, skel)
     names = [b.name for b in rig.data.bones]
     w = np.zeros((len(body.data.vertices), len(names)))
     gidx = {g.index: names.index(g.name) for g in body.vertex_groups if g.name in names}
@@ -207,24 +271,24 @@ def bind_body(body, rig, leg_spread_deg=0.0):
     return w, names
 
 
-def retime_mocap(mocap, rig, bvh_start, speed, scene_start, yaw_deg, arm_abduction_deg):
-    """Maps BVH frame `bvh_start` to scene frame `scene_start`, played at `speed` x real time
-    at 30 fps; rotates the clip about z by `yaw_deg` around its hips at that frame, moves it
-    so its hips start on the rig's hips, and raises both upper arms by `arm_abduction_deg`
-    so hanging hands do not trap skirts and coats against the hips."""
+def retime_mocap(mocap, rig, skel, bvh_start, scene_start, steps, segment_frames, yaw_deg, arm_abduction_deg):
+    """Plays BVH frame `bvh_start` at scene frame `scene_start` and on through the time map
+    (`scene_frames_of`: speed and time warps); rotates the clip about z by `yaw_deg` around
+    its hips at that frame, moves it so its hips start on the rig's hips, and raises both
+    upper arms by `arm_abduction_deg` so hanging hands do not trap skirts and coats against
+    the hips."""
     action = mocap.animation_data.action
-    step = BVH_HZ / 30.0 * speed
     for fc in action.fcurves:
         n = len(fc.keyframe_points)
         co = np.empty(2 * n)
         fc.keyframe_points.foreach_get("co", co)
         co = co.reshape(-1, 2)
-        co[:, 0] = (co[:, 0] - bvh_start) / step + scene_start
+        co[:, 0] = motion_blocks.scene_frames_of(co[:, 0], bvh_start, scene_start, steps, segment_frames)
         fc.keyframe_points.foreach_set("co", co.ravel())
         for kp in fc.keyframe_points:
             kp.interpolation = "LINEAR"
         fc.update()
-    _abduct_arms(mocap, arm_abduction_deg)
+    _abduct_arms(mocap, arm_abduction_deg, skel)
     scene = bpy.context.scene
     scene.frame_set(scene_start)
     hips = mocap.matrix_world @ mocap.pose.bones["Hips"].head
@@ -235,11 +299,12 @@ def retime_mocap(mocap, rig, bvh_start, speed, scene_start, yaw_deg, arm_abducti
     bpy.context.view_layer.update()
 
 
-def _abduct_arms(mocap, deg):
+def _abduct_arms(mocap, deg, skel):
     """Left-multiplies each upper arm's local rotation by a rotation about the axis that
     raises the arm sideways in the rest frame (world -y for the left arm, +y for the right)."""
     action = mocap.animation_data.action
-    for name, axis in (("LeftArm", (0, -1, 0)), ("RightArm", (0, 1, 0))):
+    for cmu_name, axis in (("LeftArm", (0, -1, 0)), ("RightArm", (0, 1, 0))):
+        name = skel.bone(cmu_name)
         pb = mocap.pose.bones[name]
         rest = pb.bone.matrix_local.to_3x3()
         local_axis = rest.inverted() @ mathutils.Vector(axis)
@@ -263,9 +328,11 @@ def _abduct_arms(mocap, deg):
             fc.update()
 
 
-def drive_rig(rig, mocap, ramp_start, ramp_frames):
+def drive_rig(rig, mocap, ramp_start, ramp_frames, pose_blend=1.0):
     """World-space copy-rotation constraints (and copy-location on the hips) from the
-    mocap, with influence 0 before `ramp_start` rising linearly to 1 over `ramp_frames`."""
+    mocap, with influence 0 before `ramp_start` rising linearly over `ramp_frames` to 1 for
+    the location and to `pose_blend` for the rotations (below 1: a blend of the mocap with the
+    rest pose, a smaller motion)."""
     for pb in rig.pose.bones:
         kinds = ["COPY_ROTATION"] + (["COPY_LOCATION"] if pb.name == "Hips" else [])
         for kind in kinds:
@@ -276,7 +343,7 @@ def drive_rig(rig, mocap, ramp_start, ramp_frames):
             c.owner_space = "WORLD"
             c.influence = 0.0
             c.keyframe_insert("influence", frame=ramp_start)
-            c.influence = 1.0
+            c.influence = pose_blend if kind == "COPY_ROTATION" else 1.0
             c.keyframe_insert("influence", frame=ramp_start + ramp_frames)
     for fc in rig.animation_data.action.fcurves:
         for kp in fc.keyframe_points:

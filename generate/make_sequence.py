@@ -26,6 +26,7 @@ from mathutils.kdtree import KDTree  # noqa: E402
 import numpy as np  # noqa: E402
 
 import body_rig  # noqa: E402
+import motion_blocks  # noqa: E402
 import outfits  # noqa: E402
 import quality  # noqa: E402
 from garments import SCENE_SCALE, BodyProfile  # noqa: E402
@@ -41,7 +42,13 @@ DEFAULTS = {
     "clips": ["01_01.bvh", "01_03.bvh"],
     "block_bvh_frames": 480,      # motion blocks (4 s at 120 Hz) assigned to splits
     "split_pattern": "ttvttte",   # block k (over all clips) -> split: t train, v val, e test
-    "speed_range": [0.8, 1.25],
+    # Explicit blocks instead of the three keys above: {"train": [[clip, first BVH frame,
+    # end BVH frame], ...], "val": [...], "test": [...]}; a clip is drawn first, then a block.
+    "motion_blocks": None,
+    "speed_range": [0.8, 1.25],   # mean playback speed (capped so the span fits the block)
+    "time_warp": 0.0,             # segment speeds vary by up to +-this fraction around the mean
+    "time_warp_segment_frames": 20,
+    "pose_blend_range": [1.0, 1.0],  # rotation influence of the mocap after the ramp (< 1: blended with the rest pose)
     "yaw_range_deg": [-180.0, 180.0],
     "mirror_probability": 0.5,
     "arm_abduction_deg": [22.0, 28.0],
@@ -58,7 +65,7 @@ DEFAULTS = {
     "garment_spacing_m": outfits.SPACING,  # rest edge length of the garments (metres)
     "ring_vertices": outfits.COLS,         # vertices around a ring (multiple of 8)
 }
-SPLIT_CODE = {"train": "t", "val": "v", "test": "e"}
+SPLIT_CODE = motion_blocks.SPLIT_CODE
 
 
 def parse_args():
@@ -82,26 +89,48 @@ def parse_args():
     return a, cfg
 
 
-def bvh_frame_count(clip):
-    with open(os.path.join(body_rig.BVH_DIR, clip)) as f:
-        for line in f:
-            if line.startswith("Frames:"):
-                return int(line.split()[1])
-    raise RuntimeError(f"{clip}: no 'Frames:' line")
+def sample_listed_motion(rng, cfg, split):
+    """Clip, first BVH frame and mean speed inside one of the split's listed blocks: a clip
+    first (so a clip with many blocks does not crowd out the others), then a block, then a
+    speed capped so that the whole span stays inside the block."""
+    blocks = cfg["motion_blocks"].get(split, [])
+    clips = list(dict.fromkeys(b[0] for b in blocks))
+    if not clips:
+        raise SystemExit(f"make_sequence.py: motion_blocks has no block for split '{split}'")
+    clip = clips[int(rng.integers(len(clips)))]
+    mine = [b for b in blocks if b[0] == clip]
+    _, lo, hi = mine[int(rng.integers(len(mine)))]
+    step = body_rig.bvh_rate(clip) / 30.0
+    moving = cfg["frames"] - cfg["rest_frames"]
+    fastest = min(cfg["speed_range"][1], (hi - lo - 2) / (moving * step))
+    if fastest < cfg["speed_range"][0]:
+        raise SystemExit(f"make_sequence.py: motion block {clip} [{lo}, {hi}) is too short for "
+                         f"{moving} frames at speed {cfg['speed_range'][0]}; lengthen it or drop it")
+    speed = float(rng.uniform(cfg["speed_range"][0], fastest))
+    span = moving * step * speed
+    start = float(rng.uniform(lo, max(lo, hi - span - 1)))
+    return clip, start, speed
+
+
+def sample_time_warp(rng, cfg):
+    """Per-segment speed factors with mean 1 over the moving frames (so the span is the
+    constant-speed one), or [1] without a warp."""
+    if cfg["time_warp"] <= 0:
+        return [1.0]
+    moving = cfg["frames"] - cfg["rest_frames"]
+    seg = cfg["time_warp_segment_frames"]
+    lengths = np.minimum(seg, moving - seg * np.arange(-(-moving // seg)))
+    u = rng.uniform(1 - cfg["time_warp"], 1 + cfg["time_warp"], size=len(lengths))
+    return [float(x) for x in u * moving / (u * lengths).sum()]
 
 
 def sample_motion(rng, cfg, split):
     """Clip, first BVH frame and speed, inside a motion block that belongs to `split`."""
-    step = body_rig.BVH_HZ / 30.0
+    if cfg["motion_blocks"]:
+        return sample_listed_motion(rng, cfg, split)
+    step = body_rig.bvh_rate(cfg["clips"][0]) / 30.0
     need = (cfg["frames"] - cfg["rest_frames"]) * step * cfg["speed_range"][1] + 2
-    blocks, k = [], 0
-    for clip in cfg["clips"]:
-        n = bvh_frame_count(clip)
-        size = max(cfg["block_bvh_frames"], int(need) + 10)
-        for start in range(1, n - size + 1, size):  # frame 0 is a calibration pose
-            if cfg["split_pattern"][k % len(cfg["split_pattern"])] == SPLIT_CODE[split]:
-                blocks.append((clip, start, start + size))
-            k += 1
+    blocks = [b[1:] for b in motion_blocks.rule_blocks(cfg, need, body_rig.BVH_DIR) if b[0] == split]
     if not blocks:
         raise SystemExit(f"make_sequence.py: no motion block of {need:.0f} BVH frames for split "
                          f"'{split}'; lower 'frames' or 'block_bvh_frames'")
@@ -174,7 +203,7 @@ def add_wind(pivots, centre, field_seed):
     return wind
 
 
-def make_cloth(garments, body_w, bone_names, body_rest, layer_attrs, cfg):
+def make_cloth(garments, body_w, bone_names, body_rest, layer_attrs, cfg, torso_bones):
     """One mesh object holding every layer (self-collision keeps the layers apart), with
     an Armature modifier (for the pinned edges) before the Cloth modifier."""
     verts = np.concatenate([g.verts for g in garments])
@@ -199,7 +228,7 @@ def make_cloth(garments, body_w, bone_names, body_rest, layer_attrs, cfg):
             vg.add([int(i)], float(w[i]), "REPLACE")
     # Skin weights (they move the pinned waistband / top edge) from the nearest body vertex,
     # restricted to the pelvis and spine: thigh or arm weights would stretch the band.
-    keep = np.array([n in ("Hips", "LowerBack", "Spine", "Spine1") for n in bone_names])
+    keep = np.array([n in torso_bones for n in bone_names])
     dominant = np.argmax(body_w, axis=1)
     torso = np.nonzero(keep[dominant] & (body_w.sum(1) > 0))[0]
     kd = KDTree(len(torso))
@@ -255,6 +284,10 @@ def main():
     outer_kind = str(rng.choice(cfg["outer_kinds"]))
     layer_attrs, body_friction = outfits.sample_attributes(rng, cfg["ranges"])
     pivots = sample_wind(rng, cfg, T)
+    warp = sample_time_warp(rng, cfg)
+    pose_blend = float(rng.uniform(*cfg["pose_blend_range"])) if cfg["pose_blend_range"][0] < 1 else 1.0
+    skel = body_rig.skeleton_of(clip)
+    steps = [body_rig.bvh_rate(clip) / 30.0 * speed * u for u in warp]
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
@@ -263,20 +296,21 @@ def main():
     scene.frame_start, scene.frame_end = 1, T
     body = body_rig.import_body(cfg["decimate_ratio"])
     mocap = body_rig.import_bvh(clip)
-    rig = body_rig.build_rig(mocap, body)
-    body_w, bone_names = body_rig.bind_body(body, rig, cfg["leg_spread_deg"])
+    rig = body_rig.build_rig(mocap, body, skel)
+    body_w, bone_names = body_rig.bind_body(body, rig, skel, cfg["leg_spread_deg"])
     body_rest = body_rig._mesh_world(body)
     unweighted = int((body_w.sum(1) <= 0).sum())
     ramp_start = 1 + cfg["rest_frames"]
-    body_rig.retime_mocap(mocap, rig, bvh_start, speed, ramp_start, yaw, abduction)
-    body_rig.drive_rig(rig, mocap, ramp_start, cfg["ramp_frames"])
+    body_rig.retime_mocap(mocap, rig, skel, bvh_start, ramp_start, steps, cfg["time_warp_segment_frames"], yaw,
+                          abduction)
+    body_rig.drive_rig(rig, mocap, ramp_start, cfg["ramp_frames"], pose_blend)
     body.modifiers.new("collision", "COLLISION")
     body.collision.cloth_friction = body_friction
 
     profile = BodyProfile(body_rest, centre=(0.0, -0.03 * SCENE_SCALE), arm_x=0.35 * SCENE_SCALE)
     garments = outfits.build_outfit(profile, inner_kind, outer_kind, rng, cfg["garment_spacing_m"],
                                     cfg["ring_vertices"])
-    cloth, offs = make_cloth(garments, body_w, bone_names, body_rest, layer_attrs, cfg)
+    cloth, offs = make_cloth(garments, body_w, bone_names, body_rest, layer_attrs, cfg, skel.torso)
     add_wind(pivots, (0.0, 0.0, 1.0 * SCENE_SCALE), cfg["field_seed"])
 
     body_faces = body_rig.triangles(body)
@@ -330,7 +364,8 @@ def main():
             "wind": "windy" if max_wind > 250 else ("calm" if max_wind <= 50 else "moderate")}
     report = {
         "seed": args.seed, "split": args.split, "clip": clip, "bvh_start": bvh_start, "speed": speed,
-        "yaw_deg": yaw, "mirrored": mirror, "arm_abduction_deg": abduction,
+        "yaw_deg": yaw, "mirrored": mirror, "arm_abduction_deg": abduction, "skeleton": skel.name,
+        "time_warp": warp, "pose_blend": pose_blend,
         "inner_kind": inner_kind, "outer_kind": outer_kind, "garments": [g["name"] for g in gar],
         "garment_types": [g["type"] for g in gar], "attributes": layer_attrs,
         "body_friction": body_friction, "wind_pivots": pivots, "max_wind_strength": max_wind,

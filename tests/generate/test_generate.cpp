@@ -71,6 +71,12 @@ TEST(GenerateGarments, TemplatesHavePanelsMetricUvAndLayerGap) {
   EXPECT_EQ(run("/usr/bin/python3 " + kSource + "/tests/generate/test_garments.py"), 0);
 }
 
+TEST(GenerateRecipes, MediumMotionBlocksAreDisjointAndFit) {
+  if (run("/usr/bin/python3 -c 'import numpy' > /dev/null 2>&1") != 0) GTEST_SKIP() << "no numpy";
+  if (!fs::exists("/usr/share/assimp/models/BVH/Boxing_Toes.bvh")) GTEST_SKIP() << "assimp-testmodels not installed";
+  EXPECT_EQ(run("/usr/bin/python3 " + kSource + "/tests/generate/test_motion_blocks.py"), 0);
+}
+
 TEST(GenerateConvert, MockDLayersReleaseConvertsToValidFiles) {
   if (run("/usr/bin/python3 -c 'import h5py, numpy' > /dev/null 2>&1") != 0) GTEST_SKIP() << "no h5py/numpy";
   EXPECT_EQ(run("/usr/bin/python3 " + kSource + "/tests/generate/test_convert.py"), 0);

@@ -1,0 +1,62 @@
+#!/usr/bin/python3
+"""The medium recipe's motion blocks: no two splits share a BVH frame, no block shares one
+with the default recipe's training blocks, every block fits a whole sequence at the slowest
+speed, and every clip on the machine is used. The time map plays a constant speed exactly
+as the linear formula and a warp with mean 1 spans the same frames."""
+import json
+import os
+import sys
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.join(HERE, "../../generate"))
+import motion_blocks  # noqa: E402
+import numpy as np  # noqa: E402
+
+RECIPES = os.path.join(HERE, "../../generate/recipes")
+RULE = {"clips": ["01_01.bvh", "01_03.bvh"], "block_bvh_frames": 480, "split_pattern": "ttvttte"}
+
+
+def rate(clip):
+    with open(os.path.join(motion_blocks.BVH_DIR, clip)) as f:
+        for line in f:
+            if line.startswith("Frame Time:"):
+                return round(1.0 / float(line.split()[2]), 2)
+
+
+def main():
+    default = json.load(open(os.path.join(RECIPES, "default.json")))["scene"]
+    medium = json.load(open(os.path.join(RECIPES, "medium.json")))["scene"]
+    need = (default["frames"] - default["rest_frames"]) * 4 * 1.25 + 2
+    default_train = [b for b in motion_blocks.rule_blocks(RULE, need) if b[0] == "train"]
+    assert len(default_train) == 10, default_train
+    blocks = motion_blocks.listed_blocks(medium)
+    assert not motion_blocks.overlaps(default_train, blocks), motion_blocks.overlaps(default_train, blocks)
+    for a in blocks:
+        for b in blocks:
+            if a is not b:
+                assert not motion_blocks.overlaps([a], [b]), (a, b)
+    moving = medium["frames"] - medium["rest_frames"]
+    for split, clip, lo, hi in blocks:
+        n = motion_blocks.bvh_frame_count(clip)
+        assert 1 <= lo < hi <= n, (clip, lo, hi, n)
+        assert hi - lo - 2 >= moving * rate(clip) / 30.0 * 0.8, (split, clip, lo, hi)
+    clips = sorted(f for f in os.listdir(motion_blocks.BVH_DIR) if f.endswith(".bvh"))
+    assert sorted({b[1] for b in blocks}) == clips, clips
+    assert medium["frames"] - medium["rest_frames"] - medium["ramp_frames"] >= 80
+    # Time map: one step is the linear map, bit for bit; a warp with mean factor 1 over the
+    # moving frames ends where the constant speed ends, and is increasing.
+    keys = np.arange(0.0, 3000.0, 1.0)
+    step = 120.0 / 30.0 * 1.13
+    assert np.array_equal(motion_blocks.scene_frames_of(keys, 961.5, 9, [step], 20), (keys - 961.5) / step + 9)
+    u = np.array([0.8, 1.2, 1.1, 0.9, 1.25])
+    u = u * moving / (u * np.minimum(20, moving - 20 * np.arange(5))).sum()
+    warped = motion_blocks.scene_frames_of(keys, 961.5, 9, list(step * u), 20)
+    assert np.all(np.diff(warped) > 0)
+    end = motion_blocks.scene_frames_of(np.array([961.5 + step * moving]), 961.5, 9, list(step * u), 20)
+    assert abs(end[0] - (9 + moving)) < 1e-9, end
+    print(f"medium: {len(blocks)} blocks over {clips}; disjoint from each other and from the "
+          f"{len(default_train)} default training blocks")
+
+
+if __name__ == "__main__":
+    main()
