@@ -1,6 +1,7 @@
 #include "losses/losses.h"
 
 #include "dataset/neighbours.h"
+#include "dataset/patches.h"
 #include "model/input_builder.h"
 #include "model/params_layout.h"
 #include "model/tape_helpers.h"
@@ -60,7 +61,26 @@ LossInput<double> build_loss_input(const model::SceneWindow& s, const model::Mod
   }
   L.body_pos = relative(s.body_tp1, s.root[3]);
   L.body_normals = model::vertex_normals(L.body_pos, s.body_faces);
+  set_target_edges(L);
   return L;
+}
+
+template <class T>
+void set_target_edges(LossInput<T>& L) {
+  const dataset::Faces faces =
+      Eigen::Map<const dataset::Faces>(L.faces.data(), static_cast<Eigen::Index>(L.faces.size() / 3), 3);
+  L.edges.clear();
+  L.target_edge_length.clear();
+  for (const auto& [a, b] : dataset::mesh_edges(faces)) {
+    double len2 = 0;
+    for (int c = 0; c < 3; ++c) {
+      const double d = static_cast<double>(L.target[3 * a + c]) - static_cast<double>(L.target[3 * b + c]);
+      len2 += d * d;
+    }
+    L.edges.push_back(a);
+    L.edges.push_back(b);
+    L.target_edge_length.push_back(static_cast<T>(std::sqrt(len2)));
+  }
 }
 
 template <class T>
@@ -126,6 +146,21 @@ LossTerms<T> compute_losses(ad::Tape<T>& tape, ad::ParamStore<T>& params, const 
                             out.layer_collisions),
              lc.collision_layer, out.collision_layer);
   }
+  if (lc.edge_strain != 0 && !tg.edges.empty()) {
+    const int64_t E = static_cast<int64_t>(tg.target_edge_length.size());
+    std::vector<int32_t> ends[2];
+    std::vector<T> inverse_length(E), ones(E, T(1));
+    for (int64_t e = 0; e < E; ++e) {
+      ends[0].push_back(tg.edges[2 * e]);
+      ends[1].push_back(tg.edges[2 * e + 1]);
+      // A degenerate ground-truth edge would give an infinite weight: floor it at 1e-6 units.
+      inverse_length[e] = T(1) / std::max(tg.target_edge_length[e], T(1e-6));
+    }
+    const Var<T> length = ad::row_norm(tape, ad::sub(tape, ad::gather_rows(tape, x, ends[0]), ad::gather_rows(tape, x, ends[1])));
+    const Var<T> ratio = ad::mul(tape, length, model::constant(tape, inverse_length, E, 1));
+    add_term(ad::mean_all(tape, ad::squared_error(tape, ratio, model::constant(tape, ones, E, 1))), lc.edge_strain,
+             out.edge_strain);
+  }
   const auto rot_names = model::rotation_map_names(mc);
   // With model.orthogonality = "exact" the constraint holds by construction: no penalty.
   if (lc.orthogonality != 0 && !rot_names.empty() && mc.orthogonality != "exact") {
@@ -152,6 +187,8 @@ LossTerms<T> compute_losses(ad::Tape<T>& tape, ad::ParamStore<T>& params, const 
   return out;
 }
 
+template void set_target_edges(LossInput<float>&);
+template void set_target_edges(LossInput<double>&);
 template Var<float> vertex_normals(ad::Tape<float>&, const Var<float>&, const std::vector<int32_t>&);
 template Var<double> vertex_normals(ad::Tape<double>&, const Var<double>&, const std::vector<int32_t>&);
 template LossTerms<float> compute_losses(ad::Tape<float>&, ad::ParamStore<float>&, const ModelConfig&, const LossConfig&,

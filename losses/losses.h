@@ -11,6 +11,8 @@
 //                    vertex of all inner garments, with the PREDICTED inner normals (eq. 18)
 //   orthogonality    Σ_W ‖W Wᵀ − I‖²_F + ‖Wᵀ W − I‖²_F over every RET map W (eq. 9 as a penalty);
 //                    absent with model.orthogonality = "exact" (W orthonormal by construction)
+//   edge_strain      Σ_e ((‖x̂_i − x̂_j‖ − l_e) / l_e)² / E over the garment edges, l_e the ground-truth
+//                    length at t+1 (not in the paper; off by default)
 //
 //   total = Σ weight_k · term_k, weights from LossConfig (collision_layer is NOT multiplied by
 //   collision_body, as in the official code).
@@ -42,22 +44,29 @@ struct LossInput {
   std::vector<int32_t> garment_offsets;  // (G + 1), inner -> outer
   std::vector<T> body_pos;        // (B, 3) GT body at t+1
   std::vector<T> body_normals;    // (B, 3) its vertex normals
+  std::vector<int32_t> edges;     // (E, 2) unique garment edges, global vertex ids (from faces)
+  std::vector<T> target_edge_length;  // (E) ground-truth lengths at t+1, scene units
 };
+
+// Fills L.edges and L.target_edge_length from L.faces and L.target.
+template <class T>
+void set_target_edges(LossInput<T>& L);
 
 LossInput<double> build_loss_input(const model::SceneWindow& scene, const model::ModelInput<double>& input);
 
 template <class U, class T>
 LossInput<U> cast_loss_input(const LossInput<T>& in) {
   auto cv = [](const std::vector<T>& v) { return std::vector<U>(v.begin(), v.end()); };
-  return {cv(in.target), cv(in.target_patch), cv(in.target_normals), in.faces, in.garment_offsets,
-          cv(in.body_pos), cv(in.body_normals)};
+  return {cv(in.target),    cv(in.target_patch), cv(in.target_normals), in.faces, in.garment_offsets,
+          cv(in.body_pos),  cv(in.body_normals),  in.edges,               cv(in.target_edge_length)};
 }
 
 template <class T>
 struct LossTerms {
   ad::Var<T> total;  // (1, 1), differentiable
   // Unweighted values of each term (0 when absent) for logging.
-  double vertex = 0, patch = 0, normal = 0, collision_body = 0, collision_layer = 0, orthogonality = 0;
+  double vertex = 0, patch = 0, normal = 0, collision_body = 0, collision_layer = 0, orthogonality = 0,
+         edge_strain = 0;
   int64_t body_collisions = 0, layer_collisions = 0;  // N_c of each collision term
 };
 

@@ -26,6 +26,7 @@ LossInput<float> loss_input_from_sample(const dataset::TrainingSample& s, const 
   const auto normals = model::vertex_normals(target, L.faces);
   L.target_normals.assign(normals.begin(), normals.end());
   L.garment_offsets = st.vertex_offsets;
+  set_target_edges(L);
   L.body_pos.resize(B * 3);
   L.body_normals.resize(B * 3);
   for (int64_t b = 0; b < B; ++b)

@@ -35,6 +35,9 @@ struct LossConfig {
   double collision_layer = 0.1;  // λ_g (eq. 18 outer vs inner layer; official: not × λ_b)
   double collision_eps = 0.001;  // d_ε, scene units
   double orthogonality = 1.0;    // ||W Wᵀ − I||² + ||Wᵀ W − I||² penalty
+  // Not in the paper (0 = off): mean over garment edges of ((|x̂_i − x̂_j| − l_ij) / l_ij)², l the
+  // ground-truth length at t+1. Penalises the per-vertex jitter that crumples self-fed rollouts.
+  double edge_strain = 0.0;
 };
 
 }  // namespace layersnet

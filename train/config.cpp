@@ -174,6 +174,7 @@ const Schema& schema() {
     k.add("loss.collision_layer", [](Config& c) -> double& { return c.loss.collision_layer; }, "outer-inner layer collision weight", weight);
     k.add("loss.collision_eps", [](Config& c) -> double& { return c.loss.collision_eps; }, "collision margin d_eps (scene units)", {0, 10, {}});
     k.add("loss.orthogonality", [](Config& c) -> double& { return c.loss.orthogonality; }, "W_R orthogonality penalty weight", weight);
+    k.add("loss.edge_strain", [](Config& c) -> double& { return c.loss.edge_strain; }, "edge-length strain weight (not in the paper; 0 = off)", weight);
     // [data]
     k.add("data.dataset", [](Config& c) -> std::string& { return c.data.dataset; }, "data set folder");
     k.add("data.first_frame", [](Config& c) -> int& { return c.data.first_frame; }, "first input frame of a sample", {2, 1e6, {}});

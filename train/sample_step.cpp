@@ -21,13 +21,14 @@ double seconds_since(std::chrono::steady_clock::time_point start) {
 LossParts& LossParts::operator+=(const LossParts& o) {
   total += o.total, vertex += o.vertex, patch += o.patch, normal += o.normal;
   collision_body += o.collision_body, collision_layer += o.collision_layer, orthogonality += o.orthogonality;
+  edge_strain += o.edge_strain;
   return *this;
 }
 
 LossParts LossParts::scaled(double s) const {
   LossParts p = *this;
   p.total *= s, p.vertex *= s, p.patch *= s, p.normal *= s;
-  p.collision_body *= s, p.collision_layer *= s, p.orthogonality *= s;
+  p.collision_body *= s, p.collision_layer *= s, p.orthogonality *= s, p.edge_strain *= s;
   return p;
 }
 
@@ -64,8 +65,8 @@ SampleOutcome train_sample(const TrainData& data, Window& window, int t, int sel
   params.zero_grads();
   const auto pred = model::forward(tape, params, config.model, input);
   const auto terms = losses::compute_losses(tape, params, config.model, config.loss, target, pred);
-  out.loss = {terms.total.scalar(), terms.vertex,          terms.patch,        terms.normal,
-              terms.collision_body, terms.collision_layer, terms.orthogonality};
+  out.loss = {terms.total.scalar(), terms.vertex,          terms.patch,         terms.normal,
+              terms.collision_body, terms.collision_layer, terms.orthogonality, terms.edge_strain};
   out.loss_finite = std::isfinite(out.loss.total);
   if (out.loss_finite) {
     tape.backward(terms.total);

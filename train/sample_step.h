@@ -17,7 +17,8 @@
 namespace layersnet {
 
 struct LossParts {
-  double total = 0, vertex = 0, patch = 0, normal = 0, collision_body = 0, collision_layer = 0, orthogonality = 0;
+  double total = 0, vertex = 0, patch = 0, normal = 0, collision_body = 0, collision_layer = 0, orthogonality = 0,
+         edge_strain = 0;
   LossParts& operator+=(const LossParts& o);
   LossParts scaled(double s) const;
 };

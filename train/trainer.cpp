@@ -90,7 +90,7 @@ std::string json_parts(const LossParts& p) {
   return "{\"total\":" + json_number(p.total) + ",\"vertex\":" + json_number(p.vertex) + ",\"patch\":" +
          json_number(p.patch) + ",\"normal\":" + json_number(p.normal) + ",\"collision_body\":" +
          json_number(p.collision_body) + ",\"collision_layer\":" + json_number(p.collision_layer) +
-         ",\"orthogonality\":" + json_number(p.orthogonality) + "}";
+         ",\"orthogonality\":" + json_number(p.orthogonality) + ",\"edge_strain\":" + json_number(p.edge_strain) + "}";
 }
 
 std::string duration_text(double s) {
@@ -456,11 +456,11 @@ void Run::log_progress(int epoch) {
   char line[512];
   std::snprintf(line, sizeof line,
                 "epoch %d/%d  step %lld  sample %lld/%lld  %.2f samples/s  ETA %s  lr %.3g  loss %.5g "
-                "(vertex %.4g patch %.4g normal %.4g body %.4g layer %.4g orth %.4g)  outside model %.0f%%",
+                "(vertex %.4g patch %.4g normal %.4g body %.4g layer %.4g orth %.4g strain %.4g)  outside model %.0f%%",
                 epoch + 1, tc.epochs, static_cast<long long>(adam_->step_count()), static_cast<long long>(state_.position),
                 static_cast<long long>(train_->num_samples()), rate, duration_text(eta).c_str(),
                 learning_rate_at(tc, epoch), loss.total, loss.vertex, loss.patch, loss.normal, loss.collision_body,
-                loss.collision_layer, loss.orthogonality, 100 * share);
+                loss.collision_layer, loss.orthogonality, loss.edge_strain, 100 * share);
   out_ << line << std::endl;
   metric("{\"event\":\"train\",\"epoch\":" + std::to_string(epoch + 1) + ",\"step\":" +
          std::to_string(adam_->step_count()) + ",\"batch\":" + std::to_string(summary_.batches) + ",\"position\":" +

@@ -77,6 +77,34 @@ TEST(Losses, GradientsOfEveryTermMatchFiniteDifferences) {
   EXPECT_TRUE(report.ok) << report.failures;
 }
 
+TEST(Losses, EdgeStrainHandCountedAndGradcheck) {
+  Toy toy;
+  set_target_edges(toy.target);
+  ASSERT_EQ(toy.target.edges.size(), 12u);  // two triangles, three edges each
+  LossConfig lc;
+  lc.vertex = lc.patch = lc.normal = lc.collision_body = lc.collision_layer = 0;
+  lc.edge_strain = 2.0;
+  ad::ParamStore<double> ps;
+  ad::Tape<double> tape;
+  model::Predictions<double> pred{tape.leaf(toy.pred.data(), 6, 9), tape.leaf(toy.patch.data(), 1, 9)};
+  const auto t = compute_losses(tape, ps, no_ret(), lc, toy.target, pred);
+  // Inner triangle: exact lengths (0 strain). Outer edges: ground truth 1, 1, sqrt(2) at z = 0.2;
+  // predicted (0,0,.1005)-(1,0,.05), (0,0,.1005)-(0,1,.3), (1,0,.05)-(0,1,.3).
+  const double l01 = std::sqrt(1 + 0.0505 * 0.0505), l02 = std::sqrt(1 + 0.1995 * 0.1995),
+               l12 = std::sqrt(2 + 0.25 * 0.25);
+  const double expected =
+      ((l01 - 1) * (l01 - 1) + (l02 - 1) * (l02 - 1) + (l12 / std::sqrt(2.0) - 1) * (l12 / std::sqrt(2.0) - 1)) / 6;
+  EXPECT_NEAR(t.edge_strain, expected, 1e-12);
+  EXPECT_NEAR(t.total.scalar(), 2.0 * expected, 1e-12);
+  const auto f = [&](ad::Tape<double>& tp, const std::vector<ad::Var<double>>& in) {
+    return compute_losses(tp, ps, no_ret(), lc, toy.target, model::Predictions<double>{in[0], in[1]}).total;
+  };
+  ad::GradcheckInput v{Eigen::Map<ad::RowMat<double>>(toy.pred.data(), 6, 9)};
+  ad::GradcheckInput p{Eigen::Map<ad::RowMat<double>>(toy.patch.data(), 1, 9)};
+  const auto report = ad::gradcheck(f, {v, p});
+  EXPECT_TRUE(report.ok) << report.failures;
+}
+
 TEST(Losses, VertexNormalsGradcheck) {
   // A bent 3x3 grid of vertices (8 triangles).
   std::vector<int32_t> faces;
