@@ -19,6 +19,7 @@
 #include "autodiff/optim.h"
 #include "cli/bench_util.h"
 #include "cli/command_registry.h"
+#include "eval/metrics.h"
 #include "losses/losses.h"
 #include "model/input_builder.h"
 #include "model/layersnet.h"
@@ -55,14 +56,7 @@ using bench::median;
 using bench::median_times;
 using bench::now_ms;
 using bench::uptime_load;
-// q-quantile by linear interpolation (q in [0, 1]).
-double quantile(std::vector<double> v, double q) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  const double x = q * static_cast<double>(v.size() - 1);
-  const std::size_t i = static_cast<std::size_t>(x);
-  return i + 1 < v.size() ? v[i] + (x - static_cast<double>(i)) * (v[i + 1] - v[i]) : v.back();
-}
+using eval::quantile;
 
 // The outfit of bench scaling (inner 5.0 x 4.0, outer 6.25 x 4.75 scene units) at ~`target`
 // garment vertices, patches of 3x3 grid quads.

@@ -1,8 +1,9 @@
 // `layersnet eval --checkpoint C [--checkpoint C2 ...] [--split test] [--frames N] [--out DIR]`:
 // rollouts of every checkpoint and of the two baselines (constant velocity, follow the body)
-// over a split, Euclidean error and collision rates (with the ground truth's own rates as the
-// floor), speed at 1 and 2 threads against Blender's recorded time; writes eval.json,
-// eval.md, curve.png, speed.png to --out and prints the summary table. See eval/README.md.
+// over a split, Euclidean error, collision rates and edge strain (with the ground truth's own
+// values as the floor), speed at 1 and 2 threads against Blender's recorded time; writes
+// eval.json, eval.md, curve.png, speed.png, strain.png to --out and prints the summary table.
+// See eval/README.md.
 #include "autodiff/bf16_gemm.h"
 #include "cli/command_registry.h"
 #include "dataset/manifest.h"
@@ -32,6 +33,7 @@ struct EvalCliOptions {
   std::string split;
   int frames = -1;
   int start_frame = -1;
+  std::string start;  // ramp | fixed; empty: ramp, or fixed when --start-frame is given
   int max_sequences = 0;
   int speed_frames = 10;
   int threads = 0;
@@ -84,6 +86,7 @@ int run_eval(EvalCliOptions o) {
   eo.split = o.split.empty() ? base.eval.split : o.split;
   eo.frames = o.frames > 0 ? o.frames : base.eval.frames;
   eo.start_frame = o.start_frame >= 2 ? o.start_frame : std::max(2, base.data.first_frame);
+  eo.start_after_ramp = o.start.empty() ? o.start_frame < 0 : o.start == "ramp";
   eo.max_sequences = o.max_sequences;
 
   // Every model once per listed precision (a list shows the bf16 speed/accuracy trade in one table).
@@ -123,10 +126,10 @@ int run_eval(EvalCliOptions o) {
 
   if (o.threads > 0) omp_set_num_threads(o.threads);  // the evaluation rollouts (speed sets its own)
   Eigen::setNbThreads(1);  // the ops own the threads (as bench model); nested GEMM threads only contend
-  std::printf("eval: %s split '%s', %zu method(s) + 2 baselines, up to %d frames from input frame %d, %d thread(s), "
+  std::printf("eval: %s split '%s', %zu method(s) + 2 baselines, up to %d frames from %s, %d thread(s), "
               "products %s%s%s\n",
-              root.c_str(), eo.split.c_str(), owned.size() - 3, eo.frames, eo.start_frame, omp_get_max_threads(),
-              o.precision.c_str(), any_bf16 ? ", bf16 kernel " : "", any_bf16 ? ad::bf16_kernel_name() : "");
+              root.c_str(), eo.split.c_str(), owned.size() - 3, eo.frames, eval::start_description(eo).c_str(),
+              omp_get_max_threads(), o.precision.c_str(), any_bf16 ? ", bf16 kernel " : "", any_bf16 ? ad::bf16_kernel_name() : "");
   std::vector<eval::MethodResult> results = eval::evaluate(manifest, predictors, eo, true);
   for (size_t p = 0; p < results.size(); ++p) {
     results[p].kind = kinds[p];
@@ -139,11 +142,12 @@ int run_eval(EvalCliOptions o) {
   // Speed on the first sequence of the split, 1 and 2 threads.
   const std::string speed_id = results[0].sequences[0].id;
   const dataset::Sequence speed_seq = dataset::read_sequence(manifest.sequence_path(speed_id));
+  const int speed_t0 = results[0].sequences[0].first_frame - 1;  // the evaluation's own start
   ctx.speed_sequence = speed_id;
-  ctx.speed_frames = std::min(o.speed_frames, speed_seq.info.num_frames - 1 - eo.start_frame);
+  ctx.speed_frames = std::min(o.speed_frames, speed_seq.info.num_frames - 1 - speed_t0);
   for (size_t p = 0; p + 1 < predictors.size(); ++p) {
-    results[p].ms_per_frame_1thread = eval::median_ms_per_frame(*predictors[p], speed_seq, eo.start_frame, ctx.speed_frames, 1);
-    results[p].ms_per_frame_2threads = eval::median_ms_per_frame(*predictors[p], speed_seq, eo.start_frame, ctx.speed_frames, 2);
+    results[p].ms_per_frame_1thread = eval::median_ms_per_frame(*predictors[p], speed_seq, speed_t0, ctx.speed_frames, 1);
+    results[p].ms_per_frame_2threads = eval::median_ms_per_frame(*predictors[p], speed_seq, speed_t0, ctx.speed_frames, 2);
   }
   double blender_sum = 0;
   int blender_n = 0;
@@ -177,7 +181,14 @@ LAYERSNET_COMMAND(eval, "Roll out checkpoints and baselines over a split; error,
                     sub.add_option("--dataset", o->dataset, "data set folder (default: the first checkpoint's data.dataset)");
                     sub.add_option("--split", o->split, "train | val | test (default: the config's eval.split)");
                     sub.add_option("--frames", o->frames, "predicted frames per sequence (default: eval.frames)");
-                    sub.add_option("--start-frame", o->start_frame, "input frame t0 of the first prediction (default: data.first_frame)");
+                    sub.add_option("--start", o->start,
+                                   "where rollouts start: ramp = per sequence, the first predicted frame is the "
+                                   "file's rest_frames + ramp_frames (files without them: as fixed); fixed = input "
+                                   "frame t0 = --start-frame (default: ramp, or fixed when --start-frame is given)")
+                        ->check(CLI::IsMember({"ramp", "fixed"}));
+                    sub.add_option("--start-frame", o->start_frame,
+                                   "input frame t0 of a fixed start, and of --start ramp for files without the ramp "
+                                   "attributes (default: data.first_frame)");
                     sub.add_option("--max-sequences", o->max_sequences, "evaluate only the first N sequences (0 = all)");
                     sub.add_option("--speed-frames", o->speed_frames, "frames of the 1- and 2-thread speed rollouts");
                     sub.add_option("--tether", o->tethers,

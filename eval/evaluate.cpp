@@ -2,6 +2,7 @@
 #include "eval/evaluate.h"
 
 #include "dataset/h5.h"
+#include "eval/stress.h"
 
 #include <nlohmann/json.hpp>
 #include <omp.h>
@@ -11,6 +12,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <sstream>
 
 namespace layersnet::eval {
@@ -50,10 +52,21 @@ SequenceResult score_rollout(const dataset::Sequence& seq, const Rollout& r, con
   s.garment_error.assign(L.num_garments(), 0.0);
   const double n = static_cast<double>(r.frames.size());
   double inner = 0, outer = 0, h = 0, lo = 0, la = 0, ln = 0;
+  const GarmentEdges edges = garment_edges(seq);
+  std::vector<double> strains;  // every edge of every frame, for the sequence's p99
+  bool finite = true;
   for (size_t k = 0; k < r.frames.size(); ++k) {
     const int t = r.first_frame + static_cast<int>(k);
     const Points truth = garments_at(seq, t);
     const FrameMetrics m = frame_metrics(L, r.frames[k], truth, seq.body_at(t), seq.info.body_faces, o);
+    if (r.frames[k].allFinite()) {
+      const std::vector<double> e = edge_strains(edges, r.frames[k]);
+      s.strain_p99_curve.push_back(quantile(e, 0.99));
+      strains.insert(strains.end(), e.begin(), e.end());
+    } else {  // NaN would break the sort; the sequence counts as diverged
+      s.strain_p99_curve.push_back(std::numeric_limits<double>::quiet_NaN());
+      finite = false;
+    }
     s.error_curve.push_back(m.error);
     s.error += m.error / n;
     for (int g = 0; g < L.num_garments(); ++g) s.garment_error[g] += m.garment_error[g] / n;
@@ -66,6 +79,12 @@ SequenceResult score_rollout(const dataset::Sequence& seq, const Rollout& r, con
   }
   s.inner_error = inner;
   s.h_rate = h;
+  if (finite) {
+    s.strain_mean = mean_std(strains).mean;
+    s.strain_p99 = quantile(std::move(strains), 0.99);
+  } else {
+    s.strain_mean = s.strain_p99 = std::numeric_limits<double>::quiet_NaN();
+  }
   if (L.layered()) {
     s.outer_error = outer;
     s.l_rate_outer = lo;
@@ -73,6 +92,13 @@ SequenceResult score_rollout(const dataset::Sequence& seq, const Rollout& r, con
     s.l_rate_outer_near = ln;
   }
   return s;
+}
+
+RolloutStart rollout_start(const std::string& sequence_path, const EvalOptions& o) {
+  if (!o.start_after_ramp) return {o.start_frame, false};
+  const int settled = settled_frame(sequence_path, -1);
+  if (settled < 0) return {o.start_frame, false};  // not from `layersnet generate`
+  return {std::max(2, settled - 1), true};           // t0 + 1 = first settled frame
 }
 
 std::vector<MethodResult> evaluate(const dataset::DatasetManifest& manifest, std::vector<Predictor*> predictors,
@@ -87,18 +113,22 @@ std::vector<MethodResult> evaluate(const dataset::DatasetManifest& manifest, std
   for (size_t p = 0; p < predictors.size(); ++p) results[p].name = predictors[p]->name();
   for (const std::string& id : ids) {
     const dataset::Sequence seq = dataset::read_sequence(manifest.sequence_path(id));
+    const RolloutStart start = rollout_start(manifest.sequence_path(id), o);
     CollisionOptions co;
     co.max_body_distance = o.max_body_distance_m * seq.info.scale;
     co.max_layer_distance = o.max_layer_distance_m * seq.info.scale;
     for (size_t p = 0; p < predictors.size(); ++p) {
-      const Rollout r = rollout(*predictors[p], seq, o.start_frame, o.frames);
+      const Rollout r = rollout(*predictors[p], seq, start.input_frame, o.frames);
       SequenceResult s = score_rollout(seq, r, co);
       s.id = id;
+      s.after_ramp = start.after_ramp;
       if (auto it = subsets.find(id); it != subsets.end()) s.subsets = it->second;
       if (progress)
-        std::printf("  %-10s %-22s %3zu frames  error %8.2f mm  H %5.2f %%  L %s\n", id.c_str(),
-                    predictors[p]->name().c_str(), r.frames.size(), s.error * s.mm(), 100 * s.h_rate,
-                    s.l_rate_outer < 0 ? "  -" : (std::to_string(100 * s.l_rate_outer).substr(0, 5) + " %").c_str());
+        std::printf("  %-10s %-22s %3zu frames from %3d  error %8.2f mm  H %5.2f %%  L %s  strain p99 %6.2f %%\n",
+                    id.c_str(), predictors[p]->name().c_str(), r.frames.size(), r.first_frame, s.error * s.mm(),
+                    100 * s.h_rate,
+                    s.l_rate_outer < 0 ? "  -" : (std::to_string(100 * s.l_rate_outer).substr(0, 5) + " %").c_str(),
+                    100 * s.strain_p99);
       results[p].sequences.push_back(std::move(s));
     }
     if (progress) std::fflush(stdout);
@@ -124,9 +154,9 @@ double median_ms_per_frame(Predictor& predictor, const dataset::Sequence& seq, i
 
 Summary summarise(const MethodResult& m) {
   Summary s;
-  std::vector<double> err, inner, outer, h, lo, la, ln, steps;
+  std::vector<double> err, inner, outer, h, lo, la, ln, strain_mean, strain_p99, steps;
   std::map<std::string, std::vector<double>> by_type, by_subset;
-  std::vector<std::vector<double>> curve;
+  std::vector<std::vector<double>> curve, strain_curve;
   for (const SequenceResult& r : m.sequences) {
     if (r.diverged_at >= 0 || !std::isfinite(r.error)) {
       ++s.diverged;
@@ -136,6 +166,8 @@ Summary summarise(const MethodResult& m) {
     err.push_back(r.error * mm);
     inner.push_back(r.inner_error * mm);
     h.push_back(100 * r.h_rate);
+    strain_mean.push_back(100 * r.strain_mean);
+    strain_p99.push_back(100 * r.strain_p99);
     if (r.outer_error >= 0) {
       outer.push_back(r.outer_error * mm);
       lo.push_back(100 * r.l_rate_outer);
@@ -152,6 +184,10 @@ Summary summarise(const MethodResult& m) {
       if (curve.size() <= k) curve.resize(k + 1);
       curve[k].push_back(r.error_curve[k] * mm);
     }
+    for (size_t k = 0; k < r.strain_p99_curve.size(); ++k) {
+      if (strain_curve.size() <= k) strain_curve.resize(k + 1);
+      strain_curve[k].push_back(100 * r.strain_p99_curve[k]);
+    }
     steps.insert(steps.end(), r.step_ms.begin(), r.step_ms.end());
   }
   s.error_mm = mean_std(err);
@@ -161,9 +197,12 @@ Summary summarise(const MethodResult& m) {
   s.l_outer_percent = mean_std(lo);
   s.l_all_percent = mean_std(la);
   s.l_near_percent = mean_std(ln);
+  s.strain_mean_percent = mean_std(strain_mean);
+  s.strain_p99_percent = mean_std(strain_p99);
   for (const auto& [k, v] : by_type) s.by_type_mm[k] = mean_std(v);
   for (const auto& [k, v] : by_subset) s.by_subset_mm[k] = mean_std(v);
   for (const auto& v : curve) s.curve_mm.push_back(mean_std(v).mean);
+  for (const auto& v : strain_curve) s.strain_p99_curve_percent.push_back(mean_std(v).mean);
   if (!steps.empty()) {
     std::nth_element(steps.begin(), steps.begin() + static_cast<std::ptrdiff_t>(steps.size() / 2), steps.end());
     s.median_step_ms = steps[steps.size() / 2];

@@ -10,7 +10,11 @@
 //   summary   mean ± std (population) over sequences.
 // Millimetres: scene units / scale · 1000, per sequence (its file's `scale`), before the
 // summary. Collision rates are aggregated the same way (per frame -> per sequence -> mean ±
-// std), in percent. Layer metrics only over sequences with >= 2 garments.
+// std), in percent. Layer metrics only over sequences with >= 2 garments. Edge strain
+// |length / rest length − 1| (every garment edge once, rest lengths from the file's rest shapes,
+// eval::garment_edges): per sequence the mean and 99th percentile over all edges x rollout
+// frames (a ratio), summary mean ± std over sequences in percent; also for the ground truth,
+// whose strain is the simulator's own.
 #include "dataset/manifest.h"
 #include "eval/metrics.h"
 #include "eval/rollout.h"
@@ -27,6 +31,7 @@ struct SequenceResult {
   std::vector<std::string> garment_types;  // (G,) layer order
   double scale = 10;                       // scene units per metre
   int first_frame = 0;                     // first predicted frame
+  bool after_ramp = false;                 // first_frame from the file's rest_frames + ramp_frames
   // Scene units, means over the rollout's frames:
   double error = 0;
   std::vector<double> error_curve;    // (n,) per rollout frame
@@ -34,6 +39,9 @@ struct SequenceResult {
   double inner_error = 0, outer_error = -1;
   // Rates in [0, 1], means over frames (-1: no layers):
   double h_rate = 0, l_rate_outer = -1, l_rate_all = -1, l_rate_outer_near = -1;
+  // Edge strain (ratio) over all edges x rollout frames; NaN once a prediction is non-finite:
+  double strain_mean = 0, strain_p99 = 0;
+  std::vector<double> strain_p99_curve;  // (n,) over each rollout frame's edges
   std::vector<double> step_ms;  // (n,)
   int diverged_at = -1;         // first rollout frame with a non-finite prediction, -1 = none
   double mm() const { return 1000.0 / scale; }  // millimetres per scene unit
@@ -50,6 +58,10 @@ struct MethodResult {
 struct EvalOptions {
   std::string split = "test";
   int frames = 36;          // predicted frames per sequence (clamped to the sequence)
+  // Rollout start. After the ramp: per sequence, the first predicted frame is the file's
+  // rest_frames + ramp_frames (the body's ramp from the rest pose into the clip is not
+  // motion to predict); start_frame for files without them. Otherwise t0 = start_frame.
+  bool start_after_ramp = true;
   int start_frame = 2;      // input frame t0 of the first prediction (>= 2)
   int max_sequences = 0;    // 0 = every sequence of the split
   double max_body_distance_m = 0.5;   // H-collision distance limit in metres (official 5.0 units at scale 10)
@@ -63,6 +75,14 @@ std::map<std::string, std::vector<std::string>> read_subsets(const std::string& 
 // Blender's seconds per frame recorded at generation (root attribute q_blender_s_per_frame),
 // or -1 when the file has none.
 double blender_seconds_per_frame(const std::string& sequence_path);
+
+// The input frame t0 of a sequence's rollouts under `options` (see EvalOptions), and whether
+// it came from the file's ramp attributes.
+struct RolloutStart {
+  int input_frame = 2;
+  bool after_ramp = false;
+};
+RolloutStart rollout_start(const std::string& sequence_path, const EvalOptions& options);
 
 // Predicts every sequence with every predictor. The same frames, metrics and sequences for all.
 // progress: print one line per sequence and method to stdout.
@@ -89,9 +109,11 @@ double median_ms_per_frame(Predictor& predictor, const dataset::Sequence& seq, i
 struct Summary {
   MeanStd error_mm, inner_mm, outer_mm;
   MeanStd h_percent, l_outer_percent, l_all_percent, l_near_percent;
+  MeanStd strain_mean_percent, strain_p99_percent;  // edge strain × 100
   std::map<std::string, MeanStd> by_type_mm;    // garment type -> over sequences holding it
   std::map<std::string, MeanStd> by_subset_mm;  // T, T+W, L, L+W
   std::vector<double> curve_mm;                 // mean over sequences per rollout frame
+  std::vector<double> strain_p99_curve_percent; // the same of the per-frame strain p99
   double median_step_ms = 0;                    // over every step of every sequence
   int diverged = 0;  // sequences with a non-finite prediction: left out of every number above
 };

@@ -3,6 +3,7 @@
 
 #include "dataset/neighbours.h"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 
@@ -139,6 +140,14 @@ MeanStd mean_std(const std::vector<double>& values) {
   for (double v : values) ss += (v - r.mean) * (v - r.mean);
   r.std = std::sqrt(ss / static_cast<double>(values.size()));
   return r;
+}
+
+double quantile(std::vector<double> v, double q) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  const double x = q * static_cast<double>(v.size() - 1);
+  const std::size_t i = static_cast<std::size_t>(x);
+  return i + 1 < v.size() ? v[i] + (x - static_cast<double>(i)) * (v[i + 1] - v[i]) : v.back();
 }
 
 }  // namespace layersnet::eval

@@ -101,4 +101,8 @@ struct MeanStd {
 };
 MeanStd mean_std(const std::vector<double>& values);
 
+// q-quantile (q in [0, 1]) by linear interpolation between the sorted values (numpy's
+// default percentile); 0 for no values. Values must not hold NaN.
+double quantile(std::vector<double> values, double q);
+
 }  // namespace layersnet::eval

@@ -35,13 +35,16 @@ void write_text(const std::filesystem::path& p, const std::string& text) {
   if (!out) throw std::runtime_error(p.string() + ": cannot be written (check the --out folder's permissions)");
 }
 
-std::string curve_data(const std::vector<MethodResult>& methods) {
-  // Columns: frame, then one per method (mm); blank for methods whose rollout is shorter.
-  std::vector<Summary> sums;
+// A per-rollout-frame curve of the summaries (curve_mm, strain_p99_curve_percent).
+using SummaryCurve = std::vector<double> Summary::*;
+
+std::string curve_data(const std::vector<MethodResult>& methods, SummaryCurve curve) {
+  // Columns: frame, then one per method; blank for methods whose rollout is shorter.
+  std::vector<std::vector<double>> sums;
   size_t n = 0;
   for (const auto& m : methods) {
-    sums.push_back(summarise(m));
-    n = std::max(n, sums.back().curve_mm.size());
+    sums.push_back(summarise(m).*curve);
+    n = std::max(n, sums.back().size());
   }
   std::ostringstream o;
   o << "frame";  // header row (gnuplot columnhead), not a comment
@@ -49,7 +52,7 @@ std::string curve_data(const std::vector<MethodResult>& methods) {
   o << "\n";
   for (size_t k = 0; k < n; ++k) {
     o << k + 1;
-    for (const auto& s : sums) o << "\t" << (k < s.curve_mm.size() ? fmt("%.6g", s.curve_mm[k]) : "NaN");
+    for (const auto& s : sums) o << "\t" << (k < s.size() ? fmt("%.6g", s[k]) : "NaN");
     o << "\n";
   }
   return o.str();
@@ -57,7 +60,8 @@ std::string curve_data(const std::vector<MethodResult>& methods) {
 
 bool run_gnuplot(const std::filesystem::path& dir, const std::vector<MethodResult>& methods) {
   if (std::system("command -v gnuplot >/dev/null 2>&1") != 0) return false;
-  write_text(dir / "curve.dat", curve_data(methods));
+  write_text(dir / "curve.dat", curve_data(methods, &Summary::curve_mm));
+  write_text(dir / "strain.dat", curve_data(methods, &Summary::strain_p99_curve_percent));
   std::ostringstream gp;
   gp << "set terminal png size 900,520\nset output '" << (dir / "curve.png").string() << "'\n"
      << "set title 'Euclidean error over the rollout'\nset xlabel 'predicted frame'\nset ylabel 'error (mm)'\n"
@@ -69,6 +73,13 @@ bool run_gnuplot(const std::filesystem::path& dir, const std::vector<MethodResul
        << " with linespoints title columnhead(" << m + 2 << ")";
     first = false;
   }
+  gp << "\n";
+  // Strain: every method, the ground truth too (its strain is the simulator's own).
+  gp << "set output '" << (dir / "strain.png").string() << "'\nset title 'Edge strain over the rollout (mean over "
+     << "sequences)'\nset ylabel 'p99 of |edge length / rest length - 1| (%)'\nplot ";
+  for (size_t m = 0; m < methods.size(); ++m)
+    gp << (m ? ", " : "") << "'" << (dir / "strain.dat").string() << "' using 1:" << m + 2
+       << " with linespoints title columnhead(" << m + 2 << ") noenhanced";  // names hold '_'
   gp << "\n";
   // Error vs speed: one point per method that has a measured speed.
   std::ostringstream sp;
@@ -96,26 +107,37 @@ std::vector<std::string> all_types(const std::vector<MethodResult>& methods) {
 
 }  // namespace
 
+std::string start_description(const EvalOptions& o) {
+  const std::string fixed = "input frame " + std::to_string(o.start_frame);
+  return o.start_after_ramp ? "input frame rest_frames + ramp_frames - 1 of each file, the first predicted frame "
+                              "following the generator's ramp (" + fixed + " for files without them)"
+                            : fixed;
+}
+
 std::string summary_table(const std::vector<MethodResult>& methods, const ReportContext& c) {
   std::ostringstream o;
   char line[512];
-  std::snprintf(line, sizeof line, "%-28s %18s %18s %18s %14s %14s %14s %9s %9s\n", "method", "error mm", "inner mm",
-                "outer mm", "H-coll %", "L-coll %", "L-near %", "ms/f 1t", "ms/f 2t");
-  o << line << std::string(149, '-') << "\n";
+  std::snprintf(line, sizeof line, "%-28s %18s %18s %18s %14s %14s %14s %16s %16s %9s %9s\n", "method", "error mm",
+                "inner mm", "outer mm", "H-coll %", "L-coll %", "L-near %", "strain %", "strain p99 %", "ms/f 1t",
+                "ms/f 2t");
+  o << line << std::string(183, '-') << "\n";
   for (const auto& m : methods) {
     const Summary s = summarise(m);
-    std::snprintf(line, sizeof line, "%-28s %18s %18s %18s %14s %14s %14s %9s %9s\n", m.name.substr(0, 28).c_str(),
-                  pm(s.error_mm).c_str(), pm(s.inner_mm).c_str(), pm(s.outer_mm).c_str(), pm(s.h_percent, "%.2f").c_str(),
-                  pm(s.l_outer_percent, "%.2f").c_str(), pm(s.l_near_percent, "%.2f").c_str(),
+    std::snprintf(line, sizeof line, "%-28s %18s %18s %18s %14s %14s %14s %16s %16s %9s %9s\n",
+                  m.name.substr(0, 28).c_str(), pm(s.error_mm).c_str(), pm(s.inner_mm).c_str(), pm(s.outer_mm).c_str(),
+                  pm(s.h_percent, "%.2f").c_str(), pm(s.l_outer_percent, "%.2f").c_str(),
+                  pm(s.l_near_percent, "%.2f").c_str(), pm(s.strain_mean_percent, "%.2f").c_str(),
+                  pm(s.strain_p99_percent, "%.2f").c_str(),
                   m.ms_per_frame_1thread > 0 ? fmt("%.3g", m.ms_per_frame_1thread).c_str() : "–",
                   m.ms_per_frame_2threads > 0 ? fmt("%.3g", m.ms_per_frame_2threads).c_str() : "–");
     o << line;
     if (s.diverged) o << "    (" << s.diverged << " diverged sequence(s) left out: non-finite prediction)\n";
   }
   o << "(" << (methods.empty() ? 0 : methods[0].sequences.size()) << " " << c.options.split << " sequences, up to "
-    << c.options.frames << " predicted frames from input frame " << c.options.start_frame
+    << c.options.frames << " predicted frames from " << start_description(c.options)
     << "; L-coll = share of outer-layer vertices, L-near = only those within " << c.options.max_layer_distance_m
-    << " m of the inner layer";
+    << " m of the inner layer; strain = |edge length / rest length - 1| in %, mean and 99th percentile over "
+       "edges x frames";
   if (c.blender_s_per_frame > 0) o << "; Blender " << fmt("%.3f", c.blender_s_per_frame) << " s/frame";
   o << ")\n";
   return o.str();
@@ -126,6 +148,7 @@ std::string report_json(const std::vector<MethodResult>& methods, const ReportCo
   j["dataset"] = c.dataset;
   j["split"] = c.options.split;
   j["frames"] = c.options.frames;
+  j["start"] = c.options.start_after_ramp ? "ramp" : "fixed";  // per sequence: first_frame, input_frame
   j["start_frame"] = c.options.start_frame;
   j["h_collision_max_distance_m"] = c.options.max_body_distance_m;
   j["l_collision_near_max_distance_m"] = c.options.max_layer_distance_m;
@@ -133,7 +156,10 @@ std::string report_json(const std::vector<MethodResult>& methods, const ReportCo
   j["speed"] = {{"sequence", c.speed_sequence}, {"frames", c.speed_frames}, {"load_average_1min", c.load_average}};
   j["units"] = "error_*_mm: millimetres (scene units / scale * 1000); error_units: scene units; rates in [0, 1], "
                "*_percent in percent; l_rate_outer = colliding / outer vertices, l_rate_all = colliding / all garment "
-               "vertices (official aggregate)";
+               "vertices (official aggregate); strain_*: |edge length / rest length - 1| over every garment edge and rollout "
+               "frame, a ratio per sequence (mean, p99 = 99th percentile by linear interpolation; strain_p99_curve: "
+               "per frame), *_percent in percent over sequences; start ramp: first_frame = the file's rest_frames + "
+               "ramp_frames, fixed: input_frame = start_frame";
   j["methods"] = json::array();
   for (const auto& m : methods) {
     const Summary s = summarise(m);
@@ -146,7 +172,10 @@ std::string report_json(const std::vector<MethodResult>& methods, const ReportCo
                {"h_collision_percent", ms_json(s.h_percent)},
                {"l_collision_outer_percent", ms_json(s.l_outer_percent)},
                {"l_collision_all_percent", ms_json(s.l_all_percent)},
-               {"l_collision_near_percent", ms_json(s.l_near_percent)}, {"curve_mm", s.curve_mm}};
+               {"l_collision_near_percent", ms_json(s.l_near_percent)}, {"curve_mm", s.curve_mm},
+               {"strain_mean_percent", ms_json(s.strain_mean_percent)},
+               {"strain_p99_percent", ms_json(s.strain_p99_percent)},
+               {"strain_p99_curve_percent", s.strain_p99_curve_percent}};
     for (const auto& [k, v] : s.by_type_mm) js["by_type_mm"][k] = ms_json(v);
     for (const auto& [k, v] : s.by_subset_mm) js["by_subset_mm"][k] = ms_json(v);
     jm["summary"] = js;
@@ -156,12 +185,15 @@ std::string report_json(const std::vector<MethodResult>& methods, const ReportCo
       for (double e : r.error_curve) curve.push_back(e * r.mm());
       for (double e : r.garment_error) garments.push_back(e * r.mm());
       jm["sequences"].push_back({{"id", r.id}, {"subsets", r.subsets}, {"garment_types", r.garment_types},
-                                 {"scale", r.scale}, {"first_frame", r.first_frame}, {"error_units", r.error},
+                                 {"scale", r.scale}, {"first_frame", r.first_frame},
+                                 {"input_frame", r.first_frame - 1}, {"start", r.after_ramp ? "ramp" : "fixed"},
+                                 {"error_units", r.error},
                                  {"error_mm", r.error * r.mm()}, {"error_curve_mm", curve},
                                  {"garment_error_mm", garments}, {"inner_mm", r.inner_error * r.mm()},
                                  {"outer_mm", r.outer_error < 0 ? -1.0 : r.outer_error * r.mm()},
                                  {"h_rate", r.h_rate}, {"l_rate_outer", r.l_rate_outer}, {"l_rate_all", r.l_rate_all},
-                                 {"l_rate_outer_near", r.l_rate_outer_near},
+                                 {"l_rate_outer_near", r.l_rate_outer_near}, {"strain_mean", r.strain_mean},
+                                 {"strain_p99", r.strain_p99}, {"strain_p99_curve", r.strain_p99_curve},
                                  {"step_ms", r.step_ms}, {"diverged_at", r.diverged_at}});
     }
     j["methods"].push_back(jm);
@@ -173,7 +205,8 @@ std::string report_markdown(const std::vector<MethodResult>& methods, const Repo
   std::ostringstream o;
   const size_t n_seq = methods.empty() ? 0 : methods[0].sequences.size();
   o << "# Evaluation: " << c.dataset << ", split `" << c.options.split << "`\n\n"
-    << n_seq << " sequences; rollouts from the ground truth at input frame " << c.options.start_frame << " for up to "
+    << n_seq << " sequences; rollouts from the ground truth at " << start_description(c.options)
+    << " (each sequence's first predicted frame: `first_frame` in eval.json) for up to "
     << c.options.frames << " predicted frames (body and wind from the data every frame). Errors in mm "
     << "(scene units / `scale` · 1000): mean over a frame's vertices, then over the sequence's frames, then "
     << "mean ± std over sequences. Collision rates in % aggregated the same way; H-collision over all garment "
@@ -202,6 +235,17 @@ std::string report_markdown(const std::vector<MethodResult>& methods, const Repo
     << ". Machine load (1-minute average) after the run: " << fmt("%.1f", c.load_average)
     << " — on a loaded machine 2 threads can be slower than 1. The ground-truth row is the floor of the "
        "collision rates.\n\n";
+  o << "## Edge strain, % (every method, the ground truth too)\n\n"
+       "Strain = |edge length / rest length − 1| over every garment edge (each once; rest length from the file's rest "
+       "shape) and every rollout frame: per sequence the mean and the 99th percentile, then mean ± std over "
+       "sequences. The ground truth's strain is the simulator's own.\n\n![strain p99 over frames](strain.png)\n\n"
+       "| method | strain % (mean) | strain % (p99) |\n|---|---|---|\n";
+  for (const auto& m : methods) {
+    const Summary s = summarise(m);
+    o << "| " << m.name << " | " << pm(s.strain_mean_percent, "%.2f") << " | " << pm(s.strain_p99_percent, "%.2f")
+      << " |\n";
+  }
+  o << "\n";
   const auto types = all_types(methods);
   o << "## Per garment type (paper Table 2 layout), mm (sequences)\n\n| method |";
   for (const auto& t : types) o << " " << t << " |";
@@ -267,6 +311,7 @@ std::vector<std::string> write_report(const std::string& dir_name, const std::ve
   if (plots) {
     written.push_back((dir / "curve.png").string());
     written.push_back((dir / "speed.png").string());
+    written.push_back((dir / "strain.png").string());
   }
   return written;
 }

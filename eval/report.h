@@ -5,6 +5,7 @@
 //                  per split T / T+W / L / L+W (Table 1), inner vs outer, error over frames
 //   curve.png      error (mm) over the rollout frame, one line per method   (gnuplot)
 //   speed.png      error (mm) against ms per frame                          (gnuplot)
+//   strain.png     edge strain p99 (%) over the rollout frame, every method (gnuplot)
 // and a plain-text summary table for the terminal.
 #include "eval/evaluate.h"
 
@@ -22,13 +23,16 @@ struct ReportContext {
   double load_average = -1;         // 1-minute load average after the run (/proc/loadavg), -1 = unknown
 };
 
-// Plain-text table: one row per method (error mm ± std, inner, outer, H %, L %, ms/frame).
+// Where the rollouts start under `options`, for the reports' prose.
+std::string start_description(const EvalOptions& options);
+
+// Plain-text table: one row per method (error mm ± std, inner, outer, H %, L %, strain %, ms/frame).
 std::string summary_table(const std::vector<MethodResult>& methods, const ReportContext& context);
 
 std::string report_json(const std::vector<MethodResult>& methods, const ReportContext& context);
 std::string report_markdown(const std::vector<MethodResult>& methods, const ReportContext& context);
 
-// Writes eval.json, eval.md and (when gnuplot runs) curve.png, speed.png into `dir`
+// Writes eval.json, eval.md and (when gnuplot runs) curve.png, speed.png, strain.png into `dir`
 // (created). Returns the paths written; a missing gnuplot is reported in eval.md, not thrown.
 std::vector<std::string> write_report(const std::string& dir, const std::vector<MethodResult>& methods,
                                       const ReportContext& context);

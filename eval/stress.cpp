@@ -136,14 +136,17 @@ double speed_factor_for_top_speed(const dataset::Sequence& source, int first, do
   return best_s;
 }
 
-int settled_frame(const std::string& sequence_path) {
+int settled_frame(const std::string& sequence_path, int missing) {
   const dataset::h5::Handle file = dataset::h5::open_file(sequence_path);
   const dataset::h5::Where where{sequence_path, "/"};
   int f = 0;
+  bool found = false;
   for (const char* name : {"rest_frames", "ramp_frames"})
-    if (dataset::h5::has_attr(file.get(), name))
+    if (dataset::h5::has_attr(file.get(), name)) {
       f += static_cast<int>(std::lround(dataset::h5::read_float_attr(file.get(), name, where)));
-  return f;
+      found = true;
+    }
+  return found ? f : missing;
 }
 
 std::vector<double> garment_graph_diameters(const dataset::Sequence& seq) {
@@ -242,6 +245,17 @@ double max_edge_stretch(const GarmentEdges& edges, const Points& x) {
       worst = std::max(worst, (x.row(a) - x.row(b)).cast<double>().norm() / edges.rest[e]);
     }
   return worst;
+}
+
+std::vector<double> edge_strains(const GarmentEdges& edges, const Points& x) {
+  std::vector<double> out;
+  out.reserve(edges.rows.size());
+  for (size_t e = 0; e < edges.rows.size(); ++e)
+    if (edges.rest[e] > 0) {
+      const auto [a, b] = edges.rows[e];
+      out.push_back(std::abs((x.row(a) - x.row(b)).cast<double>().norm() / edges.rest[e] - 1.0));
+    }
+  return out;
 }
 
 std::vector<double> garment_distance_bounds(const dataset::Sequence& seq) {

@@ -61,8 +61,8 @@ double body_top_speed(const dataset::Sequence& source, int first, double speed, 
 double speed_factor_for_top_speed(const dataset::Sequence& source, int first, double multiple, int frames);
 
 // First frame after the generator's rest and ramp: the root attributes rest_frames +
-// ramp_frames that `layersnet generate` writes; 0 when the file has neither.
-int settled_frame(const std::string& sequence_path);
+// ramp_frames that `layersnet generate` writes; `missing` when the file has neither.
+int settled_frame(const std::string& sequence_path, int missing = 0);
 
 // Builds the stress sequence (see above). Throws std::invalid_argument for frames < 4,
 // speed <= 0 or f0 outside [0, T − 2], naming the source file.
@@ -97,6 +97,9 @@ struct GarmentEdges {
 GarmentEdges garment_edges(const dataset::Sequence& seq);
 // max over edges of length / rest length (edges of zero rest length skipped).
 double max_edge_stretch(const GarmentEdges& edges, const Points& x);
+// Strain |length / rest length − 1| of every edge in x (N, 3), in edge order (edges of zero
+// rest length skipped, as above).
+std::vector<double> edge_strains(const GarmentEdges& edges, const Points& x);
 
 // The data's own max over frames first..T−1 and garments of dist / B_g (B_g from frame
 // `first`, as a stress scene starting there uses): how much room the bound leaves real cloth.

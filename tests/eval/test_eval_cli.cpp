@@ -1,5 +1,6 @@
 // `layersnet eval` and `layersnet export` end to end: a freshly initialised tiny model
 // (configs/tiny.toml) in a checkpoint, on a tiny synthetic data set.
+#include "dataset/h5.h"
 #include "dataset/stats.h"
 #include "dataset/synthetic.h"
 #include "eval/render.h"
@@ -89,10 +90,15 @@ TEST_F(EvalCli, EvalWritesReportsAndPrintsTheSummaryTable) {
     ASSERT_EQ(m["sequences"].size(), 2u) << m["name"];
     EXPECT_EQ(m["sequences"][0]["error_curve_mm"].size(), 3u);
     EXPECT_GE(m["summary"]["h_collision_percent"]["mean"].get<double>(), 0.0);
+    EXPECT_GE(m["summary"]["strain_mean_percent"]["mean"].get<double>(), 0.0) << m["name"];
+    EXPECT_EQ(m["summary"]["strain_p99_curve_percent"].size(), 3u) << m["name"];
+    EXPECT_EQ(m["sequences"][0]["strain_p99_curve"].size(), 3u) << m["name"];
   }
   const auto& gt = j["methods"][4];
   EXPECT_EQ(gt["kind"], "ground truth");
   EXPECT_EQ(gt["summary"]["error_mm"]["mean"].get<double>(), 0.0);
+  EXPECT_GT(gt["summary"]["strain_p99_percent"]["mean"].get<double>(), 0.0);  // the synthetic cloth ripples
+  EXPECT_NE(text.find("strain p99 %"), std::string::npos) << text;
   EXPECT_EQ(j["methods"][0]["kind"], "model");
   EXPECT_GT(j["methods"][0]["ms_per_frame_1thread"].get<double>(), 0.0);
   EXPECT_GT(j["methods"][1]["ms_per_frame_2threads"].get<double>(), 0.0);
@@ -102,10 +108,54 @@ TEST_F(EvalCli, EvalWritesReportsAndPrintsTheSummaryTable) {
   const std::string md = slurp(out / "eval.md");
   EXPECT_NE(md.find("Per garment type"), std::string::npos);
   EXPECT_NE(md.find("| T | T+W | L | L+W |"), std::string::npos);
+  EXPECT_NE(md.find("## Edge strain"), std::string::npos);
   if (std::system("command -v gnuplot >/dev/null 2>&1") == 0) {
     EXPECT_TRUE(fs::exists(out / "curve.png"));
     EXPECT_TRUE(fs::exists(out / "speed.png"));
+    EXPECT_TRUE(fs::exists(out / "strain.png"));
   }
+}
+
+TEST_F(EvalCli, StartsAfterTheRampByDefaultOrAtAFixedInputFrame) {
+  // A copy of the data whose first test sequence has the generator's ramp attributes (the
+  // second has none and takes the fixed start, data.first_frame = 2).
+  const fs::path data = root_ / "data_ramp";
+  fs::copy(root_ / "data", data, fs::copy_options::recursive);
+  const dataset::DatasetManifest manifest = dataset::read_manifest(data.string());
+  const std::vector<std::string> ids = manifest.split("test");
+  ASSERT_EQ(ids.size(), 2u);
+  const hid_t f = H5Fopen(manifest.sequence_path(ids[0]).c_str(), H5F_ACC_RDWR, H5P_DEFAULT);
+  ASSERT_GE(f, 0);
+  dataset::h5::write_int_attr(f, "rest_frames", 2);
+  dataset::h5::write_int_attr(f, "ramp_frames", 3);
+  H5Fclose(f);
+  const auto starts = [&](const std::string& flags) {
+    int code = 0;
+    const fs::path out = root_ / "eval_start";
+    const std::string text = run("eval --dataset " + data.string() + " --frames 2 --speed-frames 1 " + flags +
+                                     " --out " + out.string(),
+                                 &code);
+    EXPECT_EQ(code, 0) << text;
+    const auto j = nlohmann::json::parse(slurp(out / "eval.json"));
+    std::vector<std::pair<int, std::string>> first;  // (first predicted frame, start) per sequence
+    for (const auto& m : j["methods"])  // the same start for every method
+      for (size_t i = 0; i < m["sequences"].size(); ++i) {
+        const auto& s = m["sequences"][i];
+        if (first.size() <= i) first.push_back({s["first_frame"].get<int>(), s["start"].get<std::string>()});
+        EXPECT_EQ(s["first_frame"].get<int>(), first[i].first) << m["name"];
+        EXPECT_EQ(s["input_frame"].get<int>(), first[i].first - 1);
+        EXPECT_EQ(s["error_curve_mm"].size(), 2u);
+      }
+    return first;
+  };
+  using Starts = std::vector<std::pair<int, std::string>>;
+  EXPECT_EQ(starts(""), (Starts{{5, "ramp"}, {3, "fixed"}}));  // 2 + 3 = 5
+  EXPECT_EQ(starts("--start ramp --start-frame 4"), (Starts{{5, "ramp"}, {5, "fixed"}}));
+  EXPECT_EQ(starts("--start fixed"), (Starts{{3, "fixed"}, {3, "fixed"}}));
+  EXPECT_EQ(starts("--start-frame 6"), (Starts{{7, "fixed"}, {7, "fixed"}}));
+  int code = 0;
+  const std::string bad = run("eval --dataset " + data.string() + " --start later", &code);
+  EXPECT_NE(code, 0) << bad;
 }
 
 TEST_F(EvalCli, RunDirectoryPicksBestElseTheNewestCheckpoint) {
