@@ -19,6 +19,8 @@ int run_config(const ConfigOptions& o) {
     return 0;
   }
   const layersnet::Config c = layersnet::load_config(o.files, o.overrides);
+  // On stderr: stdout stays the TOML that scripts read.
+  for (const auto& w : layersnet::config_warnings(c)) std::fprintf(stderr, "warning: %s\n", w.c_str());
   std::fputs(layersnet::to_toml(c).c_str(), stdout);
   return 0;
 }

@@ -1,15 +1,22 @@
 // `layersnet inspect DATASET`: what a data set holds — sequences per split, frames, body and
-// garment vertex/face/patch counts, wind segments, statistics. Reads headers only unless
-// --check, which reads every frame and checks every value against the spec.
+// garment vertex/face/patch counts, wind segments, statistics, and how many world edges join
+// the outer garment's patches to the inner garments' (the model's only cross-layer attention
+// besides the body) at the first frame after the generator's ramp. Reads headers and that
+// frame only unless --check, which reads every frame and checks every value against the spec.
 #include "cli/command_registry.h"
 #include "dataset/manifest.h"
 #include "dataset/patches.h"
+#include "dataset/sample.h"
 #include "dataset/sequence.h"
 #include "dataset/stats.h"
 #include "dataset/wind.h"
+#include "train/config.h"
+#include "train/train_data.h"
 
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
+#include <limits>
 #include <set>
 
 namespace {
@@ -19,8 +26,40 @@ struct InspectOptions {
   std::string root;
   bool check = false;
   bool brief = false;
-  float patch_size = kDefaultPatchSize;
+  std::string config;  // model.patch_size, model.world_radius (and the rest of [model]) from here
+  double patch_size = -1, world_radius = -1;  // < 0: from the config (or the code defaults)
 };
+
+// Outer-garment patches and their world edges to inner-garment patches, over sequences.
+struct CrossGarmentTally {
+  int64_t patches = 0, edges = 0, without = 0;
+  int32_t min = std::numeric_limits<int32_t>::max();
+  void add(const std::vector<int32_t>& counts) {
+    for (int32_t c : counts) {
+      ++patches, edges += c, without += c == 0;
+      min = std::min(min, c);
+    }
+  }
+  void print(const char* indent) const {
+    if (patches == 0) {
+      std::printf("%sno outer-garment patches (single-garment sequences)\n", indent);
+      return;
+    }
+    std::printf("%s%ld outer-garment patches: %.3g cross-garment world edges each (min %d), %.1f%% with none\n", indent,
+                static_cast<long>(patches), static_cast<double>(edges) / static_cast<double>(patches), min,
+                100.0 * static_cast<double>(without) / static_cast<double>(patches));
+  }
+};
+
+// The sample training would build at the sequence's first frame after the ramp (t >= 2 as
+// every sample); its world edges depend on positions only, so any statistics do.
+std::vector<int32_t> cross_garment_edges(const SequenceFile& f, const SampleOptions& options, int* frame) {
+  const SequenceInfo& info = f.info();
+  if (info.num_frames < 4) return {};  // too short for any sample
+  *frame = std::clamp(info.settled_frame(), 2, info.num_frames - 2);
+  const FrameWindow w = f.read_frames(*frame - 2, 4);
+  return outer_to_inner_world_edges(build_sample(info, w, *frame, NormalisationStats{}, nullptr, options));
+}
 
 void print_wind(const SequenceInfo& info) {
   const auto segments = wind_segments(info);
@@ -40,6 +79,12 @@ void print_wind(const SequenceInfo& info) {
 }
 
 int run_inspect(const InspectOptions& o) {
+  layersnet::Config config = layersnet::load_config(o.config.empty() ? std::vector<std::string>{}
+                                                                     : std::vector<std::string>{o.config});
+  if (o.patch_size >= 0) config.model.patch_size = o.patch_size;
+  if (o.world_radius >= 0) config.model.world_radius = o.world_radius;
+  const SampleOptions sample_options = layersnet::sample_options_for(config.model);
+  const float patch_size = sample_options.patch_size;
   const DatasetManifest m = read_manifest(o.root);
   std::printf("data set %s: %zu sequences (train %zu, val %zu, test %zu)\nsource: %s\n", o.root.c_str(),
               m.all_ids().size(), m.train.size(), m.val.size(), m.test.size(), m.source.c_str());
@@ -53,6 +98,7 @@ int run_inspect(const InspectOptions& o) {
   }
   int64_t frames = 0, garments = 0, vertices = 0, patches = 0, with_wind = 0;
   std::set<std::string> types;
+  CrossGarmentTally cross_total;
   for (const char* split : {"train", "val", "test"}) {
     for (const auto& id : m.split(split)) {
       const SequenceFile f(m.sequence_path(id));
@@ -66,7 +112,7 @@ int run_inspect(const InspectOptions& o) {
                     static_cast<long>(info.body_faces.rows()), info.body_friction, info.num_garments(),
                     o.check ? ", all values checked" : "");
       for (const auto& g : info.garments) {
-        const PatchStructure p = build_patches(g, o.patch_size);
+        const PatchStructure p = build_patches(g, patch_size);
         ++garments;
         vertices += g.num_vertices;
         patches += p.num_patches;
@@ -80,12 +126,23 @@ int run_inspect(const InspectOptions& o) {
                       g.attributes.self_friction);
       }
       if (!o.brief) print_wind(info);
+      int t = 0;
+      const std::vector<int32_t> cross = cross_garment_edges(f, sample_options, &t);
+      cross_total.add(cross);
+      if (!o.brief && info.num_garments() >= 2) {
+        CrossGarmentTally one;
+        one.add(cross);
+        std::printf("    at frame %d:", t);
+        one.print(" ");
+      }
     }
   }
   std::printf("total: %ld frames, %ld garments (%zu types), %ld garment vertices, %ld patches (size %g), %ld/%zu "
               "sequences with wind\n",
               static_cast<long>(frames), static_cast<long>(garments), types.size(), static_cast<long>(vertices),
-              static_cast<long>(patches), o.patch_size, static_cast<long>(with_wind), m.all_ids().size());
+              static_cast<long>(patches), patch_size, static_cast<long>(with_wind), m.all_ids().size());
+  std::printf("cross-garment world edges (world radius %g, at the first frame after each ramp, else 2):", sample_options.neighbours.world_radius);
+  cross_total.print(" ");
   return 0;
 }
 
@@ -97,6 +154,10 @@ LAYERSNET_COMMAND(inspect, "Summarise a D-LAYERS-H5 data set (sequences, garment
                     sub.add_option("dataset", opts->root, "data-set folder holding dataset.json")->required();
                     sub.add_flag("--check", opts->check, "also read every frame and check all values");
                     sub.add_flag("--brief", opts->brief, "totals only");
-                    sub.add_option("--patch-size", opts->patch_size, "UV patch size (default 0.04)");
+                    sub.add_option("--config,-c", opts->config,
+                                   "take model.patch_size and model.world_radius from this config (resolved, with its includes)");
+                    sub.add_option("--patch-size", opts->patch_size, "UV patch size (default: the config's, else 0.04)");
+                    sub.add_option("--world-radius", opts->world_radius,
+                                   "patch-to-patch world-edge radius, scene units (default: the config's, else 0.4)");
                     return [opts] { return run_inspect(*opts); };
                   });

@@ -157,6 +157,19 @@ TrainingSample build_sample(const SequenceInfo& info, const FrameWindow& w, int 
   return s;
 }
 
+std::vector<int32_t> outer_to_inner_world_edges(const TrainingSample& s) {
+  const SequenceStructure& S = *s.structure;
+  const int G = static_cast<int>(S.garments.size());
+  std::vector<int32_t> counts;
+  if (G < 2) return counts;
+  const int32_t outer_begin = S.patch_offsets[G - 1];
+  for (int32_t p = outer_begin; p < S.patch_offsets[G]; ++p)
+    counts.push_back(static_cast<int32_t>(std::count_if(s.world_edges.begin(p), s.world_edges.end(p), [&](int32_t q) {
+      return S.patch_garment[q] < G - 1;
+    })));
+  return counts;
+}
+
 std::vector<int> sample_frames(int T, const FrameSelection& sel) {
   const int end = sel.max_frames < 0 ? T : std::min(T, sel.start_frame + sel.max_frames);
   std::vector<int> out;

@@ -112,6 +112,10 @@ TrainingSample build_sample(const SequenceInfo& info, const FrameWindow& frames,
                             const NormalisationStats& stats, std::shared_ptr<const SequenceStructure> structure,
                             const SampleOptions& options = {});
 
+// Cross-garment world edges: for each patch of the outer (last) garment, in its patch order,
+// how many of its world edges reach a patch of an inner garment. Empty with one garment.
+std::vector<int32_t> outer_to_inner_world_edges(const TrainingSample& sample);
+
 // Which input frames t of a T-frame sequence give samples.
 struct FrameSelection {
   int start_frame = 0;    // official 60

@@ -106,6 +106,12 @@ void read_root_attributes(hid_t file, SequenceInfo& info) {
       root.fail("attribute 'gravity' (" + std::to_string(g[0]) + ", " + std::to_string(g[1]) + ", " +
                 std::to_string(g[2]) + ") does not point along -" + up + " (up_axis)");
   }
+  for (auto [name, value] : {std::pair<const char*, int*>{"rest_frames", &info.rest_frames}, {"ramp_frames", &info.ramp_frames}})
+    if (h5::has_attr(file, name)) {
+      const double f = h5::read_float_attr(file, name, root);
+      if (!(f >= 0 && f <= INT32_MAX)) root.fail(std::string("attribute '") + name + "' must be >= 0, is " + std::to_string(f));
+      *value = static_cast<int>(std::lround(f));
+    }
 }
 
 void read_body(hid_t file, SequenceInfo& info) {

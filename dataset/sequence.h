@@ -71,7 +71,13 @@ struct SequenceInfo {
   bool has_wind = false;            // /wind present
   Quats wind_rotation;              // (T, 4) unit quaternions (w, x, y, z); 0 rows without wind
   Eigen::VectorXf wind_strength;    // (T,) 0 = no wind; empty without wind
+  // Optional root attrs of `layersnet generate`: frames of rest pose, then of blending into the
+  // motion (0 when absent).
+  int rest_frames = 0;
+  int ramp_frames = 0;
 
+  // First frame after the rest pose and the ramp: where the motion proper starts.
+  int settled_frame() const { return rest_frames + ramp_frames; }
   int num_garments() const { return static_cast<int>(garments.size()); }
   int64_t total_garment_vertices() const;
   // Bytes of per-frame positions (body + garments) of one frame in memory.

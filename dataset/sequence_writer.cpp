@@ -30,6 +30,7 @@ void validate_sequence(const Sequence& seq, const std::string& file) {
   if (T < 3) fail("/body/vertices", "T = " + std::to_string(T) + " frames, must be >= 3");
   if (!(s.fps > 0) || !(s.scale > 0) || !s.gravity.allFinite()) fail("/", "fps, scale must be > 0, gravity finite");
   if (s.up_axis != 'z' && s.up_axis != 'y') fail("/", "up_axis must be 'z' or 'y'");
+  if (s.rest_frames < 0 || s.ramp_frames < 0) fail("/", "rest_frames and ramp_frames must be >= 0");
   if (seq.frames.first != 0 || seq.frames.count != T) fail("/", "the sequence must hold all frames");
   if (s.num_body_vertices <= 0 || seq.frames.body.rows() != static_cast<Eigen::Index>(T) * s.num_body_vertices)
     fail("/body/vertices", "shape does not match (T, B, 3)");
@@ -89,6 +90,8 @@ void write_sequence_contents(hid_t r, const Sequence& seq, const SequenceWriteOp
   h5::write_string_attr(r, "up_axis", std::string(1, s.up_axis));
   h5::write_float_vector_attr(r, "gravity", {s.gravity.x(), s.gravity.y(), s.gravity.z()});
   h5::write_float_attr(r, "scale", s.scale);
+  if (s.rest_frames > 0) h5::write_int_attr(r, "rest_frames", s.rest_frames);
+  if (s.ramp_frames > 0) h5::write_int_attr(r, "ramp_frames", s.ramp_frames);
   const h5::Where wb{path, "/body"};
   h5::Handle body = h5::create_group(r, "body", wb);
   h5::write_floats(body.get(), "vertices", seq.frames.body.data(),

@@ -5,6 +5,7 @@
 #include <Eigen/QR>
 
 #include <cmath>
+#include <cstdlib>
 #include <random>
 #include <sstream>
 
@@ -108,6 +109,13 @@ std::vector<std::string> rotation_map_names(const ModelConfig& c) {
       names.push_back("encoder.layers." + std::to_string(l) + ".attn.rot_mapping." + std::to_string(g) + ".weight");
   names.push_back("decoder.rot_mapping.weight");
   return names;
+}
+
+double orthogonality_floor(const ModelConfig& c) {
+  if (!c.rotation_equivalent || c.orthogonality == "exact") return 0.0;
+  const ModelDims m = model_dims(c);
+  // The shapes register_params gives the maps: (hd, 3) per layer and group, decoder (d, 3k).
+  return static_cast<double>(m.layers * m.groups * std::abs(m.head_dim - 3) + std::abs(m.d - 3 * c.decoder_ret_channels));
 }
 
 template <class T>

@@ -51,6 +51,13 @@ void init_params(ad::ParamStore<T>& params, const ModelConfig& config, uint64_t 
 // Names of the RET maps W (for the orthogonality penalty); empty without RET.
 std::vector<std::string> rotation_map_names(const ModelConfig& config);
 
+// The smallest value the orthogonality penalty Σ_W ‖W Wᵀ − I‖² + ‖Wᵀ W − I‖² can take: Σ_W |d_W − c_W|
+// for W (d_W, c_W), since the larger of W Wᵀ, Wᵀ W has |d_W − c_W| zero eigenvalues (rank
+// min(d_W, c_W)); orthonormal columns, the initialisation, reach it. A constant the optimiser
+// cannot remove, so logs show the excess over it. 0 without a penalty (no RET, or
+// model.orthogonality = "exact").
+double orthogonality_floor(const ModelConfig& config);
+
 // Parameter count of the official layout with these sizes (incl. the dead last-layer
 // tensors; official sizes: 1,018,719).
 int64_t official_parameter_count(const ModelConfig& config);

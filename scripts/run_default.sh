@@ -15,7 +15,7 @@ if has generate; then
 fi
 if [ -f "$data/dataset.json" ]; then
   has prepare && "$bin" prepare "$data"
-  has inspect && "$bin" inspect "$data" --brief --patch-size "$("$bin" config -c configs/default.toml | sed -n 's/^patch_size = //p')"
+  has inspect && "$bin" inspect "$data" --brief --config configs/default.toml
 fi
 if has train && [ -f "$data/stats.h5" ]; then
   if [ -f runs/default/config.toml ]; then

@@ -122,7 +122,7 @@ void write_checkpoint(const std::string& path, const ad::ParamStore<float>& para
       h5::write_string_attr(g.get(), "toml", cp.config_toml);
     }
     write_tensor_group(f, "weights", params, params.values());
-    {
+    if (cp.has_optimizer) {
       h5::Handle adam = h5::create_group(f, "adam", {tmp, "/adam"});
       h5::write_int_attr(adam.get(), "step", cp.state.global_step);
       write_tensor_group(adam.get(), "m", params, params.moment1());
@@ -192,7 +192,11 @@ Checkpoint read_checkpoint(const std::string& path, ad::ParamStore<float>& param
       cp.config_toml = h5::read_string_attr(g.get(), "toml", {path, "/config"});
     }
     read_tensor_group(f, path, "weights", params, params.values());
-    {
+    cp.has_optimizer = h5::has_link(f, "adam");
+    if (!cp.has_optimizer) {
+      std::fill(params.moment1().begin(), params.moment1().end(), 0.0f);
+      std::fill(params.moment2().begin(), params.moment2().end(), 0.0f);
+    } else {
       const h5::Where aw{path, "/adam"};
       h5::Handle adam = h5::open_group(f, "adam", aw);
       cp.state.global_step = h5::read_int_attr(adam.get(), "step", aw);

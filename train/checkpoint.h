@@ -5,7 +5,9 @@
 //   /config           attr  toml: the fully resolved configuration (text)
 //   /weights/<name>   float32 (rows, cols), one per parameter, dotted names
 //                     ("encoder.layers.0.attn.q_proj.weight")
-//   /adam/m/<name>, /adam/v/<name>   float32 (rows, cols): Adam's moments; attr step
+//   /adam/m/<name>, /adam/v/<name>   float32 (rows, cols): Adam's moments; attr step. Absent
+//                     in a packed model (weights only: what `layersnet pack` ships), which
+//                     runs, evaluates and fine-tunes but cannot resume a run
 //   /state            attrs epoch, position (next sample index in the epoch's order),
 //                     global_step, best_val_error, nonfinite_in_row
 //   /state/rng/<name> uint8 (bytes,): the raw state of each named GSL generator
@@ -42,12 +44,14 @@ struct TrainingState {
 };
 
 struct Checkpoint {
+  bool has_optimizer = true;  // false: a packed model (no Adam moments; moments read as 0)
   std::string config_toml;
   TrainingState state;
   std::map<std::string, std::vector<double>> stats;
 };
 
-// Writes params (values and Adam moments) and `checkpoint` atomically to `path`.
+// Writes params (values, and Adam moments when checkpoint.has_optimizer) and `checkpoint`
+// atomically to `path`.
 void write_checkpoint(const std::string& path, const ad::ParamStore<float>& params, const Checkpoint& checkpoint);
 
 // Reads `path` into `params` (whose layout must match: same names and shapes; every

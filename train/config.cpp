@@ -199,7 +199,7 @@ const Schema& schema() {
     k.add("train.epoch_checkpoints", [](Config& c) -> bool& { return c.train.epoch_checkpoints; }, "checkpoint at each epoch end (false: only the last epoch)");
     k.add("train.validate", [](Config& c) -> bool& { return c.train.validate; }, "one-step validation error after each epoch");
     k.add("train.val_samples", [](Config& c) -> int& { return c.train.val_samples; }, "validation samples, evenly spaced (0 = all)", {0, 1e9, {}});
-    k.add("train.val_rollout_frames", [](Config& c) -> int& { return c.train.val_rollout_frames; }, "validate by a self-fed rollout of this many frames per val sequence (0 = one-step error)", {0, 1e6, {}});
+    k.add("train.val_rollout_frames", [](Config& c) -> int& { return c.train.val_rollout_frames; }, "validate by a self-fed rollout of up to this many frames per val sequence, predicting from the end of the file's ramp if it has one (0 = one-step error)", {0, 1e6, {}});
     k.add("train.max_steps", [](Config& c) -> int& { return c.train.max_steps; }, "stop after this many updates (0 = no limit)", {0, 1e9, {}});
     k.add("train.max_nonfinite_in_row", [](Config& c) -> int& { return c.train.max_nonfinite_in_row; }, "stop after this many non-finite steps in a row", positive);
     k.add("train.log_every", [](Config& c) -> int& { return c.train.log_every; }, "steps between progress lines", positive);
@@ -315,6 +315,7 @@ Config parse_config_text(const std::string& toml_text, const std::string& origin
 
 void apply_saved_config_defaults(Config& config, const std::string& saved_toml_text) {
   if (saved_toml_text.find("decoder_ret_channels") == std::string::npos) config.model.decoder_ret_channels = 1;
+  if (saved_toml_text.find("val_rollout_frames") == std::string::npos) config.train.val_rollout_frames = 0;
 }
 
 void apply_override(Config& config, const std::string& assignment) {
@@ -340,6 +341,36 @@ Config load_config(const std::vector<std::string>& files, const std::vector<std:
   for (const auto& f : files) apply_config_file(config, f);
   for (const auto& o : overrides) apply_override(config, o);
   return config;
+}
+
+std::vector<std::string> config_warnings(const Config& config) {
+  // A patch of model.patch_size s spans s metres of rest cloth: s * 10 scene units (D-LAYERS
+  // scale). The outer layer's patch centres lie up to ~0.7 of that sideways from the nearest
+  // inner-layer centre, plus the layer gap: on the default data a radius of one extent lets every
+  // outer patch over the inner garment reach an inner patch (s = 0.1, 0.15), two extents cost
+  // 8x the world edges for none more. The same extent gives every patch touching the body a
+  // body neighbour at every patch size measured.
+  const double extent = config.model.patch_size * 10.0;
+  const double slack = 1.0 - 1e-9;  // the official 0.04 / 0.4 sits on the line, not below it
+  std::ostringstream size;
+  size << "a model.patch_size = " << config.model.patch_size << " patch spans " << extent << " scene units";
+  std::vector<std::string> out;
+  if (config.model.world_radius < extent * slack) {
+    std::ostringstream w;
+    w << "model.world_radius = " << config.model.world_radius << " is smaller than one patch: " << size.str()
+      << ", so outer-garment patches over the inner garment can have no world edge to it (`layersnet inspect "
+         "DATASET --config FILE` counts them); set model.world_radius >= "
+      << extent << " or a smaller model.patch_size";
+    out.push_back(w.str());
+  }
+  if (config.model.body_radius < extent * slack) {
+    std::ostringstream w;
+    w << "model.body_radius = " << config.model.body_radius << " is smaller than one patch: " << size.str()
+      << ", so a patch touching the body can find no body vertex within it; set model.body_radius >= " << extent
+      << " or a smaller model.patch_size";
+    out.push_back(w.str());
+  }
+  return out;
 }
 
 std::string to_toml(const Config& config) {

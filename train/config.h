@@ -42,9 +42,12 @@ struct TrainConfig {
   bool epoch_checkpoints = true;        // a checkpoint at each epoch end (else only at the run's end)
   bool validate = true;                 // one-step error on the val split after each epoch
   int val_samples = 0;                  // val samples used (evenly spaced); 0 = all
-  int val_rollout_frames = 0;           // > 0: validate (and pick best.h5) by the mean error of a
-                                        // self-fed rollout of this many frames per val sequence
-                                        // from its first sample frame; 0 = one-step error (official)
+  int val_rollout_frames = 20;          // > 0: validate (and pick best.h5) by the mean error of a
+                                        // self-fed rollout of up to this many frames per val sequence,
+                                        // predicting from the first frame after the file's ramp (else
+                                        // from its first sample frame): the one-step error favours
+                                        // checkpoints that drift in rollouts. 0 = one-step error
+                                        // (official). 20: the default data's frames after the ramp
   int max_steps = 0;                    // stop after this many updates in total (benchmarks); 0 = no limit
   int max_nonfinite_in_row = 10;        // stop after this many skipped updates in a row
   int log_every = 10;                   // steps between progress lines
@@ -78,10 +81,16 @@ void apply_config_file(Config& config, const std::string& path);
 // Includes are not allowed here: the text must be self-contained (to_toml() output is).
 Config parse_config_text(const std::string& toml_text, const std::string& origin);
 // A saved config (run config.toml, checkpoint copy) written before a key whose default later
-// changed: gives that key its old value. model.decoder_ret_channels: 1 before it existed.
+// changed: gives that key its old value. model.decoder_ret_channels: 1 before it existed;
+// train.val_rollout_frames: 0.
 void apply_saved_config_defaults(Config& config, const std::string& saved_toml_text);
 // Applies one "section.key=value" (value in TOML syntax; a bare word is a string).
 void apply_override(Config& config, const std::string& assignment);
+
+// Settings that load but are likely mistakes, one message each naming the keys and the fix
+// (`config` and `train` print them as warnings). Empty when none. Today: neighbour radii too
+// small for the patch size (rule and measurements: model/README.md, "Radii and patch size").
+std::vector<std::string> config_warnings(const Config& config);
 
 // Every key with its value, as TOML that load_config reads back to the same Config.
 std::string to_toml(const Config& config);

@@ -32,6 +32,13 @@ LossParts LossParts::scaled(double s) const {
   return p;
 }
 
+LossParts LossParts::weighted(const LossConfig& w) const {
+  LossParts p = *this;
+  p.vertex *= w.vertex, p.patch *= w.patch, p.normal *= w.normal, p.collision_body *= w.collision_body;
+  p.collision_layer *= w.collision_layer, p.orthogonality *= w.orthogonality, p.edge_strain *= w.edge_strain;
+  return p;
+}
+
 SampleOutcome train_sample(const TrainData& data, Window& window, int t, int self_fed, const Config& config,
                            ad::Tape<float>& tape, ad::ParamStore<float>& params) {
   using clock = std::chrono::steady_clock;

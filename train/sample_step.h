@@ -21,6 +21,8 @@ struct LossParts {
          edge_strain = 0;
   LossParts& operator+=(const LossParts& o);
   LossParts scaled(double s) const;
+  // Each term times its weight in `weights`: what it adds to total (total itself unchanged).
+  LossParts weighted(const LossConfig& weights) const;
 };
 
 struct SampleOutcome {

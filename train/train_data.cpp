@@ -67,6 +67,8 @@ TrainData::TrainData(const dataset::DatasetManifest& manifest, const std::string
     const dataset::SequenceFile f(manifest_.sequence_path(ids_[static_cast<std::size_t>(s)]));
     const std::vector<int> ts = dataset::sample_frames(f.info().num_frames, selection);
     first_t_.push_back(ts.empty() ? 0 : ts.front());
+    const int after_ramp = f.info().settled_frame() - 1;
+    rollout_start_.push_back(std::find(ts.begin(), ts.end(), after_ramp) != ts.end() ? after_ramp : first_t_.back());
     for (int t : ts) samples_.push_back({s, t});
   }
 }

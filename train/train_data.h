@@ -56,6 +56,10 @@ class TrainData {
   const std::string& split() const { return split_; }
   // First sample frame of a sequence: a rollout may start no earlier.
   int first_t(int sequence) const { return first_t_.at(static_cast<std::size_t>(sequence)); }
+  // Input frame of a validation rollout: the one predicting the first frame after the file's rest
+  // pose and ramp (SequenceInfo::settled_frame; `layersnet eval` starts there too) when that is a
+  // sample frame, else first_t: the ramp into the motion is set-up, not motion to predict.
+  int rollout_start(int sequence) const { return rollout_start_.at(static_cast<std::size_t>(sequence)); }
 
   // Frames [t_first - 2, t_last + 1] of a sequence (calling thread only).
   Window read_window(int sequence, int t_first, int t_last);
@@ -78,6 +82,7 @@ class TrainData {
   int max_open_files_;
   std::vector<std::string> ids_;
   std::vector<int> first_t_;
+  std::vector<int> rollout_start_;
   std::vector<SampleRef> samples_;
   std::list<OpenFile> files_;  // LRU, front = most recent
   dataset::StructureCache structures_;

@@ -86,11 +86,12 @@ std::string json_string(const std::string& s) {
   return out + "\"";
 }
 
-std::string json_parts(const LossParts& p) {
+std::string json_parts(const LossParts& p, double orthogonality_excess) {
   return "{\"total\":" + json_number(p.total) + ",\"vertex\":" + json_number(p.vertex) + ",\"patch\":" +
          json_number(p.patch) + ",\"normal\":" + json_number(p.normal) + ",\"collision_body\":" +
          json_number(p.collision_body) + ",\"collision_layer\":" + json_number(p.collision_layer) +
-         ",\"orthogonality\":" + json_number(p.orthogonality) + ",\"edge_strain\":" + json_number(p.edge_strain) + "}";
+         ",\"orthogonality\":" + json_number(p.orthogonality) + ",\"orthogonality_excess\":" +
+         json_number(orthogonality_excess) + ",\"edge_strain\":" + json_number(p.edge_strain) + "}";
 }
 
 std::string duration_text(double s) {
@@ -172,6 +173,9 @@ void Run::open_data() {
 
 void Run::restore(const std::string& path) {
   Checkpoint cp = read_checkpoint(path, params_);
+  if (!cp.has_optimizer)
+    throw CheckpointError(path + ": a packed model (weights only, no optimizer state) cannot resume a run; resume from "
+                          "the run's checkpoints/step_*.h5");
   if (!all_finite(params_.values()))
     throw CheckpointError(path + ": holds non-finite weights; delete it to resume from the previous checkpoint");
   Config saved = parse_config_text(cp.config_toml, path + ":/config");
@@ -232,6 +236,7 @@ TrainSummary Run::execute() {
   // Refuses to start without stats.h5 and says that `layersnet prepare DATASET` makes it.
   stats_ = dataset::load_stats_or_explain(dataset::read_manifest(config_.data.dataset));
   write_text_atomic((fs::path(options_.run_dir) / "config.toml").string(), to_toml(config_));
+  for (const auto& w : config_warnings(config_)) out_ << "warning: " << w << "\n";
 
   model::register_params(params_, config_.model);
   model::init_params(params_, config_.model, static_cast<uint64_t>(tc.seed));
@@ -450,22 +455,28 @@ void Run::log_progress(int epoch) {
   const int64_t remaining = (tc.epochs - epoch) * train_->num_samples() - state_.position;
   const double eta = rate > 0 ? static_cast<double>(remaining) / rate : -1;
   const LossParts loss = window_batches_ > 0 ? window_loss_.scaled(1.0 / static_cast<double>(window_batches_)) : LossParts{};
+  const LossParts weighted = loss.weighted(config_.loss);
+  // The penalty's floor is a constant Σ(d − c) (312 at the default sizes) that would hide every
+  // other term: show how far above it the maps are.
+  const double orth_floor = config_.loss.orthogonality != 0 ? model::orthogonality_floor(config_.model) : 0.0;
+  const double orth_excess = window_batches_ > 0 ? loss.orthogonality - orth_floor : 0.0;
   // Thread-seconds outside the model (reading, sample building, optimizer) over all.
   const double outside = window_data_s_ + window_build_s_ + window_optim_s_;
   const double share = outside + window_model_s_ > 0 ? outside / (outside + window_model_s_) : 0;
   char line[512];
   std::snprintf(line, sizeof line,
                 "epoch %d/%d  step %lld  sample %lld/%lld  %.2f samples/s  ETA %s  lr %.3g  loss %.5g "
-                "(vertex %.4g patch %.4g normal %.4g body %.4g layer %.4g orth %.4g strain %.4g)  outside model %.0f%%",
+                "(vertex %.4g patch %.4g normal %.4g body %.4g layer %.4g orth excess %.4g strain %.4g)  outside model %.0f%%",
                 epoch + 1, tc.epochs, static_cast<long long>(adam_->step_count()), static_cast<long long>(state_.position),
                 static_cast<long long>(train_->num_samples()), rate, duration_text(eta).c_str(),
                 learning_rate_at(tc, epoch), loss.total, loss.vertex, loss.patch, loss.normal, loss.collision_body,
-                loss.collision_layer, loss.orthogonality, loss.edge_strain, 100 * share);
+                loss.collision_layer, orth_excess, loss.edge_strain, 100 * share);
   out_ << line << std::endl;
   metric("{\"event\":\"train\",\"epoch\":" + std::to_string(epoch + 1) + ",\"step\":" +
          std::to_string(adam_->step_count()) + ",\"batch\":" + std::to_string(summary_.batches) + ",\"position\":" +
          std::to_string(state_.position) + ",\"lr\":" + json_number(learning_rate_at(tc, epoch)) +
-         ",\"rollout_max\":" + std::to_string(rollout_steps_at(tc, epoch)) + ",\"loss\":" + json_parts(loss) +
+         ",\"rollout_max\":" + std::to_string(rollout_steps_at(tc, epoch)) + ",\"loss\":" + json_parts(loss, orth_excess) +
+         ",\"loss_weighted\":" + json_parts(weighted, config_.loss.orthogonality * orth_excess) +
          ",\"grad_norm\":" + json_number(window_batches_ > 0 ? window_grad_norm_ / static_cast<double>(window_batches_) : 0) +
          ",\"samples_per_s\":" + json_number(rate) + ",\"eta_s\":" + json_number(eta) + ",\"threads\":" +
          std::to_string(threads_) + ",\"seconds\":{\"wall\":" + json_number(window_wall_s_) + ",\"read\":" +
@@ -537,7 +548,7 @@ double Run::validate_rollouts() {
   std::vector<int> t0, steps;
   for (int i = 0; i < count; ++i) {
     if (last_t[static_cast<std::size_t>(i)] < 0) continue;
-    const int first = val_->first_t(i);
+    const int first = val_->rollout_start(i);
     const int n = std::min(config_.train.val_rollout_frames, last_t[static_cast<std::size_t>(i)] - first + 1);
     windows.push_back(val_->read_window(i, first, first + n - 1));
     t0.push_back(first);

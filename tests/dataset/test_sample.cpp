@@ -98,6 +98,59 @@ TEST(Sample, PatchesAttributesAndNeighbours) {
   EXPECT_EQ(s.wind.rows(), 0);
 }
 
+// outer_to_inner_world_edges against an all-pairs count of patch centres (means of member
+// vertices, in double): a radius below the layer gap gives none, a huge one every inner patch.
+TEST(Sample, CrossGarmentWorldEdgesMatchAHandCount) {
+  const Sequence seq = scene(2, false);
+  const int t = 5;
+  const auto structure = build_structure(seq.info, kDefaultPatchSize);
+  const PatchStructure& inner = structure->garments[0];
+  const PatchStructure& outer = structure->garments[1];
+  auto centres = [&](int g, const PatchStructure& ps) {
+    std::vector<Eigen::Vector3d> c;
+    for (int p = 0; p < ps.num_patches; ++p) {
+      Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+      for (const int32_t* v = ps.patch_vertices.begin(p); v != ps.patch_vertices.end(p); ++v)
+        sum += seq.garment_at(g, t).row(*v).transpose().cast<double>();
+      c.push_back(sum / ps.patch_vertices.size(p));
+    }
+    return c;
+  };
+  const auto ci = centres(0, inner), co = centres(1, outer);
+  double closest = 1e9;
+  for (const auto& a : co)
+    for (const auto& b : ci) closest = std::min(closest, (a - b).norm());
+  ASSERT_GT(closest, 0.1);  // the tubes are a layer gap (0.25) apart
+  for (const double radius : {0.05, 0.6, 1e3}) {
+    SCOPED_TRACE("radius " + std::to_string(radius));
+    SampleOptions o;
+    o.neighbours.world_radius = static_cast<float>(radius);
+    const auto counts = outer_to_inner_world_edges(build_sample(seq.info, seq.frames, t, simple_stats(), structure, o));
+    ASSERT_EQ(counts.size(), static_cast<std::size_t>(outer.num_patches));
+    int64_t total = 0;
+    for (int p = 0; p < outer.num_patches; ++p) {
+      int expected = 0;
+      for (const auto& b : ci) {
+        const double d = (co[static_cast<std::size_t>(p)] - b).norm();
+        ASSERT_GT(std::abs(d - radius), 1e-4) << "a pair on the radius: the count would hang on rounding";
+        expected += d < radius;
+      }
+      EXPECT_EQ(counts[static_cast<std::size_t>(p)], expected) << "outer patch " << p;
+      total += counts[static_cast<std::size_t>(p)];
+    }
+    if (radius < closest) {
+      EXPECT_EQ(total, 0);
+    } else if (radius > 100) {
+      EXPECT_EQ(total, int64_t{outer.num_patches} * inner.num_patches);
+    } else {
+      EXPECT_GT(total, 0);
+    }
+  }
+  // One garment: no outer layer.
+  const Sequence single = scene(1, false);
+  EXPECT_TRUE(outer_to_inner_world_edges(build_sample(single.info, single.frames, t, simple_stats(), nullptr)).empty());
+}
+
 TEST(Sample, WindGravityAndRootMotionRows) {
   const Sequence seq = scene(1, true);
   const auto st = simple_stats();

@@ -76,6 +76,20 @@ TEST(SequenceIo, RoundTripFloat32Int32) {
   EXPECT_TRUE(r.info.has_translation);
 }
 
+TEST(SequenceIo, RestAndRampFramesRoundTripAndDefaultToZero) {
+  const auto dir = temp_dir("ramp");
+  Sequence s = make_synthetic_sequence();
+  write_sequence((dir / "none.h5").string(), s);
+  EXPECT_EQ(read_sequence((dir / "none.h5").string()).info.settled_frame(), 0);
+  s.info.rest_frames = 3;
+  s.info.ramp_frames = 2;
+  write_sequence((dir / "ramp.h5").string(), s);
+  const SequenceInfo r = read_sequence((dir / "ramp.h5").string()).info;
+  EXPECT_EQ(r.rest_frames, 3);
+  EXPECT_EQ(r.ramp_frames, 2);
+  EXPECT_EQ(r.settled_frame(), 5);
+}
+
 TEST(SequenceIo, RoundTripFloat64Int64GzipWithoutWindOrTranslation) {
   const auto dir = temp_dir("rt64");
   SyntheticOptions o;

@@ -137,6 +137,19 @@ TEST(Cli, PrepareThenInspect) {
   out = run(std::string(LAYERSNET_BINARY) + " inspect --check " + dir.string(), &status);
   EXPECT_EQ(status, 0) << out;
   EXPECT_NE(out.find("stats.h5: from 2 training sequences"), std::string::npos) << out;
+  // Patch size and world radius from a config; a flag overrides the config. The synthetic tubes
+  // have no rest/ramp attrs: edges at the first sample frame.
+  const std::string quick = std::string(LAYERSNET_SOURCE_DIR) + "/configs/quick.toml";
+  out = run(std::string(LAYERSNET_BINARY) + " inspect --brief " + dir.string() + " --config " + quick, &status);
+  EXPECT_EQ(status, 0) << out;
+  EXPECT_NE(out.find("patches (size 0.1)"), std::string::npos) << out;
+  EXPECT_NE(out.find("cross-garment world edges (world radius 0.4, "), std::string::npos) << out;
+  out = run(std::string(LAYERSNET_BINARY) + " inspect " + dir.string() + " --config " + quick + " --world-radius 1000", &status);
+  EXPECT_EQ(status, 0) << out;
+  EXPECT_NE(out.find("at frame 2: "), std::string::npos) << out;
+  EXPECT_NE(out.find("(min "), std::string::npos) << out;
+  EXPECT_NE(out.find("world radius 1000, at the first frame after each ramp, else 2): "), std::string::npos) << out;
+  EXPECT_NE(out.find("0.0% with none"), std::string::npos) << out;
   // A broken data set: the error names the file and the problem, exit status 1.
   std::filesystem::resize_file(dir / "s0001.h5", 100);
   out = run(std::string(LAYERSNET_BINARY) + " inspect " + dir.string(), &status);

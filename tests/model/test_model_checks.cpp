@@ -115,6 +115,33 @@ TEST(ModelOrthogonality, ExactParametrisationHoldsForAnyParameter) {
   EXPECT_EQ(t.orthogonality, 0.0);
 }
 
+// orthogonality_floor is the penalty the loss computes at the orthonormal initialisation
+// (official sizes 333, our default k = 8: 312, tiny sizes), and 0 where the loss has no penalty.
+TEST(ModelOrthogonality, FloorEqualsThePenaltyAtTheOrthonormalInitialisation) {
+  ModelConfig official;
+  official.decoder_ret_channels = 1;
+  ModelConfig vanilla = testing::tiny_config();
+  vanilla.rotation_equivalent = false;
+  ModelConfig exact = testing::tiny_config();
+  exact.orthogonality = "exact";
+  const std::pair<ModelConfig, double> cases[] = {
+      {official, 333}, {ModelConfig{}, 312}, {testing::tiny_config(), 2 * 2 * (4 - 3) + (16 - 12)}, {vanilla, 0}, {exact, 0}};
+  const LossConfig lc;  // every term on; the penalty's own value is logged apart from them
+  for (const auto& [c, expected] : cases) {
+    SCOPED_TRACE("width " + std::to_string(c.width) + " k " + std::to_string(c.decoder_ret_channels) + " " +
+                 c.orthogonality + (c.rotation_equivalent ? "" : " vanilla"));
+    EXPECT_DOUBLE_EQ(orthogonality_floor(c), expected);
+    ad::ParamStore<double> ps;
+    register_params(ps, c);
+    init_params(ps, c, 5);
+    const auto s = make_sample<double>(testing::tiny_scene(), c);
+    ad::Tape<double> tape;
+    const auto pred = forward(tape, ps, c, s.input);
+    const auto t = losses::compute_losses(tape, ps, c, lc, s.target, pred);
+    EXPECT_NEAR(t.orthogonality, orthogonality_floor(c), 1e-9);
+  }
+}
+
 // Every registered tensor gets a non-zero gradient from one realistic sample (two garments,
 // wind, body contact), in float as in training.
 TEST(ModelGradients, EveryParameterGetsAGradient) {

@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <random>
@@ -85,6 +86,27 @@ TEST_F(CheckpointTest, RoundTripIsBitExact) {
   EXPECT_EQ(back.state.rng, cp.state.rng);
   EXPECT_EQ(back.stats, cp.stats);
   EXPECT_EQ(read_checkpoint_config(path), cp.config_toml);
+}
+
+TEST_F(CheckpointTest, PackedModelHoldsWeightsWithoutMomentsAndIsSmaller) {
+  ad::ParamStore<float> a, b;
+  make_params(a, 64);
+  make_params(b, 64);
+  fill_random(a, 1);
+  std::fill(b.moment1().begin(), b.moment1().end(), 5.0f);
+  const std::string full = (dir_ / "full.h5").string(), packed = (dir_ / "packed.h5").string();
+  Checkpoint cp = sample_checkpoint();
+  write_checkpoint(full, a, cp);
+  cp.has_optimizer = false;
+  write_checkpoint(packed, a, cp);
+  const Checkpoint back = read_checkpoint(packed, b);
+  EXPECT_FALSE(back.has_optimizer);
+  EXPECT_TRUE(read_checkpoint(full, a).has_optimizer);
+  EXPECT_TRUE(std::equal(a.values().begin(), a.values().end(), b.values().begin()));
+  EXPECT_TRUE(std::all_of(b.moment1().begin(), b.moment1().end(), [](float m) { return m == 0.0f; }));
+  EXPECT_EQ(back.stats, cp.stats);
+  // Weights are a third of what a full checkpoint stores per parameter.
+  EXPECT_LT(fs::file_size(packed), fs::file_size(full) * 6 / 10);
 }
 
 TEST_F(CheckpointTest, RewriteReplacesAtomically) {

@@ -3,6 +3,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cstdlib>
 #include <sstream>
 
 #include <filesystem>
@@ -127,6 +128,60 @@ TEST_F(ConfigTest, SavedConfigWithoutDecoderChannelsMeansTheOfficialMap) {
     if (line.find("decoder_ret_channels") == std::string::npos) old += line + "\n";
   EXPECT_EQ(parse_config_text(old, "old").model.decoder_ret_channels, 1);
   EXPECT_EQ(parse_config_text(old, "old").model.width, fresh.model.width);
+}
+
+// Radii under one patch extent (patch_size * 10 scene units) warn, naming the keys and the fix.
+TEST_F(ConfigTest, RadiusWarningFiresForSmallRadiiOnly) {
+  Config c;
+  c.model.patch_size = 0.1;  // 1 scene unit
+  c.model.world_radius = 0.4;
+  c.model.body_radius = 0.6;
+  const auto w = config_warnings(c);
+  ASSERT_EQ(w.size(), 2u);
+  EXPECT_NE(w[0].find("model.world_radius = 0.4"), std::string::npos) << w[0];
+  EXPECT_NE(w[0].find("model.patch_size = 0.1"), std::string::npos) << w[0];
+  EXPECT_NE(w[0].find("set model.world_radius >= 1"), std::string::npos) << w[0];
+  EXPECT_NE(w[1].find("set model.body_radius >= 1"), std::string::npos) << w[1];
+  c.model.world_radius = 1.2;
+  ASSERT_EQ(config_warnings(c).size(), 1u);
+  EXPECT_NE(config_warnings(c)[0].find("model.body_radius"), std::string::npos);
+  c.model.body_radius = 1.0;
+  EXPECT_TRUE(config_warnings(c).empty());
+  EXPECT_TRUE(config_warnings(Config{}).empty()) << "official 0.04 / 0.4 / 0.6 sit on or above the line";
+  EXPECT_EQ(config_warnings(load_config({std::string(LAYERSNET_SOURCE_DIR) + "/configs/quick.toml"})).size(), 2u);
+}
+
+// `config` prints each warning once, on stderr: stdout stays the resolved TOML.
+TEST_F(ConfigTest, ConfigCommandWarnsOnStderrOnce) {
+  if (!fs::exists(LAYERSNET_BINARY)) GTEST_SKIP() << "layersnet binary not built";
+  const fs::path out = dir_ / "out.toml", err = dir_ / "err.txt";
+  const std::string cmd = std::string(LAYERSNET_BINARY) + " config -c " + LAYERSNET_SOURCE_DIR +
+                          "/configs/quick.toml --set model.body_radius=2 > " + out.string() + " 2> " + err.string();
+  ASSERT_EQ(std::system(cmd.c_str()), 0);
+  std::stringstream e, o;
+  e << std::ifstream(err).rdbuf();
+  o << std::ifstream(out).rdbuf();
+  const std::string text = e.str();
+  const auto first = text.find("warning: model.world_radius = 0.4");
+  ASSERT_NE(first, std::string::npos) << text;
+  EXPECT_EQ(text.find("warning: model.world_radius", first + 1), std::string::npos) << text;
+  EXPECT_EQ(text.find("model.body_radius"), std::string::npos) << text;
+  EXPECT_EQ(o.str().find("warning"), std::string::npos);
+  EXPECT_EQ(parse_config_text(o.str(), "stdout").model.world_radius, 0.4);
+}
+
+// best.h5 follows a validation rollout unless a config asks for the one-step error; runs saved
+// before the key existed keep the one-step error.
+TEST_F(ConfigTest, ValidationIsByRolloutByDefault) {
+  EXPECT_GT(TrainConfig{}.val_rollout_frames, 0);
+  EXPECT_EQ(load_config({}, {"train.val_rollout_frames=0"}).train.val_rollout_frames, 0);
+  EXPECT_EQ(load_config({std::string(LAYERSNET_SOURCE_DIR) + "/configs/paper.toml"}).train.val_rollout_frames, 0);
+  std::string old;
+  std::istringstream lines(to_toml(Config{}));
+  for (std::string line; std::getline(lines, line);)
+    if (line.find("val_rollout_frames") == std::string::npos) old += line + "\n";
+  EXPECT_EQ(parse_config_text(old, "old").train.val_rollout_frames, 0);
+  EXPECT_GT(parse_config_text(to_toml(Config{}), "new").train.val_rollout_frames, 0);
 }
 
 TEST_F(ConfigTest, EveryShippedConfigLoads) {

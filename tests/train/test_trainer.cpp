@@ -138,6 +138,25 @@ TEST_F(TrainerTest, RefusesToOverwriteAnExistingRun) {
   EXPECT_EQ(final_weights(dir_ / "run", c), before);
 }
 
+TEST_F(TrainerTest, ResumeRefusesAPackedModel) {
+  const std::string data = make_dataset(2, 0, 6);
+  const Config c = tiny_config(data, {"train.epochs=1", "train.max_steps=1"});
+  train(c, options("run"));
+  const auto all = list_checkpoints((dir_ / "run").string());
+  ASSERT_FALSE(all.empty());
+  LoadedModel m = load_model(all.back());
+  m.checkpoint.has_optimizer = false;
+  write_checkpoint(all.back(), m.params, m.checkpoint);  // as `layersnet pack` writes it
+  auto o = options("run");
+  o.resume = true;
+  try {
+    train(c, o);
+    FAIL() << "resumed from weights without optimizer state";
+  } catch (const std::exception& e) {
+    EXPECT_NE(std::string(e.what()).find("packed model"), std::string::npos) << e.what();
+  }
+}
+
 TEST_F(TrainerTest, OverfitsOneBatchThroughTheTrainingLoop) {
   // One sequence of 4 frames: the single sample t = 2 is the batch of every epoch. The
   // model is the tiny one with the model tests' 4 heads and 2 layers. Loss: positions,
@@ -255,6 +274,71 @@ TEST_F(TrainerTest, RolloutValidationFeedsPredictionsBackAndPicksBestByIt) {
   EXPECT_NE(metrics.find("\"rollout_error\""), std::string::npos);
   EXPECT_EQ(metrics.find("\"one_step_error\""), std::string::npos);
   EXPECT_TRUE(fs::exists(dir_ / "run" / "best.h5"));
+}
+
+// The validation rollout predicts from the first frame after the file's rest pose and ramp
+// (its input frame is the one before), else from the first sample frame.
+TEST_F(TrainerTest, RolloutValidationStartsAfterTheRamp) {
+  const fs::path root = dir_ / "ramp";
+  dataset::SyntheticOptions o;
+  o.frames = 9;  // sample frames t = 2..7
+  o.garments = 2;
+  dataset::DatasetManifest m;
+  m.root = root.string();
+  m.source = "synthetic, with and without ramp attrs";
+  const std::pair<int, int> ramps[] = {{2, 3}, {0, 0}, {6, 4}};  // settled 5, none, 10 (past the samples)
+  for (int i = 0; i < 3; ++i) {
+    o.seed = 1 + static_cast<uint64_t>(i);
+    dataset::Sequence seq = dataset::make_synthetic_sequence(o);
+    seq.info.rest_frames = ramps[i].first;
+    seq.info.ramp_frames = ramps[i].second;
+    const std::string id = "v" + std::to_string(i);
+    fs::create_directories(root);
+    dataset::write_sequence((root / (id + ".h5")).string(), seq);
+    m.val.push_back(id);
+  }
+  dataset::write_manifest(m);
+  const TrainData val(dataset::read_manifest(m.root), "val", dataset::NormalisationStats{}, tiny_config(m.root));
+  EXPECT_EQ(val.first_t(0), 2);
+  EXPECT_EQ(val.rollout_start(0), 4);  // predicts frame 5, the first after the ramp
+  EXPECT_EQ(val.rollout_start(1), 2);
+  EXPECT_EQ(val.rollout_start(2), 2);
+}
+
+// metrics.jsonl: the orthogonality penalty also as its excess over the floor (the progress line
+// shows only the excess), and every term times its weight; a radius warning is printed once.
+TEST_F(TrainerTest, MetricsLogTheOrthogonalityExcessAndTheWeightedTerms) {
+  const std::string data = make_dataset(2, 1, 6);
+  const Config c = tiny_config(data, {"train.epochs=1", "train.threads=1", "loss.vertex=3", "loss.orthogonality=2",
+                                      "model.world_radius=0.3"});  // below one 0.04 patch (0.4 units)
+  train(c, options("run"));
+  const std::string metrics = read_text(dir_ / "run" / "metrics.jsonl");
+  const std::string line = metrics.substr(metrics.find("{\"event\":\"train\""));
+  auto object = [&](const std::string& key) {
+    const auto at = line.find("\"" + key + "\":{");
+    EXPECT_NE(at, std::string::npos) << key << " in " << line;
+    return line.substr(at, line.find('}', at) - at);
+  };
+  auto number = [](const std::string& json, const std::string& key) {
+    const auto at = json.find("\"" + key + "\":");
+    EXPECT_NE(at, std::string::npos) << key << " in " << json;
+    return std::stod(json.substr(at + key.size() + 3));
+  };
+  const std::string raw = object("loss"), weighted = object("loss_weighted");
+  const double floor = model::orthogonality_floor(c.model);
+  ASSERT_GT(floor, 0);
+  EXPECT_NEAR(number(raw, "orthogonality_excess"), number(raw, "orthogonality") - floor, 1e-6 * floor);
+  EXPECT_LT(std::abs(number(raw, "orthogonality_excess")), 1.0) << "the maps start orthonormal";
+  EXPECT_NEAR(number(weighted, "vertex"), 3 * number(raw, "vertex"), 1e-7 * number(weighted, "vertex"));
+  EXPECT_NEAR(number(weighted, "orthogonality"), 2 * number(raw, "orthogonality"), 1e-6 * floor);
+  EXPECT_NEAR(number(weighted, "orthogonality_excess"), 2 * number(raw, "orthogonality_excess"), 1e-6 * floor);
+  EXPECT_NEAR(number(weighted, "patch"), number(raw, "patch"), 1e-7 * number(raw, "patch"));
+  EXPECT_EQ(number(weighted, "total"), number(raw, "total"));
+  const std::string log = log_.str();
+  EXPECT_NE(log.find("orth excess "), std::string::npos) << log;
+  const auto warning = log.find("warning: model.world_radius = 0.3");
+  ASSERT_NE(warning, std::string::npos) << log;
+  EXPECT_EQ(log.find("warning:", warning + 1), std::string::npos) << log;
 }
 
 TEST_F(TrainerTest, MaxStepsStopInsideAnEpochLeavesAResumableCheckpoint) {

@@ -1,0 +1,40 @@
+// `layersnet pack --checkpoint C --out F`: a trained model to ship — weights, normalisation
+// statistics and the resolved config of a checkpoint, without the optimizer state (Adam's
+// moments are twice the weights). Every command that takes --checkpoint reads the result;
+// `train --resume` refuses it.
+#include "cli/command_registry.h"
+#include "train/checkpoint.h"
+
+#include <cstdio>
+#include <filesystem>
+
+namespace {
+
+struct PackOptions {
+  std::string checkpoint;
+  std::string out;
+};
+
+int run_pack(const PackOptions& o) {
+  layersnet::LoadedModel m = layersnet::load_model(o.checkpoint);
+  m.checkpoint.has_optimizer = false;
+  m.checkpoint.state.rng.clear();
+  const std::filesystem::path parent = std::filesystem::path(o.out).parent_path();
+  if (!parent.empty()) std::filesystem::create_directories(parent);
+  layersnet::write_checkpoint(o.out, m.params, m.checkpoint);
+  std::printf("packed %s -> %s (%zu weights, %.2f MB; epoch %lld, %lld updates, best validation error %.6g)\n",
+              o.checkpoint.c_str(), o.out.c_str(), m.params.values().size(),
+              static_cast<double>(std::filesystem::file_size(o.out)) / 1e6, static_cast<long long>(m.checkpoint.state.epoch),
+              static_cast<long long>(m.checkpoint.state.global_step), m.checkpoint.state.best_val_error);
+  return 0;
+}
+
+}  // namespace
+
+LAYERSNET_COMMAND(pack, "Write a checkpoint's weights, statistics and config without optimizer state (a model to ship)",
+                  [](CLI::App& sub) {
+                    auto o = std::make_shared<PackOptions>();
+                    sub.add_option("--checkpoint", o->checkpoint, "checkpoint to pack (e.g. runs/medium/best.h5)")->required();
+                    sub.add_option("--out", o->out, "model file to write (e.g. models/medium/model.h5)")->required();
+                    return [o] { return run_pack(*o); };
+                  });
