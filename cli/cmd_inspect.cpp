@@ -3,6 +3,8 @@
 // the outer garment's patches to the inner garments' (the model's only cross-layer attention
 // besides the body) at the first frame after the generator's ramp. Reads headers and that
 // frame only unless --check, which reads every frame and checks every value against the spec.
+// --margins measures the ground truth's collision distances as the collision loss sees them,
+// to choose loss.collision_eps from the data.
 #include "cli/command_registry.h"
 #include "dataset/manifest.h"
 #include "dataset/patches.h"
@@ -28,6 +30,57 @@ struct InspectOptions {
   bool brief = false;
   std::string config;  // model.patch_size, model.world_radius (and the rest of [model]) from here
   double patch_size = -1, world_radius = -1;  // < 0: from the config (or the code defaults)
+  bool margins = false;
+};
+
+// Signed distances (x - a)·n_a of garment vertices to their collision anchors, measured as the
+// collision loss does: a = nearest body vertex (body term) or nearest inner-garment vertex
+// (layer term, outer garment only), n_a its vertex normal. Training split, every frame after
+// the ramp.
+struct MarginTally {
+  std::vector<float> body, layer;
+  void add_frame(const SequenceInfo& info, const FrameWindow& w, int t) {
+    const Points body_x = w.body_at(t, info.num_body_vertices);
+    const Points body_n = vertex_normals(body_x, info.body_faces);
+    std::vector<Points> g;
+    for (int k = 0; k < info.num_garments(); ++k) g.push_back(w.garment_at(k, t, info.garments[k].num_vertices));
+    for (const Points& x : g) signed_distances(x, body_x, body_n, body);
+    if (g.size() < 2) return;
+    int64_t inner_rows = 0;
+    for (size_t k = 0; k + 1 < g.size(); ++k) inner_rows += g[k].rows();
+    Points inner(inner_rows, 3);
+    Faces inner_faces(0, 3);
+    int64_t row = 0;
+    for (size_t k = 0; k + 1 < g.size(); ++k) {
+      inner.middleRows(row, g[k].rows()) = g[k];
+      Faces f = info.garments[k].faces.array() + static_cast<int32_t>(row);
+      Faces joined(inner_faces.rows() + f.rows(), 3);
+      joined << inner_faces, f;
+      inner_faces = joined;
+      row += g[k].rows();
+    }
+    signed_distances(g.back(), inner, vertex_normals(inner, inner_faces), layer);
+  }
+  static void signed_distances(const Points& x, const Points& anchors, const Points& normals, std::vector<float>& out) {
+    const NearestBody nb = nearest_body(x, anchors);
+    for (Eigen::Index i = 0; i < x.rows(); ++i)
+      out.push_back((x.row(i) - anchors.row(nb.index[i])).dot(normals.row(nb.index[i])));
+  }
+  static void print(const char* what, std::vector<float> d) {
+    if (d.empty()) {
+      std::printf("  %s: no vertices\n", what);
+      return;
+    }
+    std::sort(d.begin(), d.end());
+    auto pct = [&](double q) { return d[static_cast<size_t>(q * static_cast<double>(d.size() - 1))]; };
+    std::printf("  %s (%zu vertex-frames): percentiles 1/5/10/50 %.3f / %.3f / %.3f / %.3f; share closer than", what,
+                d.size(), pct(0.01), pct(0.05), pct(0.10), pct(0.5));
+    for (float eps : {0.001f, 0.01f, 0.03f, 0.05f, 0.06f, 0.1f}) {
+      const auto n = std::lower_bound(d.begin(), d.end(), eps) - d.begin();
+      std::printf(" %g: %.1f%%", eps, 100.0 * static_cast<double>(n) / static_cast<double>(d.size()));
+    }
+    std::printf("\n");
+  }
 };
 
 // Outer-garment patches and their world edges to inner-garment patches, over sequences.
@@ -143,6 +196,19 @@ int run_inspect(const InspectOptions& o) {
               static_cast<long>(patches), patch_size, static_cast<long>(with_wind), m.all_ids().size());
   std::printf("cross-garment world edges (world radius %g, at the first frame after each ramp, else 2):", sample_options.neighbours.world_radius);
   cross_total.print(" ");
+  if (o.margins) {
+    MarginTally tally;
+    for (const auto& id : m.train) {
+      const SequenceFile f(m.sequence_path(id));
+      const SequenceInfo& info = f.info();
+      const int first = std::min(info.settled_frame(), info.num_frames - 1);
+      const FrameWindow w = f.read_frames(first, info.num_frames - first);
+      for (int t = first; t < info.num_frames; ++t) tally.add_frame(info, w, t);
+    }
+    std::printf("ground-truth collision distances, scene units (the collision loss penalises d < loss.collision_eps):\n");
+    MarginTally::print("garment to nearest body vertex", tally.body);
+    MarginTally::print("outer garment to nearest inner vertex", tally.layer);
+  }
   return 0;
 }
 
@@ -157,6 +223,8 @@ LAYERSNET_COMMAND(inspect, "Summarise a D-LAYERS-H5 data set (sequences, garment
                     sub.add_option("--config,-c", opts->config,
                                    "take model.patch_size and model.world_radius from this config (resolved, with its includes)");
                     sub.add_option("--patch-size", opts->patch_size, "UV patch size (default: the config's, else 0.04)");
+                    sub.add_flag("--margins", opts->margins,
+                                 "measure the training split's ground-truth collision distances (for loss.collision_eps)");
                     sub.add_option("--world-radius", opts->world_radius,
                                    "patch-to-patch world-edge radius, scene units (default: the config's, else 0.4)");
                     return [opts] { return run_inspect(*opts); };

@@ -150,6 +150,19 @@ TEST(Cli, PrepareThenInspect) {
   EXPECT_NE(out.find("(min "), std::string::npos) << out;
   EXPECT_NE(out.find("world radius 1000, at the first frame after each ramp, else 2): "), std::string::npos) << out;
   EXPECT_NE(out.find("0.0% with none"), std::string::npos) << out;
+  // Margins: every garment vertex of every training frame (no ramp attrs: from frame 0) is
+  // measured against the body; outer-garment vertices against the inner garment.
+  out = run(std::string(LAYERSNET_BINARY) + " inspect --brief --margins " + dir.string(), &status);
+  EXPECT_EQ(status, 0) << out;
+  int64_t all = 0, outer = 0;
+  for (const auto& id : read_manifest(dir.string()).train) {
+    const SequenceInfo info = SequenceFile((dir / (id + ".h5")).string()).info();
+    for (const auto& g : info.garments) all += static_cast<int64_t>(g.num_vertices) * info.num_frames;
+    outer += static_cast<int64_t>(info.garments.back().num_vertices) * info.num_frames;
+  }
+  EXPECT_NE(out.find("garment to nearest body vertex (" + std::to_string(all) + " vertex-frames)"), std::string::npos) << out;
+  EXPECT_NE(out.find("outer garment to nearest inner vertex (" + std::to_string(outer) + " vertex-frames)"), std::string::npos)
+      << out;
   // A broken data set: the error names the file and the problem, exit status 1.
   std::filesystem::resize_file(dir / "s0001.h5", 100);
   out = run(std::string(LAYERSNET_BINARY) + " inspect " + dir.string(), &status);
