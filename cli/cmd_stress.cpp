@@ -1,7 +1,8 @@
 // `layersnet stress --checkpoint C [--dataset D] [--sequence ID] [--frames 600] [--winds 0,400,2000]
 // [--speed 5] [--precision-frames 100] [--json F]`: long rollouts of one checkpoint at constant
 // wind strengths and with the body sped up (eval/stress.h), and float32 against float64 over
-// the same checkpoint. Prints one table; exits 1 when any run breaks its bound.
+// the same checkpoint. Prints one table; exits 1 when any run breaks its distance bound or
+// strain limit.
 #include "cli/command_registry.h"
 #include "dataset/manifest.h"
 #include "dataset/stats.h"
@@ -20,6 +21,7 @@
 #include <filesystem>
 #include <fstream>
 #include <memory>
+#include <string>
 
 namespace {
 using namespace layersnet;
@@ -50,6 +52,12 @@ json result_json(const eval::StressResult& r) {
           {"first_bad_frame", r.first_bad_frame},
           {"max_distance_over_bound", r.max_bound_ratio},
           {"max_distance_over_graph_diameter", r.max_diameter_ratio},
+          {"max_strain_p99", r.max_strain_p99},
+          {"max_strain", r.max_strain},
+          {"strain_limit", r.strain_limit},
+          {"first_torn_frame", r.first_torn_frame},
+          {"within_bound", r.within_bound()},
+          {"within_strain", r.within_strain()},
           {"bounds_units", r.bounds},
           {"max_vertex_speed_units_per_frame", r.max_vertex_speed},
           {"max_body_speed_units_per_frame", r.max_body_speed},
@@ -58,7 +66,19 @@ json result_json(const eval::StressResult& r) {
           {"per_frame", {{"distance_over_bound", r.bound_ratio_per_frame},
                          {"max_vertex_speed_units_per_frame", r.vertex_speed_per_frame},
                          {"nearest_vertex_to_body_units", r.nearest_per_frame},
-                         {"max_edge_stretch", r.edge_stretch_per_frame}}}};
+                         {"max_edge_stretch", r.edge_stretch_per_frame},
+                         {"strain_p99", r.strain_p99_per_frame},
+                         {"strain_max", r.strain_max_per_frame}}}};
+}
+
+// Why a run failed, for the table and the progress line.
+std::string verdict(const eval::StressResult& r) {
+  if (r.passed()) return "ok";
+  if (!r.finite) return "FAIL: non-finite";
+  std::string why;
+  if (!r.within_bound()) why = "distance";
+  if (!r.within_strain()) why += why.empty() ? "strain" : ", strain";
+  return why.empty() ? "FAIL" : "FAIL: " + why;
 }
 
 int run_stress(const StressCliOptions& o) {
@@ -100,14 +120,21 @@ int run_stress(const StressCliOptions& o) {
                 m.config.eval.patch_tether, first, source.info.num_frames - 1, data_tether);
   else
     std::printf("patch tether off (eval.patch_tether = 0); the data's own max offset / rest patch radius: %.3f\n", data_tether);
+  // The strain limit comes from the whole data set's ground truth, not the one source: any
+  // sequence's real cloth may stretch that much.
+  const eval::StrainExtremes data_strain = eval::data_set_strain(manifest);
+  const double strain_limit = eval::kStrainAllowance * data_strain.p99;
+  std::printf("strain limit: per-frame p99 of |edge length / rest length - 1| <= %.3f (%.1f x the data's own worst "
+              "p99 %.3f over its %zu sequences after the ramp; the data's own max %.3f; eval/stress.h)\n",
+              strain_limit, eval::kStrainAllowance, data_strain.p99, manifest.all_ids().size(), data_strain.max);
   eval::ModelPredictor predictor("model", m.config, m.params, stats);
   std::vector<eval::StressResult> results;
   const auto run_one = [&](const eval::StressScene& s, const std::string& label) {
     const auto start = std::chrono::steady_clock::now();
-    results.push_back(eval::stress_rollout(predictor, source, s, label));
+    results.push_back(eval::stress_rollout(predictor, source, s, label, strain_limit));
     std::printf("  %s: %d frames in %.0f s (%s)\n", label.c_str(), results.back().frames,
                 std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(),
-                results.back().passed() ? "within bound" : "OUT OF BOUND");
+                verdict(results.back()).c_str());
     std::fflush(stdout);
   };
   for (double w : o.no_winds ? std::vector<double>{} : o.winds) {
@@ -139,15 +166,16 @@ int run_stress(const StressCliOptions& o) {
   // gap: the garment's nearest vertex to the body (grows when cloth comes off); stretch: edge
   // length / rest length (grows when cloth tears apart) — which of the two broke a failed run.
   std::printf("\n| run | frames | finite | first bad | max dist / bound | max dist / D | max gap mm | max stretch "
-              "| max speed mm/f (body) | ms/frame | |\n");
-  std::printf("|---|---|---|---|---|---|---|---|---|---|---|\n");
+              "| max strain p99 (limit %.3f) | max speed mm/f (body) | ms/frame | |\n",
+              strain_limit);
+  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
   bool ok = true;
   const auto largest = [](const std::vector<double>& v) { return v.empty() ? 0.0 : *std::max_element(v.begin(), v.end()); };
   for (const auto& r : results) {
-    std::printf("| %s | %d | %s | %d | %.3f | %.3f | %.0f | %.2f | %.1f (%.1f) | %.1f | %s |\n", r.label.c_str(), r.frames,
-                r.finite ? "yes" : "NO", r.first_bad_frame, r.max_bound_ratio, r.max_diameter_ratio,
-                largest(r.nearest_per_frame) * mm, largest(r.edge_stretch_per_frame), r.max_vertex_speed * mm,
-                r.max_body_speed * mm, r.ms_per_frame, r.passed() ? "ok" : "FAIL");
+    std::printf("| %s | %d | %s | %d | %.3f | %.3f | %.0f | %.2f | %.3f | %.1f (%.1f) | %.1f | %s |\n", r.label.c_str(),
+                r.frames, r.finite ? "yes" : "NO", r.first_bad_frame, r.max_bound_ratio, r.max_diameter_ratio,
+                largest(r.nearest_per_frame) * mm, largest(r.edge_stretch_per_frame), r.max_strain_p99,
+                r.max_vertex_speed * mm, r.max_body_speed * mm, r.ms_per_frame, verdict(r).c_str());
     ok = ok && r.passed();
   }
   std::printf("bound per garment (units):");
@@ -158,7 +186,9 @@ int run_stress(const StressCliOptions& o) {
 
   json j = {{"checkpoint", o.checkpoint}, {"dataset", root},        {"sequence", id},
             {"runs", json::array()},     {"data_bound_ratio", data_ratio},
-            {"patch_tether", m.config.eval.patch_tether}, {"data_tether_ratio", data_tether}};
+            {"patch_tether", m.config.eval.patch_tether}, {"data_tether_ratio", data_tether},
+            {"strain_limit", strain_limit}, {"strain_allowance", eval::kStrainAllowance},
+            {"data_strain_p99", data_strain.p99}, {"data_strain_max", data_strain.max}};
   for (const auto& r : results) j["runs"].push_back(result_json(r));
   if (o.precision_frames > 0) {
     const eval::PrecisionResult p = eval::compare_precision(m.config, m.params, stats, source, o.precision_frames, first);
@@ -188,7 +218,8 @@ int run_stress(const StressCliOptions& o) {
     if (!out) throw std::runtime_error(o.json_path + ": cannot write the JSON report; check the folder exists");
     std::printf("wrote %s\n", o.json_path.c_str());
   }
-  std::printf("stress: %s\n", ok ? "every run within its bound" : "FAILED: a run broke its bound (see the table)");
+  std::printf("stress: %s (distance bound, strain p99 <= %.3f)\n",
+              ok ? "every run within its bounds" : "FAILED: a run broke a bound (see the table)", strain_limit);
   return ok ? 0 : 1;
 }
 

@@ -5,6 +5,7 @@
 #include "dataset/neighbours.h"
 #include "dataset/wind.h"
 #include "eval/evaluate.h"
+#include "eval/metrics.h"
 #include "model/layersnet.h"
 #include "model/params_layout.h"
 #include "model/sample_input.h"
@@ -258,6 +259,33 @@ std::vector<double> edge_strains(const GarmentEdges& edges, const Points& x) {
   return out;
 }
 
+StrainExtremes frame_strain(const GarmentEdges& edges, const Points& x) {
+  std::vector<double> e = edge_strains(edges, x);
+  if (e.empty()) return {};
+  const double top = *std::max_element(e.begin(), e.end());
+  return {quantile(std::move(e), 0.99), top};
+}
+
+StrainExtremes data_strain(const dataset::Sequence& seq, int first) {
+  const GarmentEdges edges = garment_edges(seq);
+  StrainExtremes worst;
+  for (int t = std::max(first, 0); t < seq.info.num_frames; ++t) {
+    const StrainExtremes s = frame_strain(edges, garments_at(seq, t));
+    worst = {std::max(worst.p99, s.p99), std::max(worst.max, s.max)};
+  }
+  return worst;
+}
+
+StrainExtremes data_set_strain(const dataset::DatasetManifest& manifest) {
+  StrainExtremes worst;
+  for (const std::string& id : manifest.all_ids()) {
+    const std::string path = manifest.sequence_path(id);
+    const StrainExtremes s = data_strain(dataset::read_sequence(path), settled_frame(path));
+    worst = {std::max(worst.p99, s.p99), std::max(worst.max, s.max)};
+  }
+  return worst;
+}
+
 std::vector<double> garment_distance_bounds(const dataset::Sequence& seq) {
   return garment_distance_bounds(seq, garment_graph_diameters(seq));
 }
@@ -287,11 +315,12 @@ double data_bound_ratio(const dataset::Sequence& source, int first) {
 }
 
 StressResult stress_rollout(Predictor& predictor, const dataset::Sequence& source, const StressScene& scene,
-                            const std::string& label) {
+                            const std::string& label, double strain_limit) {
   const dataset::Sequence seq = make_stress_sequence(source, scene);
   StressResult res;
   res.label = label;
   res.scene = scene;
+  res.strain_limit = strain_limit;
   const GarmentEdges edges = garment_edges(seq);
   const std::vector<double> diameters = garment_graph_diameters(seq, edges);
   res.bounds = garment_distance_bounds(seq, diameters);
@@ -318,6 +347,14 @@ StressResult stress_rollout(Predictor& predictor, const dataset::Sequence& sourc
     res.bound_ratio_per_frame.push_back(0.0);
     res.nearest_per_frame.push_back(0.0);
     res.edge_stretch_per_frame.push_back(max_edge_stretch(edges, x));
+    const StrainExtremes strain = frame_strain(edges, x);
+    res.strain_p99_per_frame.push_back(strain.p99);
+    res.strain_max_per_frame.push_back(strain.max);
+    res.max_strain_p99 = std::max(res.max_strain_p99, strain.p99);
+    res.max_strain = std::max(res.max_strain, strain.max);
+    const bool torn = strain.p99 > strain_limit;
+    if (torn && res.first_torn_frame < 0) res.first_torn_frame = k;
+    if (torn && res.first_bad_frame < 0) res.first_bad_frame = k;
     for (size_t g = 0; g < d.size(); ++g) {
       res.nearest_per_frame.back() = std::max(res.nearest_per_frame.back(), d[g].nearest);
       const double ratio = d[g].farthest / res.bounds[g];

@@ -29,7 +29,18 @@
 // dist is to the nearest body VERTEX (an upper bound of the distance to the body surface).
 // It holds for cloth blown straight out by wind, and fails only for cloth that came off
 // the body or spread 35 % beyond anything the simulator produced — an unstable rollout.
+//
+// Strain limit. Torn or inflated cloth can stay within the bound (patches drifting apart
+// while the garment hangs on the body), so every frame's p99 over the garment edges of the
+// strain |length / rest length − 1| (edge_strains) must also stay <= kStrainAllowance × the
+// data set's worst per-frame p99 (data_set_strain: every sequence after its ramp). The p99,
+// not the max: single short edges of real cloth stretch up to 6x.
+// data/default (12 sequences, frames after the ramp): worst per-frame p99 0.885 (00007;
+// 0.075–0.885 per sequence), worst max 5.21. Factor 2 (limit 1.77 there): a model's first
+// step from the ground truth adds only 0.03–0.15 to the data's p99 (quick model), while a
+// garment stretched 3x everywhere (strain 2) must fail, so the factor stays below 2 / 0.885.
 #include "autodiff/params.h"
+#include "dataset/manifest.h"
 #include "dataset/sequence.h"
 #include "dataset/stats.h"
 #include "eval/rollout.h"
@@ -41,6 +52,7 @@
 namespace layersnet::eval {
 
 inline constexpr double kStretchAllowance = 1.2;  // garment extent / D_g allowed (data: <= 0.89)
+inline constexpr double kStrainAllowance = 2.0;   // strain p99 limit / the data's worst p99 (see above)
 
 struct StressScene {
   int frames = 600;             // F: frames of the built sequence (D-LAYERS' longest: 600)
@@ -101,6 +113,18 @@ double max_edge_stretch(const GarmentEdges& edges, const Points& x);
 // rest length skipped, as above).
 std::vector<double> edge_strains(const GarmentEdges& edges, const Points& x);
 
+// Edge strain of one frame (p99 and max over edge_strains), or the worst of many frames.
+struct StrainExtremes {
+  double p99 = 0;
+  double max = 0;
+};
+StrainExtremes frame_strain(const GarmentEdges& edges, const Points& x);
+// The ground truth's own worst per-frame strain over frames first..T−1 of `seq`.
+StrainExtremes data_strain(const dataset::Sequence& seq, int first);
+// The same over every sequence of a data set, each from its settled_frame (the strain
+// limit's basis: kStrainAllowance × p99).
+StrainExtremes data_set_strain(const dataset::DatasetManifest& manifest);
+
 // The data's own max over frames first..T−1 and garments of dist / B_g (B_g from frame
 // `first`, as a stress scene starting there uses): how much room the bound leaves real cloth.
 double data_bound_ratio(const dataset::Sequence& source, int first);
@@ -123,12 +147,20 @@ struct StressResult {
   std::vector<double> nearest_per_frame;       // max over garments of the nearest vertex's distance
                                                // to the body, units (cloth leaving the body)
   std::vector<double> edge_stretch_per_frame;  // max edge length / rest length (cloth stretching)
+  double strain_limit = 0;      // pass: every frame's strain p99 <= this
+  double max_strain_p99 = 0;    // max over frames of the strain p99
+  double max_strain = 0;        // max over frames and edges of the strain
+  int first_torn_frame = -1;    // first rollout index whose strain p99 > strain_limit; -1 none
+  std::vector<double> strain_p99_per_frame, strain_max_per_frame;  // edge strain |l / l0 − 1|
+  bool within_bound() const { return max_bound_ratio <= 1; }
+  bool within_strain() const { return first_torn_frame < 0; }
   bool passed() const { return finite && first_bad_frame < 0; }
 };
 
-// Rolls `predictor` over make_stress_sequence(source, scene) from input frame 2 to the end.
+// Rolls `predictor` over make_stress_sequence(source, scene) from input frame 2 to the end;
+// first_bad_frame is the first frame non-finite, out of bound or over `strain_limit`.
 StressResult stress_rollout(Predictor& predictor, const dataset::Sequence& source, const StressScene& scene,
-                            const std::string& label);
+                            const std::string& label, double strain_limit);
 
 // The model predictor in float64: the same checkpoint's parameters converted to double, the
 // same samples (built in float32 by the data layer, as for the float model) cast with

@@ -14,7 +14,7 @@
 // The centre leaves v out, and the worst vertices are moved first with the centres kept
 // current, so a runaway does not drag its patch mates. Only positions change: the next
 // step's velocities are differences of positions, so the runaway velocity goes too (as in
-// position-based dynamics). factor 0 = off (official: no such step).
+// position-based dynamics). factor 0 = off (the default; official: no such step).
 #include "dataset/patches.h"
 #include "dataset/sample.h"
 #include "dataset/sequence.h"

@@ -3,8 +3,9 @@
 # tests/eval/test_extremes.cpp in CI):
 #   1. `layersnet stress` on the default model, on every test and validation sequence of the
 #      default data: 600-frame rollouts at wind 0, 400, 2000 and with the body at 5x speed
-#      (finite, every vertex within its bound, eval/stress.h; the checkpoint's
-#      eval.patch_tether applies, default 3, eval/tether.h), and float32 vs float64 over 100
+#      (finite, every vertex within its distance bound, every frame's edge-strain p99 under
+#      the limit, eval/stress.h; the checkpoint's eval.patch_tether applies, 0 = off by
+#      default, eval/tether.h), and float32 vs float64 over 100
 #      frames on the first (divergence below the model's own error);
 #   2. training at 10x the default learning rate on the default data for a short budget:
 #      it must either finish or be stopped by the non-finite guard (exit 1 with a message

@@ -206,7 +206,7 @@ const Schema& schema() {
     // [eval]
     k.add("eval.split", [](Config& c) -> std::string& { return c.eval.split; }, "split to evaluate", {0, 0, {"train", "val", "test"}});
     k.add("eval.frames", [](Config& c) -> int& { return c.eval.frames; }, "predicted frames per sequence", positive);
-    k.add("eval.patch_tether", [](Config& c) -> double& { return c.eval.patch_tether; }, "rollouts keep each vertex within this many rest patch radii of its patch centre (0 = off; eval/tether.h)", {0, 1e6, {}});
+    k.add("eval.patch_tether", [](Config& c) -> double& { return c.eval.patch_tether; }, "rollouts keep each vertex within this many rest patch radii of its patch centre (0 = off, the default; eval/tether.h)", {0, 1e6, {}});
     return k;
   }();
   return s;

@@ -56,8 +56,8 @@ struct TrainConfig {
 struct EvalConfig {
   std::string split = "test";
   int frames = 36;  // predicted frames per sequence (official test: 36)
-  double patch_tether = 3.0;  // rollouts: vertex within this × its patch's rest radius of its
-                              // patch mates' centre (eval/tether.h); 0 = off (official)
+  double patch_tether = 0.0;  // rollouts: vertex within this × its patch's rest radius of its
+                              // patch mates' centre (eval/tether.h); 0 = off (official, default)
 };
 
 struct Config {

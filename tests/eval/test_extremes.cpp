@@ -5,9 +5,12 @@
 // every test: stress scenes (ping-pong, speed, constant wind), the distance bound with known
 // predictors, 100-frame rollouts at winds 0/400/2000 and 5x body speed, degenerate inputs
 // (finite outputs and gradients), float32 vs float64, 10x learning rate, and the CLI.
+#include "dataset/manifest.h"
 #include "dataset/stats.h"
 #include "dataset/synthetic.h"
 #include "dataset/wind.h"
+#include "eval/evaluate.h"
+#include "eval/metrics.h"
 #include "eval/rollout.h"
 #include "eval/stress.h"
 #include "eval/tether.h"
@@ -176,9 +179,10 @@ struct Drifting : Predictor {
 
 TEST(StressScene, TheBoundPassesClothCarriedByTheBodyAndCatchesDrift) {
   const dataset::Sequence src = dataset::make_synthetic_sequence(synthetic_options());
+  const double limit = kStrainAllowance * data_strain(src, 0).p99;
   FollowBody follow;
   for (double speed : {1.0, 5.0}) {
-    const StressResult r = stress_rollout(follow, src, {120, speed, 2000}, "follow");
+    const StressResult r = stress_rollout(follow, src, {120, speed, 2000}, "follow", limit);
     EXPECT_TRUE(r.passed()) << "speed " << speed << " ratio " << r.max_bound_ratio;
     EXPECT_EQ(r.frames, 117);
     EXPECT_LT(r.max_bound_ratio, 0.5);
@@ -188,7 +192,7 @@ TEST(StressScene, TheBoundPassesClothCarriedByTheBodyAndCatchesDrift) {
   EXPECT_LT(data_bound_ratio(src, 0), 0.5);
   EXPECT_GT(data_bound_ratio(src, 0), 0.0);
   Drifting drift;
-  const StressResult r = stress_rollout(drift, src, {120, 1.0, 0}, "drift");
+  const StressResult r = stress_rollout(drift, src, {120, 1.0, 0}, "drift", limit);
   EXPECT_TRUE(r.finite);
   EXPECT_FALSE(r.passed());
   // Reaches the bound (a few units) after roughly bound / 0.5 frames.
@@ -220,13 +224,76 @@ TEST(StressScene, EdgeStretchIsLengthOverRestLength) {
   EXPECT_GE(max_edge_stretch(edges, pulled), 3.0 - 1e-5);
 }
 
+// The ground truth of frame t + 1, every garment scaled by 3 about its own centroid: each
+// edge 3x its real length (strain about 2), the garment still around the body.
+struct Stretched3x : Predictor {
+  std::string name() const override { return "stretched 3x"; }
+  Points step(const dataset::Sequence& seq, int t, const Points&, const Points&, const Points&) override {
+    Points x = garments_at(seq, t + 1);
+    Eigen::Index row = 0;
+    for (const auto& g : seq.info.garments) {
+      auto part = x.middleRows(row, g.num_vertices);
+      const Eigen::RowVector3f centre = part.colwise().mean();
+      part = ((part.rowwise() - centre) * 3.0f).rowwise() + centre;
+      row += g.num_vertices;
+    }
+    return x;
+  }
+};
+
+TEST(StressScene, AGarmentStretched3xFailsTheStrainLimitWithinTheDistanceBound) {
+  const dataset::Sequence src = dataset::make_synthetic_sequence(synthetic_options());
+  const StrainExtremes data = data_strain(src, 0);
+  const double limit = kStrainAllowance * data.p99;
+  ASSERT_LT(limit, 1.0);  // a small ripple: far below a 3x stretch
+  Stretched3x stretched;
+  const StressResult r = stress_rollout(stretched, src, {60, 1.0, 0}, "stretched", limit);
+  ASSERT_EQ(r.frames, 57);
+  EXPECT_TRUE(r.finite);
+  EXPECT_TRUE(r.within_bound()) << "max dist / bound " << r.max_bound_ratio;
+  EXPECT_FALSE(r.within_strain());
+  EXPECT_FALSE(r.passed());
+  EXPECT_EQ(r.first_torn_frame, 0);
+  EXPECT_EQ(r.first_bad_frame, 0);
+  EXPECT_DOUBLE_EQ(r.strain_limit, limit);
+  EXPECT_NEAR(r.max_strain_p99, 2.0, 3 * data.max + 1e-4);  // |3 (1 + e) - 1| for real strain e
+  ASSERT_EQ(r.strain_p99_per_frame.size(), 57u);
+  ASSERT_EQ(r.strain_max_per_frame.size(), 57u);
+  for (size_t k = 0; k < 57; ++k) {
+    EXPECT_GT(r.strain_p99_per_frame[k], limit) << "frame " << k;
+    EXPECT_GE(r.strain_max_per_frame[k], r.strain_p99_per_frame[k]) << "frame " << k;
+  }
+}
+
+TEST(StressScene, TheGroundTruthPassesTheStrainLimit) {
+  const dataset::Sequence src = dataset::make_synthetic_sequence(synthetic_options());
+  const StrainExtremes data = data_strain(src, 0);
+  EXPECT_GT(data.p99, 0.0);
+  EXPECT_GE(data.max, data.p99);
+  // Speed 1 replays the source's own frames (ping-pong), so the rollout's strain is the data's.
+  GroundTruth truth;
+  const StressResult r = stress_rollout(truth, src, {60, 1.0, 0}, "truth", kStrainAllowance * data.p99);
+  EXPECT_TRUE(r.passed()) << "strain p99 " << r.max_strain_p99 << " limit " << r.strain_limit;
+  EXPECT_TRUE(r.within_strain());
+  EXPECT_EQ(r.first_torn_frame, -1);
+  EXPECT_LE(r.max_strain_p99, data.p99 + 1e-9);
+  EXPECT_NEAR(r.max_strain_p99, data.p99, 1e-9);  // 57 frames cover every source frame
+  EXPECT_NEAR(r.max_strain, data.max, 1e-9);
+  // Per frame: p99 and max of edge_strains.
+  const GarmentEdges edges = garment_edges(src);
+  const std::vector<double> e = edge_strains(edges, garments_at(src, 5));
+  const StrainExtremes f = frame_strain(edges, garments_at(src, 5));
+  EXPECT_DOUBLE_EQ(f.p99, quantile(e, 0.99));
+  EXPECT_DOUBLE_EQ(f.max, *std::max_element(e.begin(), e.end()));
+}
+
 // ---- the trained tiny model at the extremes -----------------------------------------------------
 
 TEST_F(Extremes, RolloutsOf100FramesStayFiniteAtExtremeWindAndSpeed) {
   ModelPredictor p("tiny", model_->config, model_->params, stats_);
   std::vector<StressScene> scenes = {{100, 1.0, 0}, {100, 1.0, 400}, {100, 1.0, 2000}, {100, 5.0, -1}};
   for (const auto& s : scenes) {
-    const StressResult r = stress_rollout(p, source_, s, "");
+    const StressResult r = stress_rollout(p, source_, s, "", kStrainAllowance * data_strain(source_, 0).p99);
     EXPECT_TRUE(r.finite) << "wind " << s.wind_strength << " speed " << s.speed << ": non-finite at frame "
                           << r.first_bad_frame;
     EXPECT_EQ(r.frames, 97);
@@ -238,7 +305,7 @@ TEST_F(Extremes, RolloutsOf100FramesStayFiniteAtExtremeWindAndSpeed) {
   }
 }
 
-// The model's rollouts with the patch tether (eval.patch_tether, default 3): every predicted
+// The model's rollouts with the patch tether (eval.patch_tether = 3; off by default): every predicted
 // frame has every vertex within its limit of its patch mates, at 5x body speed too; the
 // untethered rollout of the same model is printed for comparison.
 TEST_F(Extremes, TetheredModelRolloutsKeepEveryVertexNearItsPatch) {
@@ -469,6 +536,22 @@ TEST_F(Extremes, StressCommandPrintsTheTableAndWritesJson) {
     EXPECT_TRUE(r["finite"].get<bool>()) << r["label"];
   }
   EXPECT_EQ(j["precision"]["frames"], 20);
+  // The strain limit: kStrainAllowance x the worst p99 over every sequence of the data set.
+  const dataset::DatasetManifest manifest = dataset::read_manifest((root_ / "data").string());
+  const StrainExtremes data = data_set_strain(manifest);
+  double worst = 0;
+  for (const std::string& id : manifest.all_ids())
+    worst = std::max(worst, data_strain(dataset::read_sequence(manifest.sequence_path(id)), 0).p99);
+  EXPECT_DOUBLE_EQ(data.p99, worst);
+  EXPECT_NEAR(j["data_strain_p99"].get<double>(), data.p99, 1e-12);
+  EXPECT_NEAR(j["strain_limit"].get<double>(), kStrainAllowance * data.p99, 1e-12);
+  EXPECT_NE(text.find("max strain p99 (limit"), std::string::npos) << text;
+  for (const auto& r : j["runs"]) {
+    EXPECT_EQ(r["per_frame"]["strain_p99"].size(), 27u);
+    EXPECT_EQ(r["strain_limit"].get<double>(), j["strain_limit"].get<double>());
+    EXPECT_EQ(r["passed"].get<bool>(),
+              r["within_bound"].get<bool>() && r["within_strain"].get<bool>() && r["finite"].get<bool>());
+  }
   EXPECT_EQ(code == 0, j["passed"].get<bool>()) << text;
   const std::string bad = run("stress --checkpoint " + (root_ / "missing.h5").string(), &code);
   EXPECT_NE(code, 0);

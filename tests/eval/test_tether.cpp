@@ -4,11 +4,13 @@
 #include "dataset/synthetic.h"
 #include "eval/rollout.h"
 #include "eval/tether.h"
+#include "train/config.h"
 
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <limits>
+#include <string>
 
 namespace layersnet::eval {
 namespace {
@@ -151,6 +153,16 @@ TEST(PatchTether, KeepsEveryStepOfARolloutWithinTheLimits) {
     EXPECT_LE(worst_over_limit(structure->all, limit, x), 1.0 + 1e-4);
     EXPECT_NEAR(tether_ratio(structure->all, limit, x), worst_over_limit(structure->all, limit, x), 1e-6);
   }
+}
+
+// Off unless asked for: the code default, and the shipped default / quick configs set
+// nothing; `eval.patch_tether` still turns it on.
+TEST(PatchTether, IsOffByDefaultAndStaysAnOption) {
+  EXPECT_EQ(Config{}.eval.patch_tether, 0.0);
+  const std::string configs = std::string(LAYERSNET_SOURCE_DIR) + "/configs/";
+  for (const char* file : {"default.toml", "quick.toml"})
+    EXPECT_EQ(load_config({configs + file}).eval.patch_tether, 0.0) << file;
+  EXPECT_EQ(load_config({configs + "default.toml"}, {"eval.patch_tether=3"}).eval.patch_tether, 3.0);
 }
 
 }  // namespace
