@@ -465,11 +465,11 @@ void Run::log_progress(int epoch) {
   const double share = outside + window_model_s_ > 0 ? outside / (outside + window_model_s_) : 0;
   char line[512];
   std::snprintf(line, sizeof line,
-                "epoch %d/%d  step %lld  sample %lld/%lld  %.2f samples/s  ETA %s  lr %.3g  loss %.5g "
+                "epoch %d/%d  step %lld  sample %lld/%lld  %.2f samples/s  ETA %s  lr %.3g  loss above floor %.5g "
                 "(vertex %.4g patch %.4g normal %.4g body %.4g layer %.4g orth excess %.4g strain %.4g)  outside model %.0f%%",
                 epoch + 1, tc.epochs, static_cast<long long>(adam_->step_count()), static_cast<long long>(state_.position),
                 static_cast<long long>(train_->num_samples()), rate, duration_text(eta).c_str(),
-                learning_rate_at(tc, epoch), loss.total, loss.vertex, loss.patch, loss.normal, loss.collision_body,
+                learning_rate_at(tc, epoch), loss.total - config_.loss.orthogonality * orth_floor, loss.vertex, loss.patch, loss.normal, loss.collision_body,
                 loss.collision_layer, orth_excess, loss.edge_strain, 100 * share);
   out_ << line << std::endl;
   metric("{\"event\":\"train\",\"epoch\":" + std::to_string(epoch + 1) + ",\"step\":" +

@@ -1,0 +1,26 @@
+#!/usr/bin/env bash
+# Reproduces the shipped model (models/medium/) from scratch: set-up, the medium data set,
+# its statistics, training with configs/medium.toml, packing (weights + statistics + config,
+# no optimizer state) and the evaluation on the medium test split. Idempotent and resumable:
+# the data set resumes, an interrupted run resumes exactly, a finished one is kept.
+set -euo pipefail
+cd "$(dirname "${BASH_SOURCE[0]}")/.."
+bash scripts/setup.sh
+bin=build/bin/layersnet
+data=data/medium
+run=runs/medium
+out=models/medium
+
+"$bin" generate --recipe generate/recipes/medium.json --out "$data"
+[ -f "$data/stats.h5" ] || "$bin" prepare "$data"
+if [ -f "$run/config.toml" ]; then
+  "$bin" train --resume "$run"
+else
+  "$bin" train --config configs/medium.toml --run "$run"
+fi
+mkdir -p "$out"
+"$bin" pack --checkpoint "$run/best.h5" --out "$out/model.h5"
+cp "$run/config.toml" "$out/config.toml"
+cp generate/recipes/medium.json "$out/recipe.json"
+cp "$run/metrics.jsonl" "$out/metrics.jsonl"
+"$bin" eval --checkpoint "$out/model.h5" --dataset "$data" --split test --tether 0 --out "$out/eval"
