@@ -5,6 +5,7 @@
 #include "cli/command_registry.h"
 #include "dataset/manifest.h"
 #include "dataset/stats.h"
+#include "eval/evaluate.h"
 #include "eval/export.h"
 #include "eval/rollout.h"
 #include "train/checkpoint.h"
@@ -55,7 +56,11 @@ int run_export(const ExportCliOptions& o) {
   }
   const dataset::Sequence seq = dataset::read_sequence(manifest.sequence_path(id));
   const int frames = o.frames > 0 ? o.frames : base.eval.frames;
-  const int t0 = o.start_frame >= 2 ? o.start_frame : std::max(2, base.data.first_frame);
+  // The same start as `layersnet eval`: after the file's ramp unless a frame is given.
+  eval::EvalOptions start;
+  start.start_after_ramp = o.start_frame < 2;
+  start.start_frame = o.start_frame >= 2 ? o.start_frame : std::max(2, base.data.first_frame);
+  const int t0 = eval::rollout_start(manifest.sequence_path(id), start).input_frame;
   const eval::Rollout r = eval::rollout(*predictor, seq, t0, frames);
   const int files = eval::export_rollout(o.out, seq, r, o.exp);
   std::printf("export: %s (%s), frames %d..%d predicted by %s: %d %s files", id.c_str(), split.c_str(), r.first_frame,
@@ -77,7 +82,7 @@ LAYERSNET_COMMAND(export, "Write a rollout's predicted and ground-truth meshes (
                     sub.add_option("--split", o->split, "split to take the sequence from (default: eval.split)");
                     sub.add_option("--sequence", o->sequence, "sequence id (default: the split's first)");
                     sub.add_option("--frames", o->frames, "predicted frames (default: eval.frames)");
-                    sub.add_option("--start-frame", o->start_frame, "input frame t0 (default: data.first_frame)");
+                    sub.add_option("--start-frame", o->start_frame, "input frame t0 (default: as eval, the frame before the first one after the file's ramp; data.first_frame without ramp attributes)");
                     sub.add_option("--format", o->exp.format, "obj | ply");
                     sub.add_option("--strip-frames", o->exp.strip_frames, "panels in strip.png (0 = no strip)");
                     sub.add_option("--out", o->out, "output folder");
