@@ -13,14 +13,16 @@ out=models/medium
 
 "$bin" generate --recipe generate/recipes/medium.json --out "$data"
 [ -f "$data/stats.h5" ] || "$bin" prepare "$data"
+mkdir -p "$(dirname "$run")"
 if [ -f "$run/config.toml" ]; then
-  "$bin" train --resume "$run"
+  "$bin" train --resume "$run" 2>&1 | tee -a "$run.log"
 else
-  "$bin" train --config configs/medium.toml --run "$run"
+  "$bin" train --config configs/medium.toml --run "$run" 2>&1 | tee -a "$run.log"
 fi
 mkdir -p "$out"
 "$bin" pack --checkpoint "$run/best.h5" --out "$out/model.h5"
 cp "$run/config.toml" "$out/config.toml"
 cp generate/recipes/medium.json "$out/recipe.json"
 cp "$run/metrics.jsonl" "$out/metrics.jsonl"
+cp "$run.log" "$out/train.log"
 "$bin" eval --checkpoint "$out/model.h5" --dataset "$data" --split test --tether 0 --out "$out/eval"
