@@ -1,6 +1,6 @@
 #pragma once
-// Fused Rotation Invariant Attention (paper eq. 5-7; official attention.py / norm_func.py,
-// reference §2.6) over sparse neighbour lists.
+// Fused Rotation Invariant Attention (paper eq. 5-7; official attention.py / norm_func.py)
+// over sparse neighbour lists.
 //
 // Dimension letters: P receivers (patches), M senders, E edges, H heads, D head width.
 // q, r: (P, H*D); s: (M, H*D); head h uses columns [h*D, (h+1)*D).
@@ -17,7 +17,7 @@
 // Both outputs are differentiable; gradients flow to q, r and s.
 //
 // Head masks: each edge has a kind (0..31) and head h attends to the kinds whose bits are set
-// in head_kinds[h]. LayersNet (§2.4, §2.6): kinds world / mesh (incl. the garment attribute
+// in head_kinds[h]. LayersNet (as the official code): kinds world / mesh (incl. the garment attribute
 // token) / inter (body, wind, gravity); world heads (h even) attend world + inter, mesh
 // heads (h odd) attend mesh; the (s + r) message is summed for world and mesh edges only.
 // layersnet_head_kinds() returns that table. A receiver with no attended edge for a head

@@ -44,7 +44,7 @@ Var<T> rotate3(Tape<T>& tape, const Var<T>& R, const Var<T>& v, bool transpose =
 template <class T>
 Var<T> rot_map_apply(Tape<T>& tape, const Var<T>& W, const Var<T>& R, const Var<T>& v, bool transpose = false);
 
-// Local frames from normals, the official utils/mesh3d.py rotation_from_normals (§2.5):
+// Local frames from normals, the official utils/mesh3d.py rotation_from_normals:
 //   x0 = (1, 0, 0), then x0_c = 1 for every component with |n_c| < 1e-7;
 //   x = normalize(x0 - (n . x0) n);  y = n x x;  R = rows [x; y; n]  (world -> local, R n = e_z
 //   for a unit n).

@@ -1,5 +1,5 @@
 // `layersnet bench dataset_memory DIR`: peak resident memory of one training epoch over a
-// data set much larger than the loader's caches (issue 3 point 7: a 2 GB data set must
+// data set much larger than the loader's caches (goal: a 2 GB data set must
 // iterate in under 1 GB). `--make-gb 2` first writes a synthetic data set of that size.
 #include "cli/command_registry.h"
 #include "dataset/loader.h"

@@ -9,7 +9,7 @@
 //            inference only): x and W rounded to bfloat16, float accumulation; the weights
 //            are packed once (cache) and checked against the cache on every call, as in a
 //            rollout. Its speed-up is fwd0 / bf16; its error is reported against float.
-// Goals (issue 2): forward >= 0.8 of the GEMM rate, backward <= 2.2x the forward time.
+// Goals: forward >= 0.8 of the GEMM rate, backward <= 2.2x the forward time.
 #include "autodiff/bf16_gemm.h"
 #include "autodiff/ops_dense.h"
 #include "cli/command_registry.h"

@@ -1,5 +1,5 @@
 // `layersnet bench scaling`: rollout ms/frame and training step ms of one outfit re-meshed at
-// several garment vertex counts (issue 8 point 2), with the split of where the time goes.
+// several garment vertex counts, with the split of where the time goes.
 //
 // The outfit: two open cylindrical garment grids of fixed metric extent (inner 5.0 x 4.0,
 // outer 6.25 x 4.75 scene units, radii 1.235 / 1.26) around a fixed body (106 x 65 = 6890
@@ -474,7 +474,7 @@ int run_bench_scaling(const ScalingOptions& o) {
 
 }  // namespace
 
-LAYERSNET_BENCH(scaling, "Rollout and training cost vs garment resolution, with the stage split (issue 8 point 2)",
+LAYERSNET_BENCH(scaling, "Rollout and training cost vs garment resolution, with the stage split",
                 [](CLI::App& sub) {
                   auto o = std::make_shared<ScalingOptions>();
                   sub.add_option("--sizes", o->sizes, "target garment vertex counts")->capture_default_str();

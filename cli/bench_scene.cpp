@@ -1,4 +1,4 @@
-// `layersnet bench scene`: cost follows the scene's content (issue 8 point 3). One motion (the
+// `layersnet bench scene`: cost follows the scene's content. One motion (the
 // synthetic outfit of `bench scaling` at --vertices, 3x3-quad patches, body 106 x 65), timed
 // in configurations that each take one part away (model/scene_variants.h):
 //   full         two garments + wind + body near
@@ -250,7 +250,7 @@ int run_bench_scene(const SceneBenchOptions& o) {
 
 }  // namespace
 
-LAYERSNET_BENCH(scene, "Cost of each scene part: one vs two garments, wind, body near/far (issue 8 point 3)",
+LAYERSNET_BENCH(scene, "Cost of each scene part: one vs two garments, wind, body near/far",
                 [](CLI::App& sub) {
                   auto o = std::make_shared<SceneBenchOptions>();
                   sub.add_option("--vertices", o->vertices, "garment vertices of the full scene")->capture_default_str();

@@ -1,4 +1,4 @@
-// `layersnet bench trade`: speed against accuracy over the model knobs (issue 8 point 1).
+// `layersnet bench trade`: speed against accuracy over the model knobs.
 //
 // One-at-a-time variation around a base config (configs/quick.toml): each variant is
 // trained with the same budget (`--budget-epochs`, default: the base config's epochs, so
@@ -63,7 +63,7 @@ struct Variant {
   bool bf16 = false;
 };
 
-// Width keeps the official proportions (reference §2.6, §2.8): FFN hidden = 2·width,
+// Width keeps the official proportions (encoder FFN, decoder MLP): FFN hidden = 2·width,
 // decoder MLP = its input width 12 + 2·width. Heads (8) divide every width here.
 Variant width_variant(int w) {
   return {"width_" + std::to_string(w), "model.width", std::to_string(w),

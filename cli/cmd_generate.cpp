@@ -48,7 +48,7 @@ struct GenerateOptions {
   int threads = 2;
   std::string blender = "blender";
   std::string script;   // generate/make_sequence.py; found next to the program if empty
-  std::string checker;  // check_dlayers_h5.py; the shared one if it exists
+  std::string checker;  // check_dlayers_h5.py; the project's own (dataset/) if empty
 };
 
 // Quality thresholds; why these values: generate/README.md ("Quality gates").
@@ -229,8 +229,7 @@ int run_generate(const GenerateOptions& opt) {
   }
   std::string checker = opt.checker;
   if (checker.empty()) {
-    // The shared validator lives beside the repository: <repo>/../shared/tools.
-    const fs::path beside = find_script("").parent_path() / "../../shared/tools/check_dlayers_h5.py";
+    const fs::path beside = find_script("").parent_path() / "../dataset/check_dlayers_h5.py";
     if (fs::exists(beside)) checker = fs::weakly_canonical(beside).string();
   }
 
@@ -382,6 +381,6 @@ LAYERSNET_COMMAND(generate, "Simulate D-LAYERS-like sequences with Blender's clo
   sub.add_option("--threads", opt->threads, "Blender threads (one Blender process runs at a time)");
   sub.add_option("--blender", opt->blender, "Blender executable");
   sub.add_option("--script", opt->script, "path of generate/make_sequence.py");
-  sub.add_option("--checker", opt->checker, "check_dlayers_h5.py to validate each file (default: the shared one if present)");
+  sub.add_option("--checker", opt->checker, "validator run on each accepted file (default: dataset/check_dlayers_h5.py)");
   return [opt] { return run_generate(*opt); };  // errors: reported by cli/main.cpp
 });

@@ -1,7 +1,7 @@
 #pragma once
 // The one exception type of the data layer. Its message always reads
 //   "<file>: <object path>: <what is wrong>"
-// (the same shape as ../shared/tools/check_dlayers_h5.py) so that a user can go straight
+// (the same shape as the format's validator check_dlayers_h5.py) so that a user can go straight
 // to the offending file and HDF5 object.
 #include <stdexcept>
 #include <string>

@@ -1,6 +1,6 @@
 #pragma once
-// Lazy, memory-bounded iteration over the training samples of a data-set split (issue 3
-// point 7: a data set larger than RAM must still train).
+// Lazy, memory-bounded iteration over the training samples of a data-set split (a data
+// set larger than RAM must still train).
 //
 // Nothing per-frame is read up front: construction opens each sequence once to learn its
 // frame count, then closes it. An epoch is a list of "chunks" — up to chunk_frames sample

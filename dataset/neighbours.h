@@ -1,5 +1,5 @@
 #pragma once
-// Neighbourhoods without all-pairs work (official §2.4), and body vertex normals (§2.5).
+// Neighbourhoods without all-pairs work (as the official code), and body vertex normals (official utils/mesh3d.py).
 //
 // All queries go through a uniform spatial hash grid whose cell equals the query radius
 // (each query visits 27 cells), or a k-d tree (nanoflann) for unbounded nearest-vertex

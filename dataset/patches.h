@@ -1,6 +1,6 @@
 #pragma once
-// Patches from UV (paper §3.1 eq. 2; official `patchwise`, see
-// ../shared/reference/official-implementation.md §1.9).
+// Patches from UV (paper eq. 2; official `patchwise` in
+// datasets/utils/mesh.py).
 //
 // For each panel (UV island, in ascending panel id):
 //   1. each face goes to the grid cell floor(c / patch_size) of its UV centroid c;

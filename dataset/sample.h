@@ -1,7 +1,7 @@
 #pragma once
-// Training samples (issue 3 point 6): the model inputs for (sequence, frame t) and the targets
-// at t+1, following the official per-sample tensors (../shared/reference/
-// official-implementation.md §2.1, §2.2, §2.4, §1.5, §1.6).
+// Training samples: the model inputs for (sequence, frame t) and the targets
+// at t+1, following the official per-sample tensors
+// (patch_layers_dynamic_dataset.py: normalisation, neighbourhoods, wind, attributes).
 //
 // Frames and units. Every position of frame f is relative to the body root translation
 // r_f of the same frame (translation only). Velocities are per frame:

@@ -1,5 +1,5 @@
-// D-LAYERS-H5 sequence reader: every rule of ../shared/spec/dlayers-h5.md is checked here,
-// in the order of ../shared/tools/check_dlayers_h5.py, and the first violation is thrown.
+// D-LAYERS-H5 sequence reader: every rule of the D-LAYERS-H5 format (docs/dlayers-h5.md) is
+// checked here, in the order of the format's validator check_dlayers_h5.py, and the first violation is thrown.
 #include "dataset/sequence.h"
 
 #include <algorithm>

@@ -1,5 +1,5 @@
 #pragma once
-// One D-LAYERS-H5 sequence (../shared/spec/dlayers-h5.md) in memory, and its reader/writer.
+// One D-LAYERS-H5 sequence (docs/dlayers-h5.md) in memory, and its reader/writer.
 //
 // Dimension letters used throughout the data layer:
 //   T frames, N garment vertices, F garment faces, B body vertices, Fb body faces,

@@ -1,5 +1,5 @@
 // D-LAYERS-H5 writer. The in-memory sequence is checked first so that nothing the project
-// writes can fail ../shared/tools/check_dlayers_h5.py.
+// writes can fail the format's validator check_dlayers_h5.py.
 #include "dataset/sequence.h"
 
 #include <cmath>

@@ -1,5 +1,5 @@
 #pragma once
-// Normalisation statistics (spec "Statistics file"; official §1.8 stat.h5).
+// Normalisation statistics (docs/dlayers-h5.md, "Statistics file"; official stat.h5).
 //
 // Quantities, all relative to the body root translation r_t of the same frame (translation
 // only, no rotation), per frame (dt = 1 frame, as the official diff_pos):

@@ -1,8 +1,8 @@
 #pragma once
-// Evaluation of predictors over a split (issue 7 points 1–4, 6): rollouts, per-frame metrics,
+// Evaluation of predictors over a split: rollouts, per-frame metrics,
 // per-sequence means and the summaries of paper Tables 1–3.
 //
-// Aggregation (paper §5.1: "mean of Euclidean errors for each frame, then average the errors
+// Aggregation (paper: "mean of Euclidean errors for each frame, then average the errors
 // across all the frames within each sequence; the final results are the mean of errors from
 // all sequences"; official accuracy_l2_rollout):
 //   frame     mean over the frame's vertices (all garments, or one garment / layer);

@@ -1,5 +1,5 @@
 #pragma once
-// Mesh export of a rollout (issue 7 point 5): predicted and ground-truth meshes per frame as
+// Mesh export of a rollout: predicted and ground-truth meshes per frame as
 // OBJ or PLY (body, each garment) for Blender / MeshLab, and a PNG strip of a few frames.
 //
 // Files in the output folder (frame numbers are the sequence's, 4 digits):

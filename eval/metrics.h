@@ -1,5 +1,5 @@
 #pragma once
-// Per-frame evaluation metrics (paper §5.1; official losses/accuracy.py, reference §4).
+// Per-frame evaluation metrics (the paper's; official losses/accuracy.py).
 //
 // Dimension letters: N garment vertices of all garments (layer order, concatenated),
 // N_g of garment g, B body vertices. Positions are world coordinates in scene units.
@@ -24,7 +24,7 @@
 //                     limit (0.05 m), and the ground-truth floor shows how much it matters.
 //                     Two denominators: rate_outer = colliding / N_outer (the share of
 //                     outer-layer vertices; our headline number) and rate_all = colliding / N
-//                     (what the official per-frame aggregate divides by, reference §4 and
+//                     (what the official per-frame aggregate divides by, see
 //                     model/README.md quirk 9).
 // All comparisons are strict (< 0), no epsilon, as the official code. Non-finite rows (a
 // diverged prediction) never count as collisions but stay in the denominators; the error

@@ -1,5 +1,5 @@
 #pragma once
-// Speed against accuracy (`layersnet bench trade`, issue 8 point 1): the Pareto front of
+// Speed against accuracy (`layersnet bench trade`): the Pareto front of
 // model variants over (ms per frame, error) and the three presets picked from it.
 //
 // Both coordinates are minimised. A point p is dominated when another point q is no worse

@@ -1,5 +1,5 @@
 #pragma once
-// A small software renderer for quick looks at rollouts (issue 7 point 5): orthographic view,
+// A small software renderer for quick looks at rollouts: orthographic view,
 // z-buffered flat-shaded triangles, PNG output (8-bit RGB, zlib).
 //
 // View: looking along +y (front of a z-up scene: x to the right, z up), or along −z for a

@@ -1,5 +1,5 @@
 #pragma once
-// Reports of an evaluation (issue 7 point 5): written to an output folder
+// Reports of an evaluation: written to an output folder
 //   eval.json      every number: settings, per method its summary and per-sequence results
 //   eval.md        Markdown: summary table (paper Table 3 layout), per garment type (Table 2),
 //                  per split T / T+W / L / L+W (Table 1), inner vs outer, error over frames

@@ -1,11 +1,11 @@
 #pragma once
-// Autoregressive rollouts (issue 7 point 1) and the predictors that drive them.
+// Autoregressive rollouts and the predictors that drive them.
 //
 // A rollout of sequence S from input frame t0 for n frames predicts frames t0+1 .. t0+n.
 // It starts from the ground truth at frames t0-2, t0-1, t0 (the model's state needs x_t, v_t,
 // x_{t-1}, v_{t-1}); every later garment state is the predictor's own output, while the body,
 // its root translation and the wind come from the data at every frame (official
-// single_gpu_rollout, reference §4). The model runs without recording (ad::NoRecord).
+// single_gpu_rollout). The model runs without recording (ad::NoRecord).
 //
 // Positions: world coordinates, scene units; garments concatenated in layer order (N, 3).
 #include "autodiff/params.h"

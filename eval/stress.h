@@ -1,5 +1,5 @@
 #pragma once
-// Stability at the extremes (issue 8 point 4): long rollouts of a model under conditions
+// Stability at the extremes: long rollouts of a model under conditions
 // beyond its training data, and float32 against float64 on the same checkpoint.
 //
 // Stress scene. A sequence of F frames built in memory from a real one (T frames):

@@ -9,8 +9,8 @@
 // Why: cloth barely stretches, so a vertex never leaves its patch (the generated data stay
 // within data_tether_ratio = 1.06–2.41 of ρ over 24 sequences); a learned step can, because
 // the decoder's vertex branch integrates each vertex's offset to its patch from the previous
-// output, and an offset it never saw feeds itself (single vertices running away, issue 8
-// point 4).
+// output, and an offset it never saw feeds itself (single vertices running away; eval/README.md,
+// "Stability at the extremes").
 // The centre leaves v out, and the worst vertices are moved first with the centres kept
 // current, so a runaway does not drag its patch mates. Only positions change: the next
 // step's velocities are differences of positions, so the runaway velocity goes too (as in

@@ -1,6 +1,6 @@
 """The MakeHuman body from assimp-testmodels, skinned to a mocap skeleton (bpy).
 
-Recipe (../shared/reference/ground-truth-generation.md): import the Collada body
+Recipe: import the Collada body
 (z up after import, faces -y, feet at z = 0), decimate it, scale the world x10; import
 the BVH clip (CMU clips, or Boxing_Toes with its own skeleton: `Skeleton`); copy its
 armature as the rig, move the rig's joints onto the body's

@@ -12,7 +12,7 @@ layout as in the official code (tried relative to --root and to its parent).
 their chumpy arrays are read without chumpy) or .npz with the same keys
 (v_template, shapedirs, posedirs, J_regressor, weights, kintree_table, f).
 
-Per sequence (facts from ../shared/reference/official-implementation.md 1.2-1.6):
+Per sequence (facts from the official data-loading code):
 - T = seq_end - seq_start; garment frame f <-> motion frame f + seq_start (the correct
   alignment; the official preprocessing adds seq_start twice, harmless iff it is 0).
 - body = human.scale x SMPL(poses, betas, trans) with pose blend shapes, SMPL faces.

@@ -1,4 +1,4 @@
-"""Writes one sequence as D-LAYERS-H5 v1 (../shared/spec/dlayers-h5.md) with h5py.
+"""Writes one sequence as D-LAYERS-H5 v1 (docs/dlayers-h5.md) with h5py.
 
 The file is written to '<path>.tmp' and renamed, so a file at `path` is always complete.
 """

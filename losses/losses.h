@@ -1,5 +1,5 @@
 #pragma once
-// LayersNet training losses (paper eq. 16–19; official definitions: reference §3), on the
+// LayersNet training losses (paper eq. 16–19, as the official losses define them), on the
 // tape, for one sample:
 //
 //   vertex      Σ_v ‖x̂_v − x_v‖² / N                                    (eq. 16, garment vertices)

@@ -314,7 +314,7 @@ ModelInput<double> build_model_input(const SceneWindow& s, const ModelConfig& cf
   in.gravity_rot.resize(9);
   normal_frame(g_raw_t, in.gravity_rot.data());
 
-  // ---- decoder candidates (reference §2.8) -------------------------------------------------------------------
+  // ---- decoder candidates -----------------------------------------------------------------------------------
   decoder_candidates(xt, centre, s.own_patch, s.adj_offsets, s.adj_patches, cfg.decoder_patch_candidates,
                      in.cand_offsets, in.cand_patches);
   validate(in);

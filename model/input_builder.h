@@ -2,7 +2,7 @@
 // SceneWindow (world coordinates) -> ModelInput (root-relative, normalised, neighbour lists,
 // frames): all the non-differentiable preparation of one forward, done outside the tape.
 //
-// What is computed (reference §2.1–2.5, §2.8; decisions in model/README.md):
+// What is computed (as the official code; decisions in model/README.md):
 //   states         [x_t, v_t, x_{t-1}, v_{t-1}] minus the root translation of each frame;
 //                  body [x_{t+1}, v_{t+1}, x_t, v_t] likewise; normalised with the stats.
 //   patch states   mean of member vertex states (raw and normalised).
@@ -27,12 +27,12 @@ namespace layersnet::model {
 
 ModelInput<double> build_model_input(const SceneWindow& scene, const ModelConfig& config);
 
-// Official rotation_from_normals (reference §2.5) of the unit direction of `normal`:
+// Official rotation_from_normals (utils/mesh3d.py) of the unit direction of `normal`:
 // R = rows [x; y; n] (world -> local, n -> e_z), x from (1,0,0) with the |n_c| < 1e-7 rule.
 // A zero vector gives the identity.
 void normal_frame(const double normal[3], double R[9]);
 
-// Decoder candidates (reference §2.8): for each vertex, the k nearest (to x_t) patches
+// Decoder candidates (official patch_decoder.py): for each vertex, the k nearest (to x_t) patches
 // mesh-adjacent to its own patch, kept if own, or closer to the vertex than to the own
 // patch's centre. xt (N, 3), centre (P, 3), own_patch (N), adjacency CSR over P -> CSR over N.
 void decoder_candidates(const std::vector<double>& xt, const std::vector<double>& centre,
@@ -41,7 +41,7 @@ void decoder_candidates(const std::vector<double>& xt, const std::vector<double>
                         std::vector<int32_t>& items);
 
 // 3x3 rotation (row-major, 9 numbers) of a unit quaternion (w, x, y, z); an all-zero
-// quaternion gives the identity (official, reference §1.5).
+// quaternion gives the identity (as the official wind reader).
 void quaternion_to_rotation(const double q[4], double R[9]);
 
 // Normalised sum of incident unit face normals, face normal (v1 - v0) x (v2 - v0).

@@ -115,7 +115,7 @@ struct Streams {
 // Attention logits and normalised edge vectors of one head family.
 //   RIA (eq. 7, official form): logit = scale (q·s + q·r) / (‖r−s‖/2 + eps), weight a/(‖r−s‖ + eps),
 //                               edge vector f = r + s.
-//   TIE (reference §8): f = LayerNorm_per_head(r + s) (no affine), logit = scale q·f, weight a.
+//   TIE (official attention.py): f = LayerNorm_per_head(r + s) (no affine), logit = scale q·f, weight a.
 template <class T>
 struct EdgeTerms {
   Var<T> logits, inv_norm, f;  // (E, G), (E, G) or empty (TIE), (E, G*hd)
@@ -200,7 +200,7 @@ Var<T> inter_messages(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
   return ad::concat_cols(tape, std::span<const Var<T>>(parts));
 }
 
-// One simulator layer (reference §2.6 with the decisions of model/README.md).
+// One simulator layer (official post-LN encoder layer, with the decisions of model/README.md).
 template <class T>
 Streams<T> encoder_layer(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfig& cfg, const ModelDims& m,
                          const Graph<T>& gr, const Var<T>& inter_rot, const Var<T>& is_world, int layer,

@@ -1,5 +1,5 @@
 #pragma once
-// The LayersNet forward pass (paper §3, official wiring: reference §2; decisions in
+// The LayersNet forward pass (the paper's model, wired as the official code; decisions in
 // model/README.md) on the reverse-mode tape.
 //
 //   tokens     patch tokens   FFN_in(mean normalised member states)            (P, d)

@@ -1,6 +1,6 @@
 #pragma once
 // Sizes and switches of the LayersNet model. Defaults are the official implementation's
-// (../shared/reference/official-implementation.md §2); configs/*.toml override them
+// (its model config, layersnet.py); configs/*.toml override them
 // under [model]. Distances are in scene units (D-LAYERS: 10 units per metre).
 #include <string>
 

@@ -8,7 +8,7 @@
 //   All matrices are row-major, flattened into std::vector<T>.
 //
 // Positions are in scene units and ROOT-RELATIVE: the body's root translation of the same
-// frame is subtracted from every garment and body position (official code, reference §1.4),
+// frame is subtracted from every garment and body position (as the official code does),
 // so shifting the whole scene changes no entry here except `root_*` tokens' absolute parts
 // (which are velocities/accelerations, also shift-free).
 //
@@ -42,7 +42,7 @@ struct ModelInput {
   std::vector<int32_t> p2v_offsets, p2v_vertices;
   // Mean of member vertex states: raw (P, 12) and normalised (P, 12).
   std::vector<T> patch_state, patch_norm;
-  // Mesh-adjacent patches (incl. the patch itself, reference §1.9).  CSR over P, items in [0, P).
+  // Mesh-adjacent patches (incl. the patch itself, as official `patchwise`).  CSR over P, items in [0, P).
   std::vector<int32_t> mesh_offsets, mesh_senders;
   // World neighbours: centre distance < R, minus mesh-adjacent ones.  CSR over P, items in [0, P).
   std::vector<int32_t> world_offsets, world_senders;
@@ -50,7 +50,7 @@ struct ModelInput {
   std::vector<int32_t> patch_attr;
 
   // ---- attribute tokens ------------------------------------------------------------------------
-  std::vector<T> attr;  // (A, 5) min-max normalised garment attributes (reference §1.6)
+  std::vector<T> attr;  // (A, 5) min-max normalised garment attributes (official read_garment_attributes)
 
   // ---- body tokens --------------------------------------------------------------------------------
   // Normalised body state [x_{t+1}, v_{t+1}, x_t, v_t] of each referenced body vertex.  (U, 12)
@@ -74,7 +74,7 @@ struct ModelInput {
   // Nearest body token of each patch centre / vertex, or -1 when farther than R_b
   // (then: identity frame, zero body feature).                         (P) / (N) in [-1, U)
   std::vector<int32_t> patch_body, vertex_body;
-  // Candidate patches of each vertex that passed the validity test (<= 4, reference §2.8).
+  // Candidate patches of each vertex that passed the validity test (<= 4, as the official decoder).
   // CSR over N, items in [0, P). An empty row gives a zero relative acceleration.
   std::vector<int32_t> cand_offsets, cand_patches;
 

@@ -1,5 +1,5 @@
 #pragma once
-// dataset::TrainingSample (issue 3's sample builder) -> ModelInput<float>.
+// dataset::TrainingSample (the sample builder of dataset/sample.h) -> ModelInput<float>.
 //
 // The sample already holds root-relative normalised states, patch structure, world edges,
 // body neighbours and nearest body vertices; this adds what only the model needs:

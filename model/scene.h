@@ -27,7 +27,7 @@ struct SceneWindow {
   std::vector<double> x_tp1;              // (N, 3) at t+1: ground truth (may be empty at inference)
   std::vector<int32_t> faces;             // (F, 3) global vertex ids, counter-clockwise
   std::vector<int32_t> garment_offsets;   // (G + 1) vertex ranges, inner -> outer (last = outer)
-  std::vector<double> garment_attr;       // (G, 5) normalised attributes (reference §1.6)
+  std::vector<double> garment_attr;       // (G, 5) normalised attributes (official read_garment_attributes)
 
   // ---- patches (static per garment set) ---------------------------------------------------------
   std::vector<int32_t> v2p_offsets, v2p_patches;    // CSR over N

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Stability at the extremes, full version (issue 8 point 4; the short version is
+# Stability at the extremes, full version (the short version is
 # tests/eval/test_extremes.cpp in CI):
 #   1. `layersnet stress` on the default model, on every test and validation sequence of the
 #      default data: 600-frame rollouts at wind 0, 400, 2000 and with the body at 5x speed

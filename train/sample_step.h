@@ -1,6 +1,6 @@
 #pragma once
-// One sample of the noisy-rollout curriculum (paper §3.2; official EncoderDecoder.
-// forward_train, reference §3), and the one-step validation error.
+// One sample of the paper's noisy-rollout curriculum (official EncoderDecoder.
+// forward_train), and the one-step validation error.
 //
 // Curriculum. The official loop draws k ~ U{0..ngs}, runs ngs steps without gradient of
 // which steps 0..k-1 take the ground-truth state (their predictions are dropped) and steps

@@ -2,7 +2,7 @@
 // The samples of one data-set split as the training loop needs them: a fixed list of
 // (sequence, t) that the loop shuffles itself (GSL generator, checkpointed), frame windows
 // read on demand, and samples built from a window whose garment frames may have been
-// replaced by the model's own predictions (the noisy-rollout curriculum, paper §3.2).
+// replaced by the model's own predictions (the paper's noisy-rollout curriculum).
 //
 // Thread use: everything that touches files (read_window: HDF5 is not thread-safe, LRU of
 // open files, structure cache) runs on the calling thread; build() is pure and may run on

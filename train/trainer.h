@@ -1,5 +1,5 @@
 #pragma once
-// `layersnet train`: the training loop of a run directory (issue 6).
+// `layersnet train`: the training loop of a run directory.
 //
 // Run directory:
 //   config.toml                  the fully resolved config (written first; --resume reads it)

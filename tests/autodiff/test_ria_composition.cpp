@@ -1,4 +1,4 @@
-// The graph ops composed the way LayersNet's RotAttention uses them (reference §2.6): the
+// The graph ops composed the way LayersNet's RotAttention uses them (official encoder layer): the
 // fused attention for self messages, its edge weights on the inter edges, the hidden-space
 // rotation phi(R) = W R W^T, an MLP in the local frame and phi(R)^T back, summed per patch.
 // Checked end to end with a directional derivative (JAX check_grads style), then in float
@@ -43,7 +43,7 @@ struct LayerGraph {
 };
 
 // Inputs: q, r (P, H*D); s = [patch senders; inter senders] (M + P*K, H*D); W (D, 3);
-// Rot (P*K, 9); A (D, D); c (1, D). Returns the (P, H*D) attention output of §2.6.
+// Rot (P*K, 9); A (D, D); c (1, D). Returns the (P, H*D) attention output of RotAttention.
 template <class T>
 Var<T> rot_attention(Tape<T>& t, const std::vector<Var<T>>& v, const LayerGraph& g) {
   const auto& [q, r, s, W, rot, A, c] = std::array<Var<T>, 7>{v[0], v[1], v[2], v[3], v[4], v[5], v[6]};

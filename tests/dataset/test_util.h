@@ -1,6 +1,6 @@
 #pragma once
 // Helpers shared by the data-layer tests: a fresh temporary folder per test and a runner
-// for ../shared/tools/check_dlayers_h5.py.
+// for the project's Python validator (dataset/check_dlayers_h5.py, independent of the C++ reader).
 #include <gtest/gtest.h>
 
 #include <cstdio>
@@ -34,13 +34,7 @@ inline std::filesystem::path temp_path(const std::string& name) {
 inline TempDir temp_dir(const std::string& name) { return TempDir(temp_path(name)); }
 
 inline std::string validator_path() {
-  return std::string(LAYERSNET_SOURCE_DIR) + "/../shared/tools/check_dlayers_h5.py";
-}
-
-// True when /usr/bin/python3 has h5py and the shared validator exists.
-inline bool validator_available() {
-  if (!std::filesystem::exists(validator_path())) return false;
-  return std::system("/usr/bin/python3 -c 'import h5py, numpy' >/dev/null 2>&1") == 0;
+  return std::string(LAYERSNET_SOURCE_DIR) + "/dataset/check_dlayers_h5.py";
 }
 
 // Runs the validator on `path`; returns its exit status and its output in `out`.

@@ -1,4 +1,4 @@
-// Stability at the extremes (issue 8 point 4), short CI version. The full version on the
+// Stability at the extremes, short CI version. The full version on the
 // default model is scripts/extremes.sh (`layersnet stress` with 600 frames).
 //
 // One tiny model (configs/tiny.toml) trained for one epoch on a synthetic data set serves

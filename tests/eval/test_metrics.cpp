@@ -1,4 +1,4 @@
-// Metric code on hand-built cases with known answers (issue 7 point 7).
+// Metric code on hand-built cases with known answers.
 #include "dataset/neighbours.h"
 #include "eval/metrics.h"
 

@@ -14,7 +14,7 @@ import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 CONVERTER = os.path.join(HERE, "../../generate/convert_dlayers.py")
-CHECKER = os.path.join(HERE, "../../../shared/tools/check_dlayers_h5.py")  # shared/ beside the repo
+CHECKER = os.path.join(HERE, "../../dataset/check_dlayers_h5.py")
 T = 4
 
 
@@ -82,8 +82,7 @@ def main():
         inner[seq] = (garment(sdir, "tee", 1.0, rng), trans)
         garment(sdir, "jacket", 1.5, rng)
     subprocess.run([sys.executable, CONVERTER, "--root", root, "--smpl-dir", smpl, "--out", out], check=True)
-    if os.path.exists(CHECKER):
-        subprocess.run([sys.executable, CHECKER, out], check=True)
+    subprocess.run([sys.executable, CHECKER, out], check=True)
     with open(os.path.join(out, "dataset.json")) as fh:
         assert json.load(fh)["splits"] == ids
     with h5py.File(os.path.join(out, "00002.h5"), "r") as f:

@@ -124,7 +124,7 @@ TEST(Losses, VertexNormalsGradcheck) {
 }
 
 // With orthonormal columns, ‖W Wᵀ − I_d‖² = d − c and ‖Wᵀ W − I_c‖² = 0 for W (d, c): official
-// sizes give 16·(16 − 3) + (128 − 3) = 333 at initialisation (reference §2.7); our default
+// sizes give 16·(16 − 3) + (128 − 3) = 333 at initialisation (the official penalty's floor); our default
 // decoder map with k = 8 channels (c = 24) gives 16·13 + (128 − 24) = 312.
 class OrthogonalityFloor : public ::testing::TestWithParam<std::pair<int, double>> {};
 INSTANTIATE_TEST_SUITE_P(DecoderChannels, OrthogonalityFloor,

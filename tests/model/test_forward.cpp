@@ -21,7 +21,7 @@ TEST(ModelParams, OfficialSizesMatchTheReferenceCount) {
   for (const auto& e : ps.entries()) total += e.size();
   std::cout << "official-size parameters: registered " << total << ", official layout "
             << official_parameter_count(c) << "\n";
-  EXPECT_EQ(official_parameter_count(c), 1018719);  // reference §2.9: 873,728 + 144,991
+  EXPECT_EQ(official_parameter_count(c), 1018719);  // counted from the official code's shapes: 873,728 + 144,991
   // Our decoder RET map has k channels (d, 3k) where the official one is (d, 3).
   // We do not register the last layer's dead r_proj, s_proj and res_norms.
   EXPECT_EQ(total, 1018719 - 2 * (128 * 128 + 128) - 4 * 128 + 128 * 3 * (c.decoder_ret_channels - 1));

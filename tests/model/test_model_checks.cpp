@@ -1,4 +1,4 @@
-// Issue 5 point 7: whole-model gradient check, every parameter trained, translation
+// Whole-model gradient check, every parameter trained, translation
 // invariance, and absent parts (wind, second garment) skip exactly their work.
 #include "losses/losses.h"
 #include "autodiff/ops_dense.h"

@@ -1,4 +1,4 @@
-// Issue 5 point 8 (small bound): the model overfits one sample with Adam.
+// Overfit, small bound: the model overfits one sample with Adam.
 #include "autodiff/optim.h"
 #include "losses/losses.h"
 #include "model/layersnet.h"

@@ -1,4 +1,4 @@
-// Issue 5 point 8: on one sequence of a tiny synthetic data set (dataset/synthetic.h, two
+// Overfit: on one sequence of a tiny synthetic data set (dataset/synthetic.h, two
 // garment layers, statistics computed by the data layer) the model drives the training
 // loss down with Adam, cycling over every training window of the sequence.
 //
