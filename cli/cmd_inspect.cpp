@@ -12,6 +12,7 @@
 #include "dataset/sequence.h"
 #include "dataset/stats.h"
 #include "dataset/wind.h"
+#include "eval/metrics.h"
 #include "train/config.h"
 #include "train/train_data.h"
 
@@ -39,27 +40,17 @@ struct InspectOptions {
 // the ramp.
 struct MarginTally {
   std::vector<float> body, layer;
-  void add_frame(const SequenceInfo& info, const FrameWindow& w, int t) {
+  // layout: eval::garment_layout(info); inner_faces: eval::inner_faces(layout).
+  void add_frame(const SequenceInfo& info, const layersnet::eval::GarmentLayout& layout, const Faces& inner_faces,
+                 const FrameWindow& w, int t) {
     const Points body_x = w.body_at(t, info.num_body_vertices);
-    const Points body_n = vertex_normals(body_x, info.body_faces);
-    std::vector<Points> g;
-    for (int k = 0; k < info.num_garments(); ++k) g.push_back(w.garment_at(k, t, info.garments[k].num_vertices));
-    for (const Points& x : g) signed_distances(x, body_x, body_n, body);
-    if (g.size() < 2) return;
-    int64_t inner_rows = 0;
-    for (size_t k = 0; k + 1 < g.size(); ++k) inner_rows += g[k].rows();
-    Points inner(inner_rows, 3);
-    Faces inner_faces(0, 3);
-    int64_t row = 0;
-    for (size_t k = 0; k + 1 < g.size(); ++k) {
-      inner.middleRows(row, g[k].rows()) = g[k];
-      Faces f = info.garments[k].faces.array() + static_cast<int32_t>(row);
-      Faces joined(inner_faces.rows() + f.rows(), 3);
-      joined << inner_faces, f;
-      inner_faces = joined;
-      row += g[k].rows();
-    }
-    signed_distances(g.back(), inner, vertex_normals(inner, inner_faces), layer);
+    Points x(layout.num_vertices(), 3);
+    for (int k = 0; k < layout.num_garments(); ++k)
+      x.middleRows(layout.offsets[k], info.garments[k].num_vertices) = w.garment_at(k, t, info.garments[k].num_vertices);
+    signed_distances(x, body_x, vertex_normals(body_x, info.body_faces), body);
+    if (!layout.layered()) return;
+    const Points inner = x.topRows(layout.num_vertices() - layout.outer_vertices());
+    signed_distances(x.bottomRows(layout.outer_vertices()), inner, vertex_normals(inner, inner_faces), layer);
   }
   static void signed_distances(const Points& x, const Points& anchors, const Points& normals, std::vector<float>& out) {
     const NearestBody nb = nearest_body(x, anchors);
@@ -72,7 +63,8 @@ struct MarginTally {
       return;
     }
     std::sort(d.begin(), d.end());
-    auto pct = [&](double q) { return d[static_cast<size_t>(q * static_cast<double>(d.size() - 1))]; };
+    const std::vector<double> sorted(d.begin(), d.end());
+    auto pct = [&](double q) { return layersnet::eval::quantile(sorted, q); };
     std::printf("  %s (%zu vertex-frames): percentiles 1/5/10/50 %.3f / %.3f / %.3f / %.3f; share closer than", what,
                 d.size(), pct(0.01), pct(0.05), pct(0.10), pct(0.5));
     for (float eps : {0.001f, 0.01f, 0.03f, 0.05f, 0.06f, 0.1f}) {
@@ -203,7 +195,9 @@ int run_inspect(const InspectOptions& o) {
       const SequenceInfo& info = f.info();
       const int first = std::min(info.settled_frame(), info.num_frames - 1);
       const FrameWindow w = f.read_frames(first, info.num_frames - first);
-      for (int t = first; t < info.num_frames; ++t) tally.add_frame(info, w, t);
+      const layersnet::eval::GarmentLayout layout = layersnet::eval::garment_layout(info);
+      const Faces inner = layersnet::eval::inner_faces(layout);
+      for (int t = first; t < info.num_frames; ++t) tally.add_frame(info, layout, inner, w, t);
     }
     std::printf("ground-truth collision distances, scene units (the collision loss penalises d < loss.collision_eps):\n");
     MarginTally::print("garment to nearest body vertex", tally.body);

@@ -81,8 +81,6 @@ GarmentLayout garment_layout(const dataset::SequenceInfo& info) {
   return L;
 }
 
-namespace {
-// Inner garments' faces re-indexed into the concatenation of garments [0, G-1).
 Faces inner_faces(const GarmentLayout& L) {
   Eigen::Index rows = 0;
   for (int g = 0; g + 1 < L.num_garments(); ++g) rows += L.faces[g].rows();
@@ -94,7 +92,6 @@ Faces inner_faces(const GarmentLayout& L) {
   }
   return out;
 }
-}  // namespace
 
 FrameMetrics frame_metrics(const GarmentLayout& L, const Eigen::Ref<const Points>& pred,
                            const Eigen::Ref<const Points>& truth, const Eigen::Ref<const Points>& body,

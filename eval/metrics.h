@@ -67,6 +67,8 @@ struct GarmentLayout {
   int outer_vertices() const { return layered() ? offsets.back() - offsets[offsets.size() - 2] : 0; }
 };
 GarmentLayout garment_layout(const dataset::SequenceInfo& info);
+// Inner garments' faces re-indexed into the concatenation of garments [0, G-1): (F_i, 3).
+Faces inner_faces(const GarmentLayout& layout);
 
 // Everything one frame contributes (numerators and denominators, so sums stay exact).
 struct FrameMetrics {

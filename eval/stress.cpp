@@ -1,7 +1,7 @@
 // Stress scenes, distance bounds and the float32/float64 comparison (see stress.h).
 #include "eval/stress.h"
 
-#include "dataset/h5.h"
+#include "dataset/sequence.h"
 #include "dataset/neighbours.h"
 #include "dataset/wind.h"
 #include "eval/evaluate.h"
@@ -138,16 +138,8 @@ double speed_factor_for_top_speed(const dataset::Sequence& source, int first, do
 }
 
 int settled_frame(const std::string& sequence_path, int missing) {
-  const dataset::h5::Handle file = dataset::h5::open_file(sequence_path);
-  const dataset::h5::Where where{sequence_path, "/"};
-  int f = 0;
-  bool found = false;
-  for (const char* name : {"rest_frames", "ramp_frames"})
-    if (dataset::h5::has_attr(file.get(), name)) {
-      f += static_cast<int>(std::lround(dataset::h5::read_float_attr(file.get(), name, where)));
-      found = true;
-    }
-  return found ? f : missing;
+  const int settled = dataset::SequenceFile(sequence_path).info().settled_frame();
+  return settled > 0 ? settled : missing;
 }
 
 std::vector<double> garment_graph_diameters(const dataset::Sequence& seq) {
@@ -280,7 +272,8 @@ StrainExtremes data_set_strain(const dataset::DatasetManifest& manifest) {
   StrainExtremes worst;
   for (const std::string& id : manifest.all_ids()) {
     const std::string path = manifest.sequence_path(id);
-    const StrainExtremes s = data_strain(dataset::read_sequence(path), settled_frame(path));
+    const dataset::Sequence seq = dataset::read_sequence(path);
+    const StrainExtremes s = data_strain(seq, seq.info.settled_frame());
     worst = {std::max(worst.p99, s.p99), std::max(worst.max, s.max)};
   }
   return worst;

@@ -72,8 +72,8 @@ double body_top_speed(const dataset::Sequence& source, int first, double speed, 
 // top speed reached.
 double speed_factor_for_top_speed(const dataset::Sequence& source, int first, double multiple, int frames);
 
-// First frame after the generator's rest and ramp: the root attributes rest_frames +
-// ramp_frames that `layersnet generate` writes; `missing` when the file has neither.
+// First frame after the generator's rest and ramp (SequenceInfo::settled_frame, from the root
+// attributes rest_frames + ramp_frames that `layersnet generate` writes); `missing` when it is 0.
 int settled_frame(const std::string& sequence_path, int missing = 0);
 
 // Builds the stress sequence (see above). Throws std::invalid_argument for frames < 4,

@@ -2,6 +2,7 @@
 #include "dataset/synthetic.h"
 #include "eval/evaluate.h"
 #include "eval/rollout.h"
+#include "test_predictors.h"
 #include "model/layersnet.h"
 #include "model/params_layout.h"
 #include "model/sample_input.h"
@@ -94,16 +95,7 @@ TEST(Rollout, FeedsItsOwnPredictionsBackAndStartsFromGroundTruth) {
   EXPECT_THROW(rollout(rec, seq, 9, 3), std::invalid_argument);
 }
 
-// Predicts the ground truth, then NaN from rollout frame 1 on.
-struct Diverging : Predictor {
-  int calls = 0;
-  std::string name() const override { return "diverging"; }
-  Points step(const dataset::Sequence& seq, int t, const Points&, const Points&, const Points&) override {
-    Points x = garments_at(seq, t + 1);
-    if (calls++ >= 1) x(0, 0) = std::numeric_limits<float>::quiet_NaN();
-    return x;
-  }
-};
+using testing::Diverging;
 
 TEST(Rollout, ADivergedRolloutIsMarkedAndLeftOutOfTheSummary) {
   const dataset::Sequence seq = sequence(2);

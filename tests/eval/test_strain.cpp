@@ -5,6 +5,7 @@
 #include "eval/evaluate.h"
 #include "eval/rollout.h"
 #include "eval/stress.h"
+#include "test_predictors.h"
 
 #include <gtest/gtest.h>
 
@@ -99,16 +100,7 @@ TEST(Strain, AGarmentScaledByTenPercentHasTenPercentStrain) {
   EXPECT_NEAR(score_rollout(seq, rollout(scaled, seq, 2, 4), {}).strain_p99, 0.0, 1e-6);
 }
 
-// Predicts the ground truth, then NaN from rollout frame 1 on.
-struct Diverging : Predictor {
-  int calls = 0;
-  std::string name() const override { return "diverging"; }
-  Points step(const dataset::Sequence& seq, int t, const Points&, const Points&, const Points&) override {
-    Points x = garments_at(seq, t + 1);
-    if (calls++ >= 1) x(0, 0) = std::numeric_limits<float>::quiet_NaN();
-    return x;
-  }
-};
+using testing::Diverging;
 
 TEST(Strain, ADivergedRolloutLeavesNoNaNInTheSummary) {
   const dataset::Sequence seq = sequence(2, 10);
