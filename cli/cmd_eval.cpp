@@ -40,6 +40,8 @@ struct EvalCliOptions {
   std::string out = "eval_out";
   std::string precision = "float32";  // of the models' linear products: float32 | bf16 | float32,bf16
   std::vector<double> tethers;        // patch tether factors (eval/tether.h); empty: each checkpoint's own
+  std::vector<std::string> constraints;  // "on" / "off" (eval/constraints.h); empty: each checkpoint's own
+  std::vector<std::string> settings;     // "eval.KEY=VALUE" for every model
 };
 
 // The checkpoint of a run directory (train/trainer.h): best.h5, else the newest
@@ -102,17 +104,28 @@ int run_eval(EvalCliOptions o) {
     const Config c = parse_config_text(read_checkpoint_config(o.checkpoints[i]), o.checkpoints[i]);
     const std::string name = i < o.names.size() ? o.names[i] : default_name(o.checkpoints[i], c);
     const std::vector<double> tethers = o.tethers.empty() ? std::vector<double>{c.eval.patch_tether} : o.tethers;
-    for (const double tether : tethers)
-      for (const ad::MatmulPrecision precision : precisions) {
-        char prefix[48] = "";  // in front: tables cut long names
-        if (o.tethers.size() > 1) std::snprintf(prefix, sizeof prefix, "[t%g] ", tether);
-        auto model = eval::load_model_predictor(o.checkpoints[i], prefix + name, fallback.get());
-        model->set_matmul_precision(precision);  // bf16: the name gets "[bf16] " in front
-        model->set_patch_tether(tether);
-        owned.push_back(std::move(model));
-        kinds.push_back("model");
-        paths.push_back(o.checkpoints[i]);
-      }
+    std::vector<bool> constrained;
+    for (const auto& setting : o.constraints) constrained.push_back(setting == "on");
+    if (constrained.empty()) constrained.push_back(c.eval.constraints);
+    for (const bool constrain : constrained)
+      for (const double tether : tethers)
+        for (const ad::MatmulPrecision precision : precisions) {
+          std::string prefix;  // in front: tables cut long names
+          if (o.constraints.size() > 1 && constrain) prefix += "[constrained] ";
+          if (o.tethers.size() > 1) {
+            char tag[48];
+            std::snprintf(tag, sizeof tag, "[t%g] ", tether);
+            prefix += tag;
+          }
+          auto model = eval::load_model_predictor(o.checkpoints[i], prefix + name, fallback.get());
+          model->set_matmul_precision(precision);  // bf16: the name gets "[bf16] " in front
+          model->apply_eval_settings(o.settings);
+          model->set_patch_tether(tether);
+          model->set_constraints(constrain);
+          owned.push_back(std::move(model));
+          kinds.push_back("model");
+          paths.push_back(o.checkpoints[i]);
+        }
   }
   owned.push_back(std::make_unique<eval::ConstantVelocity>());
   owned.push_back(std::make_unique<eval::FollowBody>());
@@ -194,6 +207,15 @@ LAYERSNET_COMMAND(eval, "Roll out checkpoints and baselines over a split; error,
                     sub.add_option("--tether", o->tethers,
                                    "patch tether factors, e.g. 0,3: every model once per factor (default: each checkpoint's eval.patch_tether)")
                         ->delimiter(',');
+                    sub.add_option("--constraints", o->constraints,
+                                   "cloth constraints after every predicted frame (edge strain limit, collision shell; "
+                                   "eval/constraints.h): on, off, or off,on for every model both ways (default: each "
+                                   "checkpoint's eval.constraints)")
+                        ->delimiter(',')
+                        ->check(CLI::IsMember({"on", "off"}));
+                    sub.add_option("--set", o->settings,
+                                   "rollout setting for every model, e.g. --set eval.strain_limit=0.2 (eval.* keys; "
+                                   "`layersnet config --keys` lists them)");
                     sub.add_option("--threads", o->threads, "OpenMP threads of the evaluation rollouts (0 = all; speed is measured at 1 and 2)");
                     sub.add_option("--out", o->out, "output folder for eval.json, eval.md and plots");
                     sub.add_option("--precision", o->precision,

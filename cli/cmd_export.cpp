@@ -26,6 +26,7 @@ struct ExportCliOptions {
   int frames = -1;
   int start_frame = -1;
   std::string out = "export_out";
+  std::vector<std::string> settings;  // "eval.KEY=VALUE" rollout settings of the checkpoint
   eval::ExportOptions exp;
 };
 
@@ -46,7 +47,9 @@ int run_export(const ExportCliOptions& o) {
     std::unique_ptr<dataset::NormalisationStats> fallback;
     if (std::filesystem::exists(manifest.stats_path()))
       fallback = std::make_unique<dataset::NormalisationStats>(dataset::read_stats(manifest.stats_path()));
-    predictor = eval::load_model_predictor(o.checkpoint, o.checkpoint, fallback.get());
+    auto model = eval::load_model_predictor(o.checkpoint, o.checkpoint, fallback.get());
+    model->apply_eval_settings(o.settings);
+    predictor = std::move(model);
   } else if (o.baseline == "constant-velocity") {
     predictor = std::make_unique<eval::ConstantVelocity>();
   } else if (o.baseline == "follow-body") {
@@ -86,6 +89,8 @@ LAYERSNET_COMMAND(export, "Write a rollout's predicted and ground-truth meshes (
                     sub.add_option("--format", o->exp.format, "obj | ply");
                     sub.add_option("--strip-frames", o->exp.strip_frames, "panels in strip.png (0 = no strip)");
                     sub.add_option("--out", o->out, "output folder");
+                    sub.add_option("--set", o->settings,
+                                   "rollout setting of the checkpoint, e.g. --set eval.constraints=false (eval.* keys)");
                     return [o] {
                       if (o->checkpoint.empty() && o->dataset.empty()) {
                         std::fprintf(stderr, "layersnet export: give --checkpoint or --dataset\n");

@@ -4,7 +4,8 @@
 // besides the body) at the first frame after the generator's ramp. Reads headers and that
 // frame only unless --check, which reads every frame and checks every value against the spec.
 // --margins measures the ground truth's collision distances as the collision loss sees them,
-// to choose loss.collision_eps from the data.
+// to choose loss.collision_eps and eval.collision_shell from the data, and the ground truth's
+// edge strain, to choose eval.strain_limit.
 #include "cli/command_registry.h"
 #include "dataset/manifest.h"
 #include "dataset/patches.h"
@@ -40,6 +41,7 @@ struct InspectOptions {
 // the ramp.
 struct MarginTally {
   std::vector<float> body, layer;
+  std::vector<float> stretch;  // edge length / rest length − 1, signed (garments with a rest shape)
   // layout: eval::garment_layout(info); inner_faces: eval::inner_faces(layout).
   void add_frame(const SequenceInfo& info, const layersnet::eval::GarmentLayout& layout, const Faces& inner_faces,
                  const FrameWindow& w, int t) {
@@ -48,6 +50,15 @@ struct MarginTally {
     for (int k = 0; k < layout.num_garments(); ++k)
       x.middleRows(layout.offsets[k], info.garments[k].num_vertices) = w.garment_at(k, t, info.garments[k].num_vertices);
     signed_distances(x, body_x, vertex_normals(body_x, info.body_faces), body);
+    for (int k = 0; k < layout.num_garments(); ++k) {
+      const GarmentMesh& g = info.garments[k];
+      if (g.rest.rows() != g.num_vertices) continue;
+      for (const auto& [a, b] : mesh_edges(g.faces)) {
+        const float rest = (g.rest.row(a) - g.rest.row(b)).norm();
+        if (rest > 0)
+          stretch.push_back((x.row(layout.offsets[k] + a) - x.row(layout.offsets[k] + b)).norm() / rest - 1.f);
+      }
+    }
     if (!layout.layered()) return;
     const Points inner = x.topRows(layout.num_vertices() - layout.outer_vertices());
     signed_distances(x.bottomRows(layout.outer_vertices()), inner, vertex_normals(inner, inner_faces), layer);
@@ -202,6 +213,15 @@ int run_inspect(const InspectOptions& o) {
     std::printf("ground-truth collision distances, scene units (the collision loss penalises d < loss.collision_eps):\n");
     MarginTally::print("garment to nearest body vertex", tally.body);
     MarginTally::print("outer garment to nearest inner vertex", tally.layer);
+    std::sort(tally.stretch.begin(), tally.stretch.end());
+    if (!tally.stretch.empty()) {
+      const std::vector<double> s(tally.stretch.begin(), tally.stretch.end());
+      std::printf("ground-truth edge strain (length / rest length - 1; eval.strain_limit bounds its magnitude), %zu "
+                  "edge-frames: percentiles", s.size());
+      for (double q : {0.001, 0.01, 0.05, 0.5, 0.95, 0.99, 0.999})
+        std::printf(" %g: %+.3f", 100 * q, layersnet::eval::quantile(s, q));
+      std::printf("\n");
+    }
   }
   return 0;
 }

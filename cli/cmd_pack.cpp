@@ -1,7 +1,7 @@
 // `layersnet pack --checkpoint C --out F`: a trained model to ship — weights, normalisation
 // statistics and the resolved config of a checkpoint, without the optimizer state (Adam's
 // moments are twice the weights). Every command that takes --checkpoint reads the result;
-// `train --resume` refuses it.
+// `train --resume` refuses it. --set changes rollout settings (eval.*) in the packed config.
 #include "cli/command_registry.h"
 #include "train/checkpoint.h"
 
@@ -13,12 +13,17 @@ namespace {
 struct PackOptions {
   std::string checkpoint;
   std::string out;
+  std::vector<std::string> settings;  // "eval.KEY=VALUE" written into the packed config
 };
 
 int run_pack(const PackOptions& o) {
   layersnet::LoadedModel m = layersnet::load_model(o.checkpoint);
   m.checkpoint.has_optimizer = false;
   m.checkpoint.state.rng.clear();
+  if (!o.settings.empty()) {
+    for (const auto& s : o.settings) layersnet::apply_rollout_override(m.config, s);
+    m.checkpoint.config_toml = layersnet::to_toml(m.config);
+  }
   const std::filesystem::path parent = std::filesystem::path(o.out).parent_path();
   if (!parent.empty()) std::filesystem::create_directories(parent);
   layersnet::write_checkpoint(o.out, m.params, m.checkpoint);
@@ -36,5 +41,7 @@ LAYERSNET_COMMAND(pack, "Write a checkpoint's weights, statistics and config wit
                     auto o = std::make_shared<PackOptions>();
                     sub.add_option("--checkpoint", o->checkpoint, "checkpoint to pack (e.g. runs/medium/best.h5)")->required();
                     sub.add_option("--out", o->out, "model file to write (e.g. models/medium/model.h5)")->required();
+                    sub.add_option("--set", o->settings,
+                                   "rollout setting stored with the model, e.g. --set eval.constraints=true (eval.* keys only)");
                     return [o] { return run_pack(*o); };
                   });

@@ -40,6 +40,7 @@ struct StressCliOptions {
   int first_frame = -1;
   int threads = 0;
   double tether = -1;  // < 0: the checkpoint config's eval.patch_tether
+  std::vector<std::string> settings;  // "eval.KEY=VALUE" rollout settings
   std::string json_path;
 };
 
@@ -85,6 +86,7 @@ int run_stress(const StressCliOptions& o) {
   if (o.threads > 0) omp_set_num_threads(o.threads);
   Eigen::setNbThreads(1);  // the ops own the threads (as bench model); nested GEMM threads only contend
   LoadedModel m = load_model(o.checkpoint);
+  for (const auto& s : o.settings) apply_rollout_override(m.config, s);
   if (o.tether >= 0) m.config.eval.patch_tether = o.tether;
   const std::string root = o.dataset.empty() ? m.config.data.dataset : o.dataset;
   const dataset::DatasetManifest manifest = dataset::read_manifest(root);
@@ -120,6 +122,11 @@ int run_stress(const StressCliOptions& o) {
                 m.config.eval.patch_tether, first, source.info.num_frames - 1, data_tether);
   else
     std::printf("patch tether off (eval.patch_tether = 0); the data's own max offset / rest patch radius: %.3f\n", data_tether);
+  if (m.config.eval.constraints)
+    std::printf("cloth constraints on: edge strain <= %g, collision shell %g units, %d passes per frame (eval/constraints.h)\n",
+                m.config.eval.strain_limit, m.config.eval.collision_shell, m.config.eval.constraint_iterations);
+  else
+    std::printf("cloth constraints off (eval.constraints = false)\n");
   // The strain limit comes from the whole data set's ground truth, not the one source: any
   // sequence's real cloth may stretch that much.
   const eval::StrainExtremes data_strain = eval::data_set_strain(manifest);
@@ -187,6 +194,7 @@ int run_stress(const StressCliOptions& o) {
   json j = {{"checkpoint", o.checkpoint}, {"dataset", root},        {"sequence", id},
             {"runs", json::array()},     {"data_bound_ratio", data_ratio},
             {"patch_tether", m.config.eval.patch_tether}, {"data_tether_ratio", data_tether},
+            {"constraints", m.config.eval.constraints},
             {"strain_limit", strain_limit}, {"strain_allowance", eval::kStrainAllowance},
             {"data_strain_p99", data_strain.p99}, {"data_strain_max", data_strain.max}};
   for (const auto& r : results) j["runs"].push_back(result_json(r));
@@ -245,6 +253,8 @@ LAYERSNET_COMMAND(stress, "Long rollouts at extreme wind and body speed, and flo
                     sub.add_option("--threads", o->threads, "OpenMP threads (0 = all)");
                     sub.add_option("--tether", o->tether,
                                    "patch tether factor for these rollouts (0 = off; default: the checkpoint's eval.patch_tether)");
+                    sub.add_option("--set", o->settings,
+                                   "rollout setting, e.g. --set eval.constraints=false (eval.* keys; default: the checkpoint's)");
                     sub.add_option("--json", o->json_path, "write the results as JSON to this file");
                     return [o] { return run_stress(*o); };
                   });

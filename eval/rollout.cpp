@@ -133,6 +133,14 @@ void NetworkPredictor<T>::begin(const dataset::Sequence& seq) {
   structure_ = dataset::build_structure(seq.info, sample_options_.patch_size);
   tether_limit_.clear();
   if (config_.eval.patch_tether > 0) tether_limit_ = tether_limits(seq, *structure_, config_.eval.patch_tether);
+  constraints_.reset();
+  if (config_.eval.constraints) constraints_ = std::make_unique<const ClothConstraints>(seq, constraint_settings(config_.eval));
+}
+
+template <class T>
+void NetworkPredictor<T>::apply_eval_settings(const std::vector<std::string>& assignments) {
+  for (const auto& a : assignments) apply_rollout_override(config_, a);
+  structure_.reset();
 }
 
 template <class T>
@@ -143,6 +151,7 @@ Points NetworkPredictor<T>::step(const dataset::Sequence& seq, int t, const Poin
       rollout_sample(seq, t, x_prev2, x_prev, x_now, stats_, structure_, sample_options_);
   Points x = predict_positions(tape_, params_, config_, sample, stats_);
   if (!tether_limit_.empty()) apply_tether(structure_->all, tether_limit_, x);
+  if (constraints_) constraints_->apply(seq.body_at(t + 1), x);
   return x;
 }
 

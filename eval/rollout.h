@@ -10,6 +10,7 @@
 // Positions: world coordinates, scene units; garments concatenated in layer order (N, 3).
 #include "autodiff/params.h"
 #include "autodiff/tape.h"
+#include "eval/constraints.h"
 #include "dataset/sample.h"
 #include "dataset/sequence.h"
 #include "dataset/stats.h"
@@ -84,7 +85,8 @@ Points predict_positions(ad::Tape<T>& tape, ad::ParamStore<T>& params, const Con
 // The network as a predictor, in precision T (float, or double for the precision check):
 // builds the dataset sample of the rollout's window (rollout_sample), the model input, runs
 // forward without recording; world x_{t+1} = predicted root-relative x + r_{t+1}, then the
-// patch tether when the config's eval.patch_tether > 0 (eval/tether.h).
+// patch tether when the config's eval.patch_tether > 0 (eval/tether.h), then the cloth
+// constraints when eval.constraints is set (eval/constraints.h).
 template <class T>
 class NetworkPredictor : public Predictor {
  public:
@@ -94,6 +96,11 @@ class NetworkPredictor : public Predictor {
   const Config& config() const { return config_; }
   // Patch tether factor of the following sequences (eval.patch_tether; 0 = off).
   void set_patch_tether(double factor) { config_.eval.patch_tether = factor; structure_.reset(); }
+  // Cloth constraints on or off for the following sequences (eval.constraints).
+  void set_constraints(bool on) { config_.eval.constraints = on; structure_.reset(); }
+  // Rollout settings "eval.KEY=VALUE" for the following sequences; any other section throws
+  // ConfigError (the model's keys are fixed by its weights).
+  void apply_eval_settings(const std::vector<std::string>& assignments);
 
  protected:
   NetworkPredictor(Config config, ad::ParamStore<T> params, dataset::NormalisationStats stats);
@@ -106,6 +113,7 @@ class NetworkPredictor : public Predictor {
   dataset::SampleOptions sample_options_;
   std::shared_ptr<const dataset::SequenceStructure> structure_;
   std::vector<float> tether_limit_;  // (N,) eval.patch_tether > 0 only
+  std::unique_ptr<const ClothConstraints> constraints_;  // eval.constraints only
 };
 extern template class NetworkPredictor<float>;
 extern template class NetworkPredictor<double>;

@@ -58,6 +58,11 @@ struct EvalConfig {
   int frames = 36;  // predicted frames per sequence (official test: 36)
   double patch_tether = 0.0;  // rollouts: vertex within this × its patch's rest radius of its
                               // patch mates' centre (eval/tether.h); 0 = off (official, default)
+  // Cloth constraints after every predicted frame (eval/constraints.h; not in the paper).
+  bool constraints = false;
+  double strain_limit = 0.05;      // largest |edge length / rest length − 1| kept
+  double collision_shell = 0.05;   // scene units kept outside the body and the inner layer (0 = none)
+  int constraint_iterations = 8;   // projection passes per frame
 };
 
 struct Config {
@@ -86,6 +91,9 @@ Config parse_config_text(const std::string& toml_text, const std::string& origin
 void apply_saved_config_defaults(Config& config, const std::string& saved_toml_text);
 // Applies one "section.key=value" (value in TOML syntax; a bare word is a string).
 void apply_override(Config& config, const std::string& assignment);
+// The same for a trained model's config: only rollout settings (eval.*) may change; any other
+// key throws ConfigError (it is fixed by the weights and the training).
+void apply_rollout_override(Config& config, const std::string& assignment);
 
 // Settings that load but are likely mistakes, one message each naming the keys and the fix
 // (`config` and `train` print them as warnings). Empty when none. Today: neighbour radii too

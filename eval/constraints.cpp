@@ -1,0 +1,90 @@
+// Cloth constraints (see constraints.h).
+#include "eval/constraints.h"
+
+#include "dataset/neighbours.h"
+#include "eval/metrics.h"
+#include "eval/stress.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace layersnet::eval {
+namespace {
+
+// Relative slack under which a constraint counts as met (float round-off of earlier moves).
+constexpr float kTolerance = 1e-4f;
+
+// Moves each vertex x_v (rows [begin, end)) whose nearest anchor a (within reach) has
+// (x_v − a)·n_a < shell onto the shell along n_a; returns how many moved.
+int64_t push_out(dataset::Points& x, Eigen::Index begin, Eigen::Index end, const Eigen::Ref<const dataset::Points>& anchors,
+                 const dataset::Points& normals, float shell, float reach) {
+  if (end <= begin || anchors.rows() == 0) return 0;
+  const dataset::NearestBody nearest = dataset::nearest_body(x.middleRows(begin, end - begin), anchors);
+  int64_t moved = 0;
+  for (Eigen::Index v = begin; v < end; ++v) {
+    const Eigen::Index i = v - begin;
+    if (nearest.distance[i] > reach) continue;
+    const Eigen::RowVector3f n = normals.row(nearest.index[i]);
+    const float depth = shell - (x.row(v) - anchors.row(nearest.index[i])).dot(n);
+    if (depth > kTolerance * shell) {  // a vertex already on the shell stays unmoved
+      x.row(v) += depth * n;
+      ++moved;
+    }
+  }
+  return moved;
+}
+
+}  // namespace
+
+ConstraintSettings constraint_settings(const EvalConfig& eval) {
+  ConstraintSettings s;
+  s.strain_limit = eval.strain_limit;
+  s.shell = eval.collision_shell;
+  s.iterations = eval.constraint_iterations;
+  return s;
+}
+
+ClothConstraints::ClothConstraints(const dataset::Sequence& seq, const ConstraintSettings& settings)
+    : settings_(settings), reach_(static_cast<float>(settings.reach_m) * seq.info.scale), body_faces_(seq.info.body_faces) {
+  const GarmentEdges edges = garment_edges(seq);
+  for (size_t e = 0; e < edges.rows.size(); ++e)
+    if (edges.rest[e] > 0) {
+      edges_.emplace_back(static_cast<int32_t>(edges.rows[e].first), static_cast<int32_t>(edges.rows[e].second));
+      rest_.push_back(static_cast<float>(edges.rest[e]));
+    }
+  const GarmentLayout layout = garment_layout(seq.info);
+  outer_begin_ = layout.num_vertices() - layout.outer_vertices();
+  if (layout.layered()) inner_faces_ = inner_faces(layout);
+}
+
+ConstraintMoves ClothConstraints::apply(const Eigen::Ref<const dataset::Points>& body, dataset::Points& x) const {
+  ConstraintMoves moves;
+  if (!x.allFinite()) return moves;
+  const auto shell = static_cast<float>(settings_.shell);
+  const dataset::Points body_normals =
+      shell > 0 ? dataset::vertex_normals(body, body_faces_) : dataset::Points(0, 3);
+  const float lo = 1.f - static_cast<float>(settings_.strain_limit), hi = 1.f + static_cast<float>(settings_.strain_limit);
+  for (int pass = 0; pass < settings_.iterations; ++pass) {
+    if (settings_.strain_limit > 0)
+      for (size_t e = 0; e < edges_.size(); ++e) {
+        const auto [a, b] = edges_[e];
+        const Eigen::RowVector3f d = x.row(b) - x.row(a);
+        const float length = d.norm();
+        const float target = std::clamp(length, lo * rest_[e], hi * rest_[e]);
+        if (std::abs(length - target) <= kTolerance * rest_[e] || length == 0.f) continue;
+        const Eigen::RowVector3f half = 0.5f * (length - target) / length * d;
+        x.row(a) += half;
+        x.row(b) -= half;
+        ++moves.edges;
+      }
+    if (shell <= 0) continue;
+    moves.body += push_out(x, 0, x.rows(), body, body_normals, shell, reach_);
+    if (outer_begin_ > 0 && outer_begin_ < x.rows()) {
+      const dataset::Points inner = x.topRows(outer_begin_);
+      moves.layer += push_out(x, outer_begin_, x.rows(), inner, dataset::vertex_normals(inner, inner_faces_), shell, reach_);
+    }
+  }
+  return moves;
+}
+
+}  // namespace layersnet::eval

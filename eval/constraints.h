@@ -1,0 +1,63 @@
+#pragma once
+// Cloth constraints on each predicted frame of a rollout: an edge-length limit, and a collision
+// shell outside the body and between the layers, projected as in position-based dynamics.
+//
+// After the network predicts x_{t+1} (world, scene units), each of `iterations` passes
+//   1. brings every garment edge back within [1 − s, 1 + s] × its rest length (Gauss–Seidel
+//      over the edges in a fixed order, both ends moved equally), s = strain_limit;
+//   2. moves every garment vertex x whose nearest body vertex h (body of frame t+1, vertex
+//      normal n) lies within `reach` and (x − h)·n < shell along n onto (x − h)·n = shell;
+//   3. does the same for every outer-layer vertex against the nearest inner-layer vertex and
+//      the inner mesh's normal there.
+// The collision steps come last, so a frame ends outside the body and the inner layer.
+// Why: the network's vertex branch integrates each vertex's offset from its patch, and in a
+// self-fed rollout these offsets drift frame by frame into stretched, crumpled cloth that sinks
+// into the body and the layer below (docs/decisions.md, "Cloth constraints"); real cloth
+// barely stretches and stays outside. Only positions change: the next step's velocities are
+// differences of positions, so a projected frame also feeds back consistent velocities.
+// Deterministic for any thread count (sequential passes).
+#include "dataset/sequence.h"
+#include "train/config.h"
+
+#include <cstdint>
+#include <utility>
+#include <vector>
+
+namespace layersnet::eval {
+
+struct ConstraintSettings {
+  double strain_limit = 0.05;    // s: largest |edge length / rest length − 1| kept; 0 = no edge step
+  double shell = 0.05;           // scene units kept outside the body and the inner layer; 0 = no collision steps
+  double reach_m = 0.05;         // metres (× the file's scale): farther anchors say nothing about the side
+  int iterations = 8;
+};
+
+// What one apply() moved.
+struct ConstraintMoves {
+  int64_t edges = 0;         // edge corrections (over all passes)
+  int64_t body = 0;          // vertices pushed out of the body (over all passes)
+  int64_t layer = 0;         // outer vertices pushed out of the inner layer (over all passes)
+};
+
+// The settings of a config's [eval] section (eval.strain_limit, collision_shell, constraint_iterations).
+ConstraintSettings constraint_settings(const EvalConfig& eval);
+
+class ClothConstraints {
+ public:
+  // Edges and rest lengths from the sequence's garments (rest template, else frame 0).
+  ClothConstraints(const dataset::Sequence& seq, const ConstraintSettings& settings);
+  // Projects x (N, 3, world, layer order) in place against the body of frame t (B, 3). A frame
+  // with a non-finite value is left as it is (the rollout reports the divergence).
+  ConstraintMoves apply(const Eigen::Ref<const dataset::Points>& body, dataset::Points& x) const;
+
+ private:
+  ConstraintSettings settings_;
+  float reach_ = 0;                                 // scene units
+  std::vector<std::pair<int32_t, int32_t>> edges_;  // rows of x
+  std::vector<float> rest_;                         // (E,) scene units, > 0
+  dataset::Faces body_faces_;
+  int32_t outer_begin_ = 0;                         // first outer-layer row; N when not layered
+  dataset::Faces inner_faces_;                      // inner garments' faces, rows [0, outer_begin_)
+};
+
+}  // namespace layersnet::eval

@@ -1,0 +1,183 @@
+// Cloth constraints (eval/constraints.h): cloth that already holds them is not moved; stretched
+// edges come back within the limit; vertices inside the body or the inner layer are pushed onto
+// the shell; and a model's rollout with eval.constraints keeps every frame within them.
+#include "dataset/neighbours.h"
+#include "dataset/synthetic.h"
+#include "eval/constraints.h"
+#include "eval/metrics.h"
+#include "eval/rollout.h"
+#include "eval/stress.h"
+#include "model/params_layout.h"
+#include "train/config.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numeric>
+
+namespace layersnet::eval {
+namespace {
+
+// Two tubes (radius 1.5 and 1.75 scene units) around a body cylinder of radius 1.2.
+dataset::Sequence tubes() {
+  dataset::SyntheticOptions o;
+  o.garments = 2;
+  o.frames = 8;
+  return dataset::make_synthetic_sequence(o);
+}
+
+double worst_strain(const dataset::Sequence& seq, const Points& x) {
+  const std::vector<double> s = edge_strains(garment_edges(seq), x);
+  return *std::max_element(s.begin(), s.end());
+}
+
+// (x − a)·n_a with a the nearest anchor (within reach) of x and n_a its vertex normal.
+double signed_distance(const Eigen::RowVector3f& x, const Points& anchors, const dataset::Faces& faces) {
+  const Points normals = dataset::vertex_normals(anchors, faces);
+  const dataset::NearestBody nb = dataset::nearest_body(x, anchors);
+  return (x - anchors.row(nb.index[0])).dot(normals.row(nb.index[0]));
+}
+
+TEST(ClothConstraints, ClothThatHoldsThemIsNotMoved) {
+  const dataset::Sequence seq = tubes();
+  ConstraintSettings s;
+  s.strain_limit = 1.1 * worst_strain(seq, garments_at(seq, 3));  // the data's own strain fits
+  ASSERT_GT(s.strain_limit, 0.0);
+  const ClothConstraints constraints(seq, s);
+  Points x = garments_at(seq, 3);
+  const Points before = x;
+  const ConstraintMoves moves = constraints.apply(seq.body_at(3), x);
+  EXPECT_EQ(moves.edges + moves.body + moves.layer, 0);
+  EXPECT_EQ(x, before);
+}
+
+TEST(ClothConstraints, StretchedEdgesComeBackWithinTheLimit) {
+  const dataset::Sequence seq = tubes();
+  ConstraintSettings s;
+  s.strain_limit = 0.05;
+  s.shell = 0;  // edges only
+  s.iterations = 40;
+  Points x = garments_at(seq, 3);
+  // Every other vertex pulled 0.3 units sideways: crumpled, stretched cloth.
+  for (Eigen::Index v = 0; v < x.rows(); v += 2) x(v, 0) += 0.3f;
+  ASSERT_GT(worst_strain(seq, x), 0.2);
+  const ConstraintMoves moves = ClothConstraints(seq, s).apply(seq.body_at(3), x);
+  EXPECT_GT(moves.edges, 0);
+  EXPECT_LE(worst_strain(seq, x), s.strain_limit + 0.01);
+}
+
+TEST(ClothConstraints, FewPassesStillShrinkTheWorstStrain) {
+  const dataset::Sequence seq = tubes();
+  ConstraintSettings s;
+  s.shell = 0;
+  s.iterations = 1;
+  Points x = garments_at(seq, 3);
+  for (Eigen::Index v = 0; v < x.rows(); v += 2) x(v, 0) += 0.3f;
+  const double before = worst_strain(seq, x);
+  ClothConstraints(seq, s).apply(seq.body_at(3), x);
+  EXPECT_LT(worst_strain(seq, x), 0.75 * before);
+}
+
+TEST(ClothConstraints, AVertexInsideTheBodyEndsOnTheShell) {
+  const dataset::Sequence seq = tubes();
+  ConstraintSettings s;
+  s.strain_limit = 0;  // collisions only
+  s.shell = 0.05;
+  const Points body = seq.body_at(3);
+  const Points body_normals = dataset::vertex_normals(body, seq.info.body_faces);
+  Points x = garments_at(seq, 3);
+  const Points before = x;
+  const Eigen::Index v = 5, h = 20;  // an inner-garment vertex, moved 0.1 inside body vertex h
+  x.row(v) = body.row(h) - 0.1f * body_normals.row(h);
+  ASSERT_LT(signed_distance(x.row(v), body, seq.info.body_faces), 0.0);
+  const ConstraintMoves moves = ClothConstraints(seq, s).apply(body, x);
+  EXPECT_EQ(moves.body, 1);
+  EXPECT_NEAR(signed_distance(x.row(v), body, seq.info.body_faces), s.shell, 1e-5);
+  for (Eigen::Index u = 0; u < x.rows(); ++u) {
+    if (u == v) continue;
+    ASSERT_EQ(x.row(u), before.row(u)) << u;
+  }
+}
+
+TEST(ClothConstraints, AnOuterVertexInsideTheInnerLayerEndsOnTheShell) {
+  const dataset::Sequence seq = tubes();
+  ConstraintSettings s;
+  s.strain_limit = 0;
+  s.shell = 0.05;
+  Points x = garments_at(seq, 3);
+  const GarmentLayout layout = garment_layout(seq.info);
+  const Eigen::Index outer_begin = layout.offsets[1];
+  const Points inner = x.topRows(outer_begin);
+  const Faces faces = inner_faces(layout);
+  const Points inner_normals = dataset::vertex_normals(inner, faces);
+  const Eigen::Index v = outer_begin + 7, y = 9;
+  x.row(v) = inner.row(y) - 0.1f * inner_normals.row(y);
+  ASSERT_LT(signed_distance(x.row(v), inner, faces), 0.0);
+  const ConstraintMoves moves = ClothConstraints(seq, s).apply(seq.body_at(3), x);
+  EXPECT_EQ(moves.layer, 1);
+  EXPECT_NEAR(signed_distance(x.row(v), x.topRows(outer_begin), faces), s.shell, 1e-5);
+  // The shell is the same rule the layer-collision metric counts: no collision left.
+  EXPECT_EQ(count_layer_collisions(x.bottomRows(x.rows() - outer_begin), x.topRows(outer_begin), faces), 0);
+}
+
+TEST(ClothConstraints, ANonFiniteFrameIsLeftForTheRolloutToReport) {
+  const dataset::Sequence seq = tubes();
+  Points x = garments_at(seq, 3);
+  x(4, 1) = std::numeric_limits<float>::quiet_NaN();
+  const ConstraintMoves moves = ClothConstraints(seq, ConstraintSettings{}).apply(seq.body_at(3), x);
+  EXPECT_EQ(moves.edges + moves.body + moves.layer, 0);
+  EXPECT_TRUE(std::isnan(x(4, 1)));
+}
+
+// A randomly initialised model crumples the cloth at once; with eval.constraints every frame
+// of its rollout stays near the strain limit and outside the body.
+TEST(ClothConstraints, AModelRolloutWithThemKeepsTheCloth) {
+  const dataset::Sequence seq = tubes();
+  Config c = load_config({std::string(LAYERSNET_SOURCE_DIR) + "/configs/tiny.toml"});
+  dataset::NormalisationStats st;
+  auto model = [&](bool constrained) {
+    ad::ParamStore<float> ps;
+    model::register_params(ps, c.model);
+    model::init_params(ps, c.model, 3);
+    auto m = std::make_unique<ModelPredictor>("tiny", c, std::move(ps), st);
+    m->set_constraints(constrained);
+    return m;
+  };
+  const Rollout free_run = rollout(*model(false), seq, 2, 5);
+  const Rollout held = rollout(*model(true), seq, 2, 5);
+  ASSERT_EQ(held.frames.size(), 5u);
+  auto mean_strain = [&](const Points& x) {
+    const std::vector<double> strain = edge_strains(garment_edges(seq), x);
+    return std::accumulate(strain.begin(), strain.end(), 0.0) / static_cast<double>(strain.size());
+  };
+  const double free_strain = mean_strain(free_run.frames.back());
+  EXPECT_GT(free_strain, 0.5);
+  const Config defaults;
+  for (size_t k = 0; k < held.frames.size(); ++k) {
+    // Eight passes do not fully undo a random network's mess (the collision steps come last),
+    // but they keep the mean near the limit, against ~1 without them.
+    EXPECT_LE(mean_strain(held.frames[k]), 2 * defaults.eval.strain_limit) << k;
+    EXPECT_LT(mean_strain(held.frames[k]), free_strain / 5) << k;
+    EXPECT_EQ(count_body_collisions(held.frames[k], seq.body_at(held.first_frame + static_cast<int>(k)),
+                                    seq.info.body_faces, 0.5),
+              0)
+        << k;
+  }
+  // A trained model's settings override per rollout; other keys are fixed by the weights.
+  auto m = model(true);
+  EXPECT_NO_THROW(m->apply_eval_settings({"eval.strain_limit=0.2"}));
+  EXPECT_THROW(m->apply_eval_settings({"model.width=8"}), ConfigError);
+}
+
+TEST(ClothConstraints, OffInThePapersConfigOnInTheProjectsModels) {
+  const std::string configs = std::string(LAYERSNET_SOURCE_DIR) + "/configs/";
+  EXPECT_FALSE(Config{}.eval.constraints);
+  EXPECT_FALSE(load_config({configs + "paper.toml"}).eval.constraints);
+  EXPECT_TRUE(load_config({configs + "default.toml"}).eval.constraints);
+  EXPECT_TRUE(load_config({configs + "medium.toml"}).eval.constraints);
+}
+
+}  // namespace
+}  // namespace layersnet::eval
