@@ -13,6 +13,7 @@
 #include "dataset/sequence.h"
 #include "dataset/stats.h"
 #include "dataset/wind.h"
+#include "eval/constraints.h"
 #include "eval/metrics.h"
 #include "train/config.h"
 #include "train/train_data.h"
@@ -42,6 +43,7 @@ struct InspectOptions {
 struct MarginTally {
   std::vector<float> body, layer;
   std::vector<float> stretch;  // edge length / rest length − 1, signed (garments with a rest shape)
+  std::vector<float> fold;     // far-corner distance of adjacent triangles / its rest value − 1
   // layout: eval::garment_layout(info); inner_faces: eval::inner_faces(layout).
   void add_frame(const SequenceInfo& info, const layersnet::eval::GarmentLayout& layout, const Faces& inner_faces,
                  const FrameWindow& w, int t) {
@@ -53,11 +55,12 @@ struct MarginTally {
     for (int k = 0; k < layout.num_garments(); ++k) {
       const GarmentMesh& g = info.garments[k];
       if (g.rest.rows() != g.num_vertices) continue;
-      for (const auto& [a, b] : mesh_edges(g.faces)) {
+      auto ratio = [&](int32_t a, int32_t b, std::vector<float>& out) {
         const float rest = (g.rest.row(a) - g.rest.row(b)).norm();
-        if (rest > 0)
-          stretch.push_back((x.row(layout.offsets[k] + a) - x.row(layout.offsets[k] + b)).norm() / rest - 1.f);
-      }
+        if (rest > 0) out.push_back((x.row(layout.offsets[k] + a) - x.row(layout.offsets[k] + b)).norm() / rest - 1.f);
+      };
+      for (const auto& [a, b] : mesh_edges(g.faces)) ratio(a, b, stretch);
+      for (const auto& [a, b] : layersnet::eval::far_corners(g.faces)) ratio(a, b, fold);
     }
     if (!layout.layered()) return;
     const Points inner = x.topRows(layout.num_vertices() - layout.outer_vertices());
@@ -67,6 +70,15 @@ struct MarginTally {
     const NearestBody nb = nearest_body(x, anchors);
     for (Eigen::Index i = 0; i < x.rows(); ++i)
       out.push_back((x.row(i) - anchors.row(nb.index[i])).dot(normals.row(nb.index[i])));
+  }
+  static void print_ratios(const char* what, std::vector<float> r) {
+    if (r.empty()) return;
+    std::sort(r.begin(), r.end());
+    const std::vector<double> sorted(r.begin(), r.end());
+    std::printf("ground-truth %s, %zu frames x pairs: percentiles", what, sorted.size());
+    for (double q : {0.001, 0.01, 0.05, 0.5, 0.95, 0.99, 0.999})
+      std::printf(" %g: %+.3f", 100 * q, layersnet::eval::quantile(sorted, q));
+    std::printf("\n");
   }
   static void print(const char* what, std::vector<float> d) {
     if (d.empty()) {
@@ -213,15 +225,9 @@ int run_inspect(const InspectOptions& o) {
     std::printf("ground-truth collision distances, scene units (the collision loss penalises d < loss.collision_eps):\n");
     MarginTally::print("garment to nearest body vertex", tally.body);
     MarginTally::print("outer garment to nearest inner vertex", tally.layer);
-    std::sort(tally.stretch.begin(), tally.stretch.end());
-    if (!tally.stretch.empty()) {
-      const std::vector<double> s(tally.stretch.begin(), tally.stretch.end());
-      std::printf("ground-truth edge strain (length / rest length - 1; eval.strain_limit bounds its magnitude), %zu "
-                  "edge-frames: percentiles", s.size());
-      for (double q : {0.001, 0.01, 0.05, 0.5, 0.95, 0.99, 0.999})
-        std::printf(" %g: %+.3f", 100 * q, layersnet::eval::quantile(s, q));
-      std::printf("\n");
-    }
+    MarginTally::print_ratios("edge strain (length / rest length - 1; eval.strain_limit bounds its magnitude)", tally.stretch);
+    MarginTally::print_ratios("far-corner distance of triangles sharing an edge / rest - 1 (eval.fold_limit bounds "
+                              "its shortening)", tally.fold);
   }
   return 0;
 }

@@ -5,8 +5,11 @@
 #include "eval/metrics.h"
 #include "eval/stress.h"
 
+#include "eval/rollout.h"
+
 #include <algorithm>
 #include <cmath>
+#include <map>
 
 namespace layersnet::eval {
 namespace {
@@ -36,9 +39,25 @@ int64_t push_out(dataset::Points& x, Eigen::Index begin, Eigen::Index end, const
 
 }  // namespace
 
+std::vector<std::pair<int32_t, int32_t>> far_corners(const dataset::Faces& faces) {
+  std::map<std::pair<int32_t, int32_t>, int32_t> first_opposite;  // edge (u < v) -> corner of its first face
+  std::vector<std::pair<int32_t, int32_t>> out;
+  for (Eigen::Index f = 0; f < faces.rows(); ++f)
+    for (int c = 0; c < 3; ++c) {
+      const int32_t a = faces(f, c), b = faces(f, (c + 1) % 3), opposite = faces(f, (c + 2) % 3);
+      const auto [it, fresh] = first_opposite.emplace(std::minmax(a, b), opposite);
+      if (!fresh && it->second >= 0 && it->second != opposite) {
+        out.emplace_back(it->second, opposite);
+        it->second = -1;  // a third face on the edge (non-manifold) adds nothing
+      }
+    }
+  return out;
+}
+
 ConstraintSettings constraint_settings(const EvalConfig& eval) {
   ConstraintSettings s;
   s.strain_limit = eval.strain_limit;
+  s.fold_limit = eval.fold_limit;
   s.shell = eval.collision_shell;
   s.iterations = eval.constraint_iterations;
   return s;
@@ -52,6 +71,17 @@ ClothConstraints::ClothConstraints(const dataset::Sequence& seq, const Constrain
       edges_.emplace_back(static_cast<int32_t>(edges.rows[e].first), static_cast<int32_t>(edges.rows[e].second));
       rest_.push_back(static_cast<float>(edges.rest[e]));
     }
+  const Points rest = rest_garments(seq);
+  Eigen::Index offset = 0;
+  for (const dataset::GarmentMesh& mesh : seq.info.garments) {
+    for (const auto& [a, b] : far_corners(mesh.faces)) {
+      const float length = (rest.row(offset + a) - rest.row(offset + b)).norm();
+      if (length <= 0) continue;
+      folds_.emplace_back(static_cast<int32_t>(offset + a), static_cast<int32_t>(offset + b));
+      fold_rest_.push_back(length);
+    }
+    offset += mesh.num_vertices;
+  }
   const GarmentLayout layout = garment_layout(seq.info);
   outer_begin_ = layout.num_vertices() - layout.outer_vertices();
   if (layout.layered()) inner_faces_ = inner_faces(layout);
@@ -77,6 +107,19 @@ ConstraintMoves ClothConstraints::apply(const Eigen::Ref<const dataset::Points>&
         x.row(b) -= half;
         ++moves.edges;
       }
+    if (settings_.fold_limit > 0) {
+      const float shortest = 1.f - static_cast<float>(settings_.fold_limit);
+      for (size_t q = 0; q < folds_.size(); ++q) {
+        const auto [a, b] = folds_[q];
+        const Eigen::RowVector3f d = x.row(b) - x.row(a);
+        const float length = d.norm(), target = shortest * fold_rest_[q];
+        if (length >= target * (1.f - kTolerance) || length == 0.f) continue;
+        const Eigen::RowVector3f half = 0.5f * (length - target) / length * d;
+        x.row(a) += half;
+        x.row(b) -= half;
+        ++moves.folds;
+      }
+    }
     if (shell <= 0) continue;
     moves.body += push_out(x, 0, x.rows(), body, body_normals, shell, reach_);
     if (outer_begin_ > 0 && outer_begin_ < x.rows()) {

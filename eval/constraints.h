@@ -1,13 +1,17 @@
 #pragma once
-// Cloth constraints on each predicted frame of a rollout: an edge-length limit, and a collision
-// shell outside the body and between the layers, projected as in position-based dynamics.
+// Cloth constraints on each predicted frame of a rollout: an edge-length limit, a fold limit,
+// and a collision shell outside the body and between the layers, projected as in
+// position-based dynamics.
 //
 // After the network predicts x_{t+1} (world, scene units), each of `iterations` passes
 //   1. brings every garment edge back within [1 − s, 1 + s] × its rest length (Gauss–Seidel
 //      over the edges in a fixed order, both ends moved equally), s = strain_limit;
-//   2. moves every garment vertex x whose nearest body vertex h (body of frame t+1, vertex
+//   2. keeps every pair of triangles sharing an edge from folding shut: the distance of their
+//      two far corners stays at least (1 − f) × its rest value, f = fold_limit (one-sided:
+//      unfolding is free);
+//   3. moves every garment vertex x whose nearest body vertex h (body of frame t+1, vertex
 //      normal n) lies within `reach` and (x − h)·n < shell along n onto (x − h)·n = shell;
-//   3. does the same for every outer-layer vertex against the nearest inner-layer vertex and
+//   4. does the same for every outer-layer vertex against the nearest inner-layer vertex and
 //      the inner mesh's normal there.
 // The collision steps come last, so a frame ends outside the body and the inner layer.
 // Why: the network's vertex branch integrates each vertex's offset from its patch, and in a
@@ -27,6 +31,7 @@ namespace layersnet::eval {
 
 struct ConstraintSettings {
   double strain_limit = 0.05;    // s: largest |edge length / rest length − 1| kept; 0 = no edge step
+  double fold_limit = 0;         // f: largest shortening of a far-corner distance kept; 0 = no fold step
   double shell = 0.05;           // scene units kept outside the body and the inner layer; 0 = no collision steps
   double reach_m = 0.05;         // metres (× the file's scale): farther anchors say nothing about the side
   int iterations = 8;
@@ -35,9 +40,13 @@ struct ConstraintSettings {
 // What one apply() moved.
 struct ConstraintMoves {
   int64_t edges = 0;         // edge corrections (over all passes)
+  int64_t folds = 0;         // far-corner corrections (over all passes)
   int64_t body = 0;          // vertices pushed out of the body (over all passes)
   int64_t layer = 0;         // outer vertices pushed out of the inner layer (over all passes)
 };
+
+// The two far corners (local indices) of every pair of triangles sharing an edge, each pair once.
+std::vector<std::pair<int32_t, int32_t>> far_corners(const dataset::Faces& faces);
 
 // The settings of a config's [eval] section (eval.strain_limit, collision_shell, constraint_iterations).
 ConstraintSettings constraint_settings(const EvalConfig& eval);
@@ -55,6 +64,8 @@ class ClothConstraints {
   float reach_ = 0;                                 // scene units
   std::vector<std::pair<int32_t, int32_t>> edges_;  // rows of x
   std::vector<float> rest_;                         // (E,) scene units, > 0
+  std::vector<std::pair<int32_t, int32_t>> folds_;  // far corners of triangle pairs, rows of x
+  std::vector<float> fold_rest_;                    // (Q,) scene units, > 0
   dataset::Faces body_faces_;
   int32_t outer_begin_ = 0;                         // first outer-layer row; N when not layered
   dataset::Faces inner_faces_;                      // inner garments' faces, rows [0, outer_begin_)

@@ -61,6 +61,7 @@ struct EvalConfig {
   // Cloth constraints after every predicted frame (eval/constraints.h; not in the paper).
   bool constraints = false;
   double strain_limit = 0.05;      // largest |edge length / rest length − 1| kept
+  double fold_limit = 0.0;         // largest shortening of the far-corner distance of two adjacent triangles (0 = none)
   double collision_shell = 0.05;   // scene units kept outside the body and the inner layer (0 = none)
   int constraint_iterations = 8;   // projection passes per frame
 };

@@ -80,6 +80,46 @@ TEST(ClothConstraints, FewPassesStillShrinkTheWorstStrain) {
   EXPECT_LT(worst_strain(seq, x), 0.75 * before);
 }
 
+TEST(ClothConstraints, FarCornersPairTheTwoTrianglesOfEachInteriorEdge) {
+  dataset::Faces quad(2, 3);
+  quad << 0, 1, 2, 0, 2, 3;  // a square split along 0-2: the far corners are 1 and 3
+  const auto pairs = far_corners(quad);
+  ASSERT_EQ(pairs.size(), 1u);
+  EXPECT_EQ(std::min(pairs[0].first, pairs[0].second), 1);
+  EXPECT_EQ(std::max(pairs[0].first, pairs[0].second), 3);
+  dataset::Faces fan(3, 3);
+  fan << 0, 1, 2, 0, 2, 3, 0, 3, 4;  // two interior edges, 0-2 and 0-3
+  EXPECT_EQ(far_corners(fan).size(), 2u);
+}
+
+TEST(ClothConstraints, FoldedTrianglePairsOpenToTheFoldLimit) {
+  const dataset::Sequence seq = tubes();
+  ConstraintSettings s;
+  s.strain_limit = 0;
+  s.fold_limit = 0.15;
+  s.shell = 0;
+  s.iterations = 40;
+  Points x = garments_at(seq, 3);
+  x.col(0) *= 0.3f;  // flattened tubes: far corners across the flattened sides come closer
+  const Points rest = rest_garments(seq);
+  auto shortest = [&](const Points& y) {
+    double worst = 1e9;
+    Eigen::Index offset = 0;
+    for (const auto& mesh : seq.info.garments) {
+      for (const auto& [a, b] : far_corners(mesh.faces))
+        worst = std::min(worst, double((y.row(offset + a) - y.row(offset + b)).norm() /
+                                       (rest.row(offset + a) - rest.row(offset + b)).norm()));
+      offset += mesh.num_vertices;
+    }
+    return worst;
+  };
+  ASSERT_LT(shortest(x), 1 - s.fold_limit - 0.1);
+  const ConstraintMoves moves = ClothConstraints(seq, s).apply(seq.body_at(3), x);
+  EXPECT_GT(moves.folds, 0);
+  EXPECT_EQ(moves.edges, 0);
+  EXPECT_GE(shortest(x), 1 - s.fold_limit - 0.01);
+}
+
 TEST(ClothConstraints, AVertexInsideTheBodyEndsOnTheShell) {
   const dataset::Sequence seq = tubes();
   ConstraintSettings s;
