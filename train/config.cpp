@@ -158,7 +158,7 @@ const Schema& schema() {
     k.add("model.patch_size", [](Config& c) -> double& { return c.model.patch_size; }, "UV patch cell size", {1e-4, 10, {}});
     k.add("model.world_radius", [](Config& c) -> double& { return c.model.world_radius; }, "patch world-edge radius R (scene units)", {0, 100, {}});
     k.add("model.body_radius", [](Config& c) -> double& { return c.model.body_radius; }, "patch-to-body radius R_b (scene units)", {0, 100, {}});
-    k.add("model.body_neighbors", [](Config& c) -> int& { return c.model.body_neighbors; }, "body vertices per patch K", {0, 256, {}});
+    k.add("model.body_neighbors", [](Config& c) -> int& { return c.model.body_neighbors; }, "body vertices per patch K (>= 1: the body is the model's only contact information)", {1, 256, {}});
     k.add("model.body_query", [](Config& c) -> std::string& { return c.model.body_query; }, "which K body vertices: nearest, or first in index order (official)", {0, 0, {"nearest", "first"}});
     k.add("model.decoder_patch_candidates", [](Config& c) -> int& { return c.model.decoder_patch_candidates; }, "patches decoding each vertex", {1, 64, {}});
     k.add("model.attention", [](Config& c) -> std::string& { return c.model.attention; }, "attention normalisation", {0, 0, {"ria", "tie"}});
@@ -182,7 +182,7 @@ const Schema& schema() {
     k.add("data.cache_sequences", [](Config& c) -> int& { return c.data.cache_sequences; }, "sequences cached in memory", positive);
     // [train]
     k.add("train.epochs", [](Config& c) -> int& { return c.train.epochs; }, "epochs", positive);
-    k.add("train.batch_size", [](Config& c) -> int& { return c.train.batch_size; }, "samples per update", positive);
+    k.add("train.batch_size", [](Config& c) -> int& { return c.train.batch_size; }, "samples per update (each holds its own tape: thousands exhaust memory)", {1, 4096, {}});
     k.add("train.learning_rate", [](Config& c) -> double& { return c.train.learning_rate; }, "Adam learning rate", {0, 10, {}});
     k.add("train.lr_decay_epochs", [](Config& c) -> std::vector<int>& { return c.train.lr_decay_epochs; }, "epochs after which lr *= lr_gamma", {1, 1e6, {}});
     k.add("train.lr_gamma", [](Config& c) -> double& { return c.train.lr_gamma; }, "step decay factor", {0, 1, {}});
@@ -246,6 +246,7 @@ void apply_value(Config& config, const std::string& key, const toml::node& node,
   const KeySpec* spec = schema().find(key);
   if (!spec) throw ConfigError(at + ": unknown key '" + key + "'; did you mean '" + closest_key(key) + "'?");
   spec->set(config, node, at);
+  config.set_at[key] = at;
 }
 
 void apply_table(Config& config, const toml::table& table, const std::string& prefix, const std::string& origin) {
@@ -264,9 +265,10 @@ void apply_file(Config& config, const fs::path& path, std::vector<fs::path>& sta
   const fs::path canonical = fs::weakly_canonical(path);
   if (std::find(stack.begin(), stack.end(), canonical) != stack.end())
     throw ConfigError(path.string() + ": include cycle (the file includes itself, directly or through its bases)");
-  if (!fs::exists(path)) {
+  if (!fs::exists(path) || fs::is_directory(path)) {
     const std::string from = stack.empty() ? "" : " (included from " + stack.back().string() + ")";
-    throw ConfigError(path.string() + ": config file not found" + from);
+    throw ConfigError(path.string() + (fs::exists(path) ? ": is a directory, not a config file" : ": config file not found") +
+                      from);
   }
   toml::table table;
   try {
@@ -315,6 +317,7 @@ Config parse_config_text(const std::string& toml_text, const std::string& origin
   Config config;
   apply_table(config, table, "", origin);
   apply_saved_config_defaults(config, toml_text);
+  validate_config(config);
   return config;
 }
 
@@ -348,10 +351,34 @@ void apply_rollout_override(Config& config, const std::string& assignment) {
   apply_override(config, assignment);
 }
 
+void validate_config(const Config& config) {
+  auto key = [&](const std::string& k, auto value) {
+    std::ostringstream s;
+    s << k << " = " << value;
+    const auto it = config.set_at.find(k);
+    s << " (" << (it == config.set_at.end() ? "default" : "set at " + it->second) << ")";
+    return s.str();
+  };
+  const ModelConfig& m = config.model;
+  if (m.heads % 2 != 0)
+    throw ConfigError(key("model.heads", m.heads) + ": the heads are half world, half mesh, so their number must be "
+                      "even; set 2, 4, 6, ...");
+  if (m.width % m.heads != 0)
+    throw ConfigError(key("model.width", m.width) + " is not a multiple of " + key("model.heads", m.heads) +
+                      ": every head takes width / heads channels; set model.width to " +
+                      std::to_string(m.width / m.heads * m.heads) + " or " +
+                      std::to_string((m.width / m.heads + 1) * m.heads));
+  if (m.rotation_equivalent && 3 * m.decoder_ret_channels > m.width)
+    throw ConfigError(key("model.decoder_ret_channels", m.decoder_ret_channels) + " needs 3 x that many channels, more "
+                      "than " + key("model.width", m.width) + "; set model.decoder_ret_channels <= " +
+                      std::to_string(m.width / 3));
+}
+
 Config load_config(const std::vector<std::string>& files, const std::vector<std::string>& overrides) {
   Config config;
   for (const auto& f : files) apply_config_file(config, f);
   for (const auto& o : overrides) apply_override(config, o);
+  validate_config(config);
   return config;
 }
 

@@ -9,6 +9,7 @@
 #include "model/model_config.h"
 
 #include <cstdint>
+#include <map>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -72,12 +73,20 @@ struct Config {
   DataConfig data;
   TrainConfig train;
   EvalConfig eval;
+  // Where each key was last set ("file:line:column" or "--set key=value"), for errors that
+  // involve several keys; keys left at their defaults are absent.
+  std::map<std::string, std::string> set_at;
 };
 
 class ConfigError : public std::runtime_error {
  public:
   using std::runtime_error::runtime_error;
 };
+
+// Refuses settings that pass each key's own range but cannot build a model or a run together
+// (ConfigError naming every key involved and where it was set). load_config and
+// parse_config_text call it.
+void validate_config(const Config& config);
 
 // Defaults, then each file in order (with its includes), then every "key=value".
 Config load_config(const std::vector<std::string>& files, const std::vector<std::string>& overrides = {});

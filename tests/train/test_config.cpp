@@ -75,6 +75,43 @@ TEST_F(ConfigTest, UnknownKeyNamesFileLineAndClosestKey) {
   EXPECT_NE(msg.find("did you mean 'model.layers'"), std::string::npos) << msg;
 }
 
+// Settings each within range that cannot build a model together are refused at load, naming
+// every key involved and the file:line (or --set) that set it.
+TEST_F(ConfigTest, ModelShapesThatCannotBuildNameTheirKeysAndLines) {
+  const std::string f = write("shape.toml", "[model]\nheads = 4\nwidth = 18\n");
+  std::string msg = error_of([&] { load_config({f}); });
+  EXPECT_NE(msg.find("model.width = 18 (set at " + f + ":3:"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("model.heads = 4 (set at " + f + ":2:"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("set model.width to 16 or 20"), std::string::npos) << msg;
+  msg = error_of([&] { load_config({}, {"model.heads=3", "model.width=96"}); });
+  EXPECT_NE(msg.find("model.heads = 3 (set at --set model.heads=3)"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("must be even"), std::string::npos) << msg;
+  msg = error_of([&] { load_config({}, {"model.decoder_ret_channels=100"}); });
+  EXPECT_NE(msg.find("model.decoder_ret_channels = 100"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("model.width = 128 (default)"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("<= 42"), std::string::npos) << msg;
+  // Without RET the decoder has no rotation channels: any count loads.
+  EXPECT_EQ(error_of([&] { load_config({}, {"model.decoder_ret_channels=100", "model.rotation_equivalent=false"}); }), "");
+  // The same checks guard a checkpoint's embedded config.
+  Config bad;
+  bad.model.width = 18;
+  bad.model.heads = 4;
+  msg = error_of([&] { parse_config_text(to_toml(bad), "run/best.h5:/config"); });
+  EXPECT_NE(msg.find("run/best.h5:/config:"), std::string::npos) << msg;
+}
+
+TEST_F(ConfigTest, ABodyBlindModelAHugeBatchAndADirectoryIncludeAreRefused) {
+  std::string msg = error_of([&] { load_config({}, {"model.body_neighbors=0"}); });
+  EXPECT_NE(msg.find("model.body_neighbors"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("[1, 256]"), std::string::npos) << msg;
+  msg = error_of([&] { load_config({}, {"train.batch_size=1000000000"}); });
+  EXPECT_NE(msg.find("[1, 4096]"), std::string::npos) << msg;
+  fs::create_directories(dir_ / "sub");
+  const std::string f = write("dir.toml", "include = \"sub\"\n");
+  msg = error_of([&] { load_config({f}); });
+  EXPECT_NE(msg.find("is a directory, not a config file (included from"), std::string::npos) << msg;
+}
+
 TEST_F(ConfigTest, WrongTypeAndOutOfRangeAreErrors) {
   const std::string t = write("type.toml", "[train]\nepochs = \"ten\"\n");
   std::string msg = error_of([&] { load_config({t}); });
