@@ -33,6 +33,13 @@ double worst_strain(const dataset::Sequence& seq, const Points& x) {
   return *std::max_element(s.begin(), s.end());
 }
 
+// Frame 3 with every other vertex pulled 0.3 units sideways: crumpled, stretched cloth.
+Points crumpled(const dataset::Sequence& seq) {
+  Points x = garments_at(seq, 3);
+  for (Eigen::Index v = 0; v < x.rows(); v += 2) x(v, 0) += 0.3f;
+  return x;
+}
+
 // (x − a)·n_a with a the nearest anchor (within reach) of x and n_a its vertex normal.
 double signed_distance(const Eigen::RowVector3f& x, const Points& anchors, const dataset::Faces& faces) {
   const Points normals = dataset::vertex_normals(anchors, faces);
@@ -59,9 +66,7 @@ TEST(ClothConstraints, StretchedEdgesComeBackWithinTheLimit) {
   s.strain_limit = 0.05;
   s.shell = 0;  // edges only
   s.iterations = 40;
-  Points x = garments_at(seq, 3);
-  // Every other vertex pulled 0.3 units sideways: crumpled, stretched cloth.
-  for (Eigen::Index v = 0; v < x.rows(); v += 2) x(v, 0) += 0.3f;
+  Points x = crumpled(seq);
   ASSERT_GT(worst_strain(seq, x), 0.2);
   const ConstraintMoves moves = ClothConstraints(seq, s).apply(seq.body_at(3), x);
   EXPECT_GT(moves.edges, 0);
@@ -73,8 +78,7 @@ TEST(ClothConstraints, FewPassesStillShrinkTheWorstStrain) {
   ConstraintSettings s;
   s.shell = 0;
   s.iterations = 1;
-  Points x = garments_at(seq, 3);
-  for (Eigen::Index v = 0; v < x.rows(); v += 2) x(v, 0) += 0.3f;
+  Points x = crumpled(seq);
   const double before = worst_strain(seq, x);
   ClothConstraints(seq, s).apply(seq.body_at(3), x);
   EXPECT_LT(worst_strain(seq, x), 0.75 * before);
