@@ -203,10 +203,12 @@ LAYERSNET_COMMAND(eval, "Roll out checkpoints and baselines over a split; error,
                                    "input frame t0 of a fixed start, and of --start ramp for files without the ramp "
                                    "attributes (default: data.first_frame)");
                     sub.add_option("--max-sequences", o->max_sequences, "evaluate only the first N sequences (0 = all)");
-                    sub.add_option("--speed-frames", o->speed_frames, "frames of the 1- and 2-thread speed rollouts");
+                    sub.add_option("--speed-frames", o->speed_frames, "frames of the 1- and 2-thread speed rollouts")
+                        ->check(CLI::Range(1, 1000000));
                     sub.add_option("--tether", o->tethers,
                                    "patch tether factors, e.g. 0,3: every model once per factor (default: each checkpoint's eval.patch_tether)")
-                        ->delimiter(',');
+                        ->delimiter(',')
+                        ->check(layersnet::cli::kFiniteNonNegative);
                     sub.add_option("--constraints", o->constraints,
                                    "cloth constraints after every predicted frame (edge strain limit, collision shell; "
                                    "eval/constraints.h): on, off, or off,on for every model both ways (default: each "

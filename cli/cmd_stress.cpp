@@ -242,17 +242,22 @@ LAYERSNET_COMMAND(stress, "Long rollouts at extreme wind and body speed, and flo
                     sub.add_option("--first-frame", o->first_frame,
                                    "first source frame of the loop (default: after the generator's rest and ramp, "
                                    "the file's rest_frames + ramp_frames; 0 without them)");
-                    sub.add_option("--frames", o->frames, "frames of each stress sequence (rollout: frames - 3)");
-                    sub.add_option("--winds", o->winds, "constant wind strengths, one run each")->delimiter(',');
+                    sub.add_option("--frames", o->frames, "frames of each stress sequence (rollout: frames - 3)")
+                        ->check(CLI::Range(4, 1000000));
+                    sub.add_option("--winds", o->winds, "constant wind strengths, one run each")
+                        ->delimiter(',')
+                        ->check(layersnet::cli::kFiniteNonNegative);
                     sub.add_flag("--no-winds", o->no_winds, "skip the wind runs (only the speed run)");
                     sub.add_option("--speed", o->speed,
-                                   "extra run with the body's top speed this multiple of the data's (0 = none)");
+                                   "extra run with the body's top speed this multiple of the data's (0 = none)")
+                        ->check(layersnet::cli::kFiniteNonNegative);
                     sub.add_flag("--speed-factor", o->speed_factor,
                                  "--speed is the time factor s (every body velocity x s) instead");
                     sub.add_option("--precision-frames", o->precision_frames, "frames of the float32/float64 comparison (0 = skip)");
                     sub.add_option("--threads", o->threads, "OpenMP threads (0 = all)");
                     sub.add_option("--tether", o->tether,
-                                   "patch tether factor for these rollouts (0 = off; default: the checkpoint's eval.patch_tether)");
+                                   "patch tether factor for these rollouts (0 = off; default: the checkpoint's eval.patch_tether)")
+                        ->check(layersnet::cli::kFiniteNonNegative);
                     sub.add_option("--set", o->settings,
                                    "rollout setting, e.g. --set eval.constraints=false (eval.* keys; default: the checkpoint's)");
                     sub.add_option("--json", o->json_path, "write the results as JSON to this file");

@@ -14,6 +14,7 @@
 // subcommand is chosen; the action's return value is the process exit code.
 #include <CLI/CLI.hpp>
 
+#include <cmath>
 #include <functional>
 #include <string>
 #include <vector>
@@ -33,6 +34,16 @@ struct CommandEntry {
 std::vector<CommandEntry>& command_registry();
 // Benchmarks, listed under `layersnet bench <name>`.
 std::vector<CommandEntry>& bench_registry();
+
+// Option check: a finite number >= 0 (CLI::NonNegativeNumber lets "nan" through).
+inline const CLI::Validator kFiniteNonNegative(
+    [](std::string& text) -> std::string {
+      double value = 0;
+      if (!CLI::detail::lexical_cast(text, value) || !std::isfinite(value) || value < 0)
+        return "'" + text + "' is not a finite number >= 0";
+      return {};
+    },
+    "FINITE>=0");
 
 struct CommandRegistrar {
   CommandRegistrar(std::vector<CommandEntry>& registry, std::string name, std::string description,

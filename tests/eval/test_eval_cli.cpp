@@ -205,6 +205,28 @@ TEST_F(EvalCli, ExportWritesMeshesAndAStrip) {
   EXPECT_EQ(slurp(root_ / "ply" / "body_0003.ply").rfind("ply\nformat binary_little_endian", 0), 0u);
 }
 
+// Arguments that cannot mean anything are refused before any file is read or model run: the
+// message names the option and the value (the checkpoint need not exist).
+TEST(EvalCliArguments, NonFiniteNegativeOrEmptySettingsAreRefusedFirst) {
+  const std::pair<const char*, const char*> cases[] = {
+      {"stress --checkpoint none.h5 --winds 0,nan", "--winds: 'nan' is not a finite number >= 0"},
+      {"stress --checkpoint none.h5 --winds inf", "--winds: 'inf' is not a finite number >= 0"},
+      {"stress --checkpoint none.h5 --tether -1", "--tether: '-1' is not a finite number >= 0"},
+      {"stress --checkpoint none.h5 --speed nan", "--speed: 'nan' is not a finite number >= 0"},
+      {"stress --checkpoint none.h5 --frames 2", "--frames: Value 2 not in range 4 to 1000000"},
+      {"eval --checkpoint none.h5 --speed-frames 0", "--speed-frames: Value 0 not in range 1 to 1000000"},
+      {"eval --checkpoint none.h5 --tether 3,-2", "--tether: '-2' is not a finite number >= 0"},
+      {"eval --checkpoint none.h5 --constraints maybe", "--constraints"},
+  };
+  for (const auto& [args, message] : cases) {
+    int code = 0;
+    const std::string text = cli_test::run_cli(args, &code);
+    EXPECT_NE(code, 0) << args;
+    EXPECT_NE(text.find(message), std::string::npos) << args << "\n" << text;
+    EXPECT_EQ(text.find("none.h5"), std::string::npos) << args << ": read before the arguments were checked\n" << text;
+  }
+}
+
 TEST(Render, DrawsATriangleOverTheBackground) {
   Image im(32, 32);
   dataset::Points x(3, 3);
