@@ -15,23 +15,23 @@ COLUMNS = [("error_mm", "error mm"), ("l_collision_outer_percent", "L-coll % (÷
            ("strain_p99_percent", "strain % p99")]
 
 
-def model_summary(eval_json):
+def model_summary(eval_json, constrained):
     methods = json.loads(eval_json.read_text())["methods"]
-    model = next(m for m in methods if m["kind"] == "model")
+    model = next(m for m in methods
+                 if m["kind"] == "model" and m["name"].startswith("[constrained]") == constrained)
     truth = next(m for m in methods if m["name"] == "ground truth")
     return model["summary"], truth["summary"], model["diverged_sequences"]
 
 
-def main(runs):
-    runs = pathlib.Path(runs)
+def table(runs, constrained):
     header = "| variant | seed | " + " | ".join(c[1] for c in COLUMNS) + " | diverged |"
-    lines = ["# Paper Table 3 on the medium test split", "", header,
-             "|" + "---|" * (len(COLUMNS) + 3)]
+    title = "with the cloth constraints" if constrained else "the network alone (the paper's comparison)"
+    lines = [f"## {title}", "", header, "|" + "---|" * (len(COLUMNS) + 3)]
     truth = None
     for key, label in VARIANTS:
         rows = []
         for path in sorted(runs.glob(f"{key}_seed*/eval/eval.json")):
-            summary, truth, diverged = model_summary(path)
+            summary, truth, diverged = model_summary(path, constrained)
             seed = path.parent.parent.name.split("_seed")[-1]
             rows.append([summary[c]["mean"] for c, _ in COLUMNS])
             lines.append(f"| {label} | {seed} | " + " | ".join(f"{v:.2f}" for v in rows[-1]) + f" | {diverged} |")
@@ -42,6 +42,13 @@ def main(runs):
                          " | ".join(f"**{m:.2f}** ({s:.2f})" for m, s in zip(means, spread)) + " | |")
     if truth:
         lines.append("| ground truth | – | 0 | " + " | ".join(f"{truth[c]['mean']:.2f}" for c, _ in COLUMNS[1:]) + " | |")
+    return lines
+
+
+def main(runs):
+    runs = pathlib.Path(runs)
+    lines = ["# Paper Table 3 on the medium test split", ""]
+    lines += table(runs, False) + [""] + table(runs, True)
     print("\n".join(lines))
 
 
