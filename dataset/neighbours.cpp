@@ -113,7 +113,7 @@ BodyNeighbours body_neighbours(const Eigen::Ref<const Points>& queries, const Ei
 
 namespace {
 struct PointsAdaptor {
-  const Eigen::Ref<const Points>& p;
+  const Points& p;
   size_t kdtree_get_point_count() const { return static_cast<size_t>(p.rows()); }
   float kdtree_get_pt(size_t i, size_t d) const { return p(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(d)); }
   template <class Box>
@@ -123,25 +123,37 @@ using KdTree = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<
                                                    uint32_t>;
 }  // namespace
 
-NearestBody nearest_body(const Eigen::Ref<const Points>& queries, const Eigen::Ref<const Points>& body) {
+struct NearestVertexIndex::Tree {
+  explicit Tree(const Eigen::Ref<const Points>& p)
+      : points(p), adaptor{points}, kd(3, adaptor, nanoflann::KDTreeSingleIndexAdaptorParams(16)) {}  // builds itself
+  Points points;
+  PointsAdaptor adaptor;
+  KdTree kd;
+};
+
+NearestVertexIndex::NearestVertexIndex(const Eigen::Ref<const Points>& points) : tree_(std::make_unique<Tree>(points)) {}
+NearestVertexIndex::~NearestVertexIndex() = default;
+
+NearestBody NearestVertexIndex::query(const Eigen::Ref<const Points>& queries) const {
   NearestBody out;
   const Eigen::Index Q = queries.rows();
   out.index.assign(Q, 0);
   out.distance.assign(Q, std::numeric_limits<float>::infinity());
-  if (body.rows() == 0) return out;
-  PointsAdaptor adaptor{body};
-  KdTree tree(3, adaptor, nanoflann::KDTreeSingleIndexAdaptorParams(16));
-  tree.buildIndex();
+  if (tree_->points.rows() == 0) return out;
 #pragma omp parallel for schedule(static) if (Q > 4096)
   for (Eigen::Index q = 0; q < Q; ++q) {
     const float pt[3] = {queries(q, 0), queries(q, 1), queries(q, 2)};
     uint32_t idx = 0;
     float d2 = 0;
-    tree.knnSearch(pt, 1, &idx, &d2);
+    tree_->kd.knnSearch(pt, 1, &idx, &d2);
     out.index[q] = static_cast<int32_t>(idx);
     out.distance[q] = std::sqrt(d2);
   }
   return out;
+}
+
+NearestBody nearest_body(const Eigen::Ref<const Points>& queries, const Eigen::Ref<const Points>& body) {
+  return NearestVertexIndex(body).query(queries);
 }
 
 }  // namespace layersnet::dataset

@@ -88,6 +88,21 @@ struct NearestBody {
 };
 NearestBody nearest_body(const Eigen::Ref<const Points>& queries, const Eigen::Ref<const Points>& body);
 
+// The same k-d tree kept for many query sets against one fixed point set (copied): building it
+// costs about as much as querying every point once. query() gives what nearest_body gives.
+class NearestVertexIndex {
+ public:
+  explicit NearestVertexIndex(const Eigen::Ref<const Points>& points);
+  ~NearestVertexIndex();
+  NearestVertexIndex(const NearestVertexIndex&) = delete;
+  NearestVertexIndex& operator=(const NearestVertexIndex&) = delete;
+  NearestBody query(const Eigen::Ref<const Points>& queries) const;
+
+ private:
+  struct Tree;
+  std::unique_ptr<Tree> tree_;
+};
+
 // ---- template implementation
 // Grid cell of a coordinate, clamped so that absurd (but finite) positions stay defined.
 inline int64_t grid_cell(float x, float cell) {

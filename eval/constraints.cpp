@@ -9,20 +9,43 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <map>
+#include <memory>
 
 namespace layersnet::eval {
 namespace {
 
 // Relative slack under which a constraint counts as met (float round-off of earlier moves).
 constexpr float kTolerance = 1e-4f;
+// Collision anchors farther than this (metres, × the file's scale) say nothing about the side:
+// the far side of a limb, a coat hem beyond the inner garment (the "near" layer metric's limit).
+constexpr float kReachMetres = 0.05f;
 
-// Moves each vertex x_v (rows [begin, end)) whose nearest anchor a (within reach) has
-// (x_v − a)·n_a < shell onto the shell along n_a; returns how many moved.
-int64_t push_out(dataset::Points& x, Eigen::Index begin, Eigen::Index end, const Eigen::Ref<const dataset::Points>& anchors,
-                 const dataset::Points& normals, float shell, float reach) {
+constexpr float kUnbounded = std::numeric_limits<float>::infinity();
+
+// Moves both ends of the pair (a, b) equally until its length lies in [min_length, max_length];
+// returns whether it moved (not when within kTolerance × rest of the range, or degenerate).
+bool project_pair(dataset::Points& x, std::pair<int32_t, int32_t> pair, float min_length, float max_length,
+                  float rest) {
+  const auto [a, b] = pair;
+  const Eigen::RowVector3f d = x.row(b) - x.row(a);
+  const float length = d.norm();
+  const float target = std::clamp(length, min_length, max_length);
+  if (std::abs(length - target) <= kTolerance * rest || length == 0.f) return false;
+  const Eigen::RowVector3f half = 0.5f * (length - target) / length * d;
+  x.row(a) += half;
+  x.row(b) -= half;
+  return true;
+}
+
+// Moves each vertex x_v (rows [begin, end)) whose nearest anchor a (within reach; `index` holds
+// the anchors) has (x_v − a)·n_a < shell onto the shell along n_a; returns how many moved.
+int64_t push_out(dataset::Points& x, Eigen::Index begin, Eigen::Index end, const dataset::NearestVertexIndex& index,
+                 const Eigen::Ref<const dataset::Points>& anchors, const dataset::Points& normals, float shell,
+                 float reach) {
   if (end <= begin || anchors.rows() == 0) return 0;
-  const dataset::NearestBody nearest = dataset::nearest_body(x.middleRows(begin, end - begin), anchors);
+  const dataset::NearestBody nearest = index.query(x.middleRows(begin, end - begin));
   int64_t moved = 0;
   for (Eigen::Index v = begin; v < end; ++v) {
     const Eigen::Index i = v - begin;
@@ -54,17 +77,8 @@ std::vector<std::pair<int32_t, int32_t>> far_corners(const dataset::Faces& faces
   return out;
 }
 
-ConstraintSettings constraint_settings(const EvalConfig& eval) {
-  ConstraintSettings s;
-  s.strain_limit = eval.strain_limit;
-  s.fold_limit = eval.fold_limit;
-  s.shell = eval.collision_shell;
-  s.iterations = eval.constraint_iterations;
-  return s;
-}
-
-ClothConstraints::ClothConstraints(const dataset::Sequence& seq, const ConstraintSettings& settings)
-    : settings_(settings), reach_(static_cast<float>(settings.reach_m) * seq.info.scale), body_faces_(seq.info.body_faces) {
+ClothConstraints::ClothConstraints(const dataset::Sequence& seq, const EvalConfig& settings)
+    : settings_(settings), reach_(kReachMetres * seq.info.scale), body_faces_(seq.info.body_faces) {
   const GarmentEdges edges = garment_edges(seq);
   for (size_t e = 0; e < edges.rows.size(); ++e)
     if (edges.rest[e] > 0) {
@@ -90,41 +104,28 @@ ClothConstraints::ClothConstraints(const dataset::Sequence& seq, const Constrain
 ConstraintMoves ClothConstraints::apply(const Eigen::Ref<const dataset::Points>& body, dataset::Points& x) const {
   ConstraintMoves moves;
   if (!x.allFinite()) return moves;
-  const auto shell = static_cast<float>(settings_.shell);
-  const dataset::Points body_normals =
-      shell > 0 ? dataset::vertex_normals(body, body_faces_) : dataset::Points(0, 3);
-  const float lo = 1.f - static_cast<float>(settings_.strain_limit), hi = 1.f + static_cast<float>(settings_.strain_limit);
-  for (int pass = 0; pass < settings_.iterations; ++pass) {
-    if (settings_.strain_limit > 0)
-      for (size_t e = 0; e < edges_.size(); ++e) {
-        const auto [a, b] = edges_[e];
-        const Eigen::RowVector3f d = x.row(b) - x.row(a);
-        const float length = d.norm();
-        const float target = std::clamp(length, lo * rest_[e], hi * rest_[e]);
-        if (std::abs(length - target) <= kTolerance * rest_[e] || length == 0.f) continue;
-        const Eigen::RowVector3f half = 0.5f * (length - target) / length * d;
-        x.row(a) += half;
-        x.row(b) -= half;
-        ++moves.edges;
-      }
-    if (settings_.fold_limit > 0) {
-      const float shortest = 1.f - static_cast<float>(settings_.fold_limit);
-      for (size_t q = 0; q < folds_.size(); ++q) {
-        const auto [a, b] = folds_[q];
-        const Eigen::RowVector3f d = x.row(b) - x.row(a);
-        const float length = d.norm(), target = shortest * fold_rest_[q];
-        if (length >= target * (1.f - kTolerance) || length == 0.f) continue;
-        const Eigen::RowVector3f half = 0.5f * (length - target) / length * d;
-        x.row(a) += half;
-        x.row(b) -= half;
-        ++moves.folds;
-      }
-    }
+  const auto shell = static_cast<float>(settings_.collision_shell);
+  // The body does not move between passes: its normals and k-d tree serve them all.
+  std::unique_ptr<dataset::NearestVertexIndex> body_index;
+  dataset::Points body_normals;
+  if (shell > 0) {
+    body_index = std::make_unique<dataset::NearestVertexIndex>(body);
+    body_normals = dataset::vertex_normals(body, body_faces_);
+  }
+  const auto s = static_cast<float>(settings_.strain_limit), f = static_cast<float>(settings_.fold_limit);
+  for (int pass = 0; pass < settings_.constraint_iterations; ++pass) {
+    if (s > 0)
+      for (size_t e = 0; e < edges_.size(); ++e)
+        moves.edges += project_pair(x, edges_[e], (1.f - s) * rest_[e], (1.f + s) * rest_[e], rest_[e]);
+    if (f > 0)
+      for (size_t q = 0; q < folds_.size(); ++q)
+        moves.folds += project_pair(x, folds_[q], (1.f - f) * fold_rest_[q], kUnbounded, fold_rest_[q]);
     if (shell <= 0) continue;
-    moves.body += push_out(x, 0, x.rows(), body, body_normals, shell, reach_);
+    moves.body += push_out(x, 0, x.rows(), *body_index, body, body_normals, shell, reach_);
     if (outer_begin_ > 0 && outer_begin_ < x.rows()) {
-      const dataset::Points inner = x.topRows(outer_begin_);
-      moves.layer += push_out(x, outer_begin_, x.rows(), inner, dataset::vertex_normals(inner, inner_faces_), shell, reach_);
+      const dataset::Points inner = x.topRows(outer_begin_);  // moved by this pass: a fresh tree
+      moves.layer += push_out(x, outer_begin_, x.rows(), dataset::NearestVertexIndex(inner), inner,
+                              dataset::vertex_normals(inner, inner_faces_), shell, reach_);
     }
   }
   return moves;

@@ -29,14 +29,6 @@
 
 namespace layersnet::eval {
 
-struct ConstraintSettings {
-  double strain_limit = 0.05;    // s: largest |edge length / rest length − 1| kept; 0 = no edge step
-  double fold_limit = 0;         // f: largest shortening of a far-corner distance kept; 0 = no fold step
-  double shell = 0.05;           // scene units kept outside the body and the inner layer; 0 = no collision steps
-  double reach_m = 0.05;         // metres (× the file's scale): farther anchors say nothing about the side
-  int iterations = 8;
-};
-
 // What one apply() moved.
 struct ConstraintMoves {
   int64_t edges = 0;         // edge corrections (over all passes)
@@ -48,19 +40,18 @@ struct ConstraintMoves {
 // The two far corners (local indices) of every pair of triangles sharing an edge, each pair once.
 std::vector<std::pair<int32_t, int32_t>> far_corners(const dataset::Faces& faces);
 
-// The settings of a config's [eval] section (eval.strain_limit, collision_shell, constraint_iterations).
-ConstraintSettings constraint_settings(const EvalConfig& eval);
-
 class ClothConstraints {
  public:
-  // Edges and rest lengths from the sequence's garments (rest template, else frame 0).
-  ClothConstraints(const dataset::Sequence& seq, const ConstraintSettings& settings);
+  // Edges and rest lengths from the sequence's garments (rest template, else frame 0). Settings:
+  // eval.strain_limit (s; 0 = no edge step), fold_limit (f; 0 = no fold step), collision_shell
+  // (scene units; 0 = no collision steps), constraint_iterations; eval.constraints is not read.
+  ClothConstraints(const dataset::Sequence& seq, const EvalConfig& settings);
   // Projects x (N, 3, world, layer order) in place against the body of frame t (B, 3). A frame
   // with a non-finite value is left as it is (the rollout reports the divergence).
   ConstraintMoves apply(const Eigen::Ref<const dataset::Points>& body, dataset::Points& x) const;
 
  private:
-  ConstraintSettings settings_;
+  EvalConfig settings_;
   float reach_ = 0;                                 // scene units
   std::vector<std::pair<int32_t, int32_t>> edges_;  // rows of x
   std::vector<float> rest_;                         // (E,) scene units, > 0

@@ -49,7 +49,7 @@ double signed_distance(const Eigen::RowVector3f& x, const Points& anchors, const
 
 TEST(ClothConstraints, ClothThatHoldsThemIsNotMoved) {
   const dataset::Sequence seq = tubes();
-  ConstraintSettings s;
+  EvalConfig s;
   s.strain_limit = 1.1 * worst_strain(seq, garments_at(seq, 3));  // the data's own strain fits
   ASSERT_GT(s.strain_limit, 0.0);
   const ClothConstraints constraints(seq, s);
@@ -62,10 +62,10 @@ TEST(ClothConstraints, ClothThatHoldsThemIsNotMoved) {
 
 TEST(ClothConstraints, StretchedEdgesComeBackWithinTheLimit) {
   const dataset::Sequence seq = tubes();
-  ConstraintSettings s;
+  EvalConfig s;
   s.strain_limit = 0.05;
-  s.shell = 0;  // edges only
-  s.iterations = 40;
+  s.collision_shell = 0;  // edges only
+  s.constraint_iterations = 40;
   Points x = crumpled(seq);
   ASSERT_GT(worst_strain(seq, x), 0.2);
   const ConstraintMoves moves = ClothConstraints(seq, s).apply(seq.body_at(3), x);
@@ -75,9 +75,9 @@ TEST(ClothConstraints, StretchedEdgesComeBackWithinTheLimit) {
 
 TEST(ClothConstraints, FewPassesStillShrinkTheWorstStrain) {
   const dataset::Sequence seq = tubes();
-  ConstraintSettings s;
-  s.shell = 0;
-  s.iterations = 1;
+  EvalConfig s;
+  s.collision_shell = 0;
+  s.constraint_iterations = 1;
   Points x = crumpled(seq);
   const double before = worst_strain(seq, x);
   ClothConstraints(seq, s).apply(seq.body_at(3), x);
@@ -98,11 +98,11 @@ TEST(ClothConstraints, FarCornersPairTheTwoTrianglesOfEachInteriorEdge) {
 
 TEST(ClothConstraints, FoldedTrianglePairsOpenToTheFoldLimit) {
   const dataset::Sequence seq = tubes();
-  ConstraintSettings s;
+  EvalConfig s;
   s.strain_limit = 0;
   s.fold_limit = 0.15;
-  s.shell = 0;
-  s.iterations = 40;
+  s.collision_shell = 0;
+  s.constraint_iterations = 40;
   Points x = garments_at(seq, 3);
   x.col(0) *= 0.3f;  // flattened tubes: far corners across the flattened sides come closer
   const Points rest = rest_garments(seq);
@@ -126,9 +126,9 @@ TEST(ClothConstraints, FoldedTrianglePairsOpenToTheFoldLimit) {
 
 TEST(ClothConstraints, AVertexInsideTheBodyEndsOnTheShell) {
   const dataset::Sequence seq = tubes();
-  ConstraintSettings s;
+  EvalConfig s;
   s.strain_limit = 0;  // collisions only
-  s.shell = 0.05;
+  s.collision_shell = 0.05;
   const Points body = seq.body_at(3);
   const Points body_normals = dataset::vertex_normals(body, seq.info.body_faces);
   Points x = garments_at(seq, 3);
@@ -138,7 +138,7 @@ TEST(ClothConstraints, AVertexInsideTheBodyEndsOnTheShell) {
   ASSERT_LT(signed_distance(x.row(v), body, seq.info.body_faces), 0.0);
   const ConstraintMoves moves = ClothConstraints(seq, s).apply(body, x);
   EXPECT_EQ(moves.body, 1);
-  EXPECT_NEAR(signed_distance(x.row(v), body, seq.info.body_faces), s.shell, 1e-5);
+  EXPECT_NEAR(signed_distance(x.row(v), body, seq.info.body_faces), s.collision_shell, 1e-5);
   for (Eigen::Index u = 0; u < x.rows(); ++u) {
     if (u == v) continue;
     ASSERT_EQ(x.row(u), before.row(u)) << u;
@@ -147,9 +147,9 @@ TEST(ClothConstraints, AVertexInsideTheBodyEndsOnTheShell) {
 
 TEST(ClothConstraints, AnOuterVertexInsideTheInnerLayerEndsOnTheShell) {
   const dataset::Sequence seq = tubes();
-  ConstraintSettings s;
+  EvalConfig s;
   s.strain_limit = 0;
-  s.shell = 0.05;
+  s.collision_shell = 0.05;
   Points x = garments_at(seq, 3);
   const GarmentLayout layout = garment_layout(seq.info);
   const Eigen::Index outer_begin = layout.offsets[1];
@@ -161,7 +161,7 @@ TEST(ClothConstraints, AnOuterVertexInsideTheInnerLayerEndsOnTheShell) {
   ASSERT_LT(signed_distance(x.row(v), inner, faces), 0.0);
   const ConstraintMoves moves = ClothConstraints(seq, s).apply(seq.body_at(3), x);
   EXPECT_EQ(moves.layer, 1);
-  EXPECT_NEAR(signed_distance(x.row(v), x.topRows(outer_begin), faces), s.shell, 1e-5);
+  EXPECT_NEAR(signed_distance(x.row(v), x.topRows(outer_begin), faces), s.collision_shell, 1e-5);
   // The shell is the same rule the layer-collision metric counts: no collision left.
   EXPECT_EQ(count_layer_collisions(x.bottomRows(x.rows() - outer_begin), x.topRows(outer_begin), faces), 0);
 }
@@ -170,7 +170,7 @@ TEST(ClothConstraints, ANonFiniteFrameIsLeftForTheRolloutToReport) {
   const dataset::Sequence seq = tubes();
   Points x = garments_at(seq, 3);
   x(4, 1) = std::numeric_limits<float>::quiet_NaN();
-  const ConstraintMoves moves = ClothConstraints(seq, ConstraintSettings{}).apply(seq.body_at(3), x);
+  const ConstraintMoves moves = ClothConstraints(seq, EvalConfig{}).apply(seq.body_at(3), x);
   EXPECT_EQ(moves.edges + moves.body + moves.layer, 0);
   EXPECT_TRUE(std::isnan(x(4, 1)));
 }

@@ -18,16 +18,7 @@
 namespace layersnet::eval {
 namespace {
 
-dataset::Sequence sequence(int garments, int frames = 10) {
-  dataset::SyntheticOptions o;
-  o.garments = garments;
-  o.frames = frames;
-  o.rings = 4;
-  o.segments = 8;
-  o.body_rings = 4;
-  o.body_segments = 8;
-  return dataset::make_synthetic_sequence(o);
-}
+using testing::sequence;
 
 // Overwrites every garment frame with x_t = x_0 + f(t).
 template <class Fn>

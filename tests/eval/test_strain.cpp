@@ -19,16 +19,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-dataset::Sequence sequence(int garments, int frames) {
-  dataset::SyntheticOptions o;
-  o.garments = garments;
-  o.frames = frames;
-  o.rings = 4;
-  o.segments = 8;
-  o.body_rings = 4;
-  o.body_segments = 8;
-  return dataset::make_synthetic_sequence(o);
-}
+using testing::sequence;
 
 TEST(Strain, QuantileInterpolatesLinearly) {
   EXPECT_DOUBLE_EQ(quantile({4, 1, 3, 2}, 0.5), 2.5);
