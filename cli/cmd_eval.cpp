@@ -1,5 +1,5 @@
 // `layersnet eval --checkpoint C [--checkpoint C2 ...] [--split test] [--frames N] [--out DIR]`:
-// rollouts of every checkpoint and of the two baselines (constant velocity, follow the body)
+// rollouts of every checkpoint, of recorded sequences (--replay) and of the two baselines (constant velocity, follow the body)
 // over a split, Euclidean error, collision rates and edge strain (with the ground truth's own
 // values as the floor), speed at 1 and 2 threads against Blender's recorded time; writes
 // eval.json, eval.md, curve.png, speed.png, strain.png to --out and prints the summary table.
@@ -29,6 +29,7 @@ struct EvalCliOptions {
   std::vector<std::string> runs;
   std::vector<std::string> checkpoints;
   std::vector<std::string> names;
+  std::vector<std::string> replays;  // folders of recorded sequences (eval::Replay)
   std::string dataset;
   std::string split;
   int frames = -1;
@@ -127,6 +128,14 @@ int run_eval(EvalCliOptions o) {
           paths.push_back(o.checkpoints[i]);
         }
   }
+  const size_t model_count = owned.size();
+  for (size_t r = 0; r < o.replays.size(); ++r) {
+    const size_t n = o.checkpoints.size() + r;
+    const std::string name = n < o.names.size() ? o.names[n] : "replay " + o.replays[r];
+    owned.push_back(std::make_unique<eval::Replay>(name, o.replays[r]));
+    kinds.push_back("replay");
+    paths.push_back(o.replays[r]);
+  }
   owned.push_back(std::make_unique<eval::ConstantVelocity>());
   owned.push_back(std::make_unique<eval::FollowBody>());
   owned.push_back(std::make_unique<eval::GroundTruth>());
@@ -139,9 +148,9 @@ int run_eval(EvalCliOptions o) {
 
   if (o.threads > 0) omp_set_num_threads(o.threads);  // the evaluation rollouts (speed sets its own)
   Eigen::setNbThreads(1);  // the ops own the threads (as bench model); nested GEMM threads only contend
-  std::printf("eval: %s split '%s', %zu method(s) + 2 baselines, up to %d frames from %s, %d thread(s), "
+  std::printf("eval: %s split '%s', %zu model(s), %zu replay(s) + 2 baselines, up to %d frames from %s, %d thread(s), "
               "products %s%s%s\n",
-              root.c_str(), eo.split.c_str(), owned.size() - 3, eo.frames, eval::start_description(eo).c_str(),
+              root.c_str(), eo.split.c_str(), model_count, o.replays.size(), eo.frames, eval::start_description(eo).c_str(),
               omp_get_max_threads(), o.precision.c_str(), any_bf16 ? ", bf16 kernel " : "", any_bf16 ? ad::bf16_kernel_name() : "");
   std::vector<eval::MethodResult> results = eval::evaluate(manifest, predictors, eo, true);
   for (size_t p = 0; p < results.size(); ++p) {
@@ -159,6 +168,7 @@ int run_eval(EvalCliOptions o) {
   ctx.speed_sequence = speed_id;
   ctx.speed_frames = std::min(o.speed_frames, speed_seq.info.num_frames - 1 - speed_t0);
   for (size_t p = 0; p + 1 < predictors.size(); ++p) {
+    if (kinds[p] == "replay") continue;  // a recording has no speed of its own
     results[p].ms_per_frame_1thread = eval::median_ms_per_frame(*predictors[p], speed_seq, speed_t0, ctx.speed_frames, 1);
     results[p].ms_per_frame_2threads = eval::median_ms_per_frame(*predictors[p], speed_seq, speed_t0, ctx.speed_frames, 2);
   }
@@ -190,7 +200,14 @@ LAYERSNET_COMMAND(eval, "Roll out checkpoints and baselines over a split; error,
                     auto o = std::make_shared<EvalCliOptions>();
                     sub.add_option("--checkpoint", o->checkpoints, "checkpoint (repeat for several variants)");
                     sub.add_option("--run", o->runs, "run directory of `layersnet train` (its best.h5, else newest checkpoint); repeatable");
-                    sub.add_option("--name", o->names, "table name of each model, in order (runs first; default: folder/file)");
+                    sub.add_option("--name", o->names,
+                                   "table name of each model, then of each replay, in order (runs first; default: "
+                                   "folder/file, 'replay FOLDER')");
+                    sub.add_option("--replay", o->replays,
+                                   "folder of another simulator's recorded sequences, scored like a model: for each "
+                                   "evaluated sequence the file of the same name, same garments (e.g. a "
+                                   "re-simulation, scripts/predictability.sh); repeatable")
+                        ->check(CLI::ExistingDirectory);
                     sub.add_option("--dataset", o->dataset, "data set folder (default: the first checkpoint's data.dataset)");
                     sub.add_option("--split", o->split, "train | val | test (default: the config's eval.split)");
                     sub.add_option("--frames", o->frames, "predicted frames per sequence (default: eval.frames)");
@@ -226,7 +243,7 @@ LAYERSNET_COMMAND(eval, "Roll out checkpoints and baselines over a split; error,
                         ->type_name("float32|bf16|float32,bf16");  // checked by ad::parse_matmul_precision
                     return [o] {
                       if (o->checkpoints.empty() && o->runs.empty() && o->dataset.empty()) {
-                        std::fprintf(stderr, "layersnet eval: give --run or --checkpoint (or --dataset for baselines only)\n");
+                        std::fprintf(stderr, "layersnet eval: give --run or --checkpoint (or --dataset for baselines and replays only)\n");
                         return 2;
                       }
                       return run_eval(*o);  // errors: reported by cli/main.cpp

@@ -136,6 +136,35 @@ std::vector<MethodResult> evaluate(const dataset::DatasetManifest& manifest, std
   return results;
 }
 
+void Replay::begin(const dataset::Sequence& seq) {
+  const std::string path = (std::filesystem::path(folder_) / std::filesystem::path(seq.info.path).filename()).string();
+  if (path == loaded_) return;
+  if (!std::filesystem::exists(path))
+    throw std::runtime_error(path + ": no recorded sequence to replay for " + seq.info.path +
+                             "; the replay folder needs a file of the same name for every evaluated sequence");
+  dataset::Sequence recorded = dataset::read_sequence(path);
+  const auto mismatch = [&](const std::string& what) {
+    return std::runtime_error(path + ": cannot replay against " + seq.info.path + ": " + what);
+  };
+  if (recorded.info.num_garments() != seq.info.num_garments())
+    throw mismatch(std::to_string(recorded.info.num_garments()) + " garments, not " +
+                   std::to_string(seq.info.num_garments()));
+  for (int g = 0; g < seq.info.num_garments(); ++g)
+    if (recorded.info.garments[g].num_vertices != seq.info.garments[g].num_vertices)
+      throw mismatch("garment " + std::to_string(g) + " has " + std::to_string(recorded.info.garments[g].num_vertices) +
+                     " vertices, not " + std::to_string(seq.info.garments[g].num_vertices));
+  if (recorded.info.num_frames < seq.info.num_frames)
+    throw mismatch(std::to_string(recorded.info.num_frames) + " frames, fewer than " +
+                   std::to_string(seq.info.num_frames));
+  recorded_ = std::move(recorded);
+  loaded_ = path;
+}
+
+Points Replay::step(const dataset::Sequence& seq, int t, const Points&, const Points&, const Points&) {
+  begin(seq);
+  return garments_at(recorded_, t + 1);
+}
+
 double median_ms_per_frame(Predictor& predictor, const dataset::Sequence& seq, int t0, int frames, int threads) {
   const int before = omp_get_max_threads();
   omp_set_num_threads(threads);

@@ -101,6 +101,24 @@ class GroundTruth : public Predictor {
   }
 };
 
+// Another simulator's recorded frames: for the sequence being evaluated, the file of the same
+// name in `folder` (its garments must match in number, layer order and vertex count, and it
+// must hold at least as many frames); step() returns its frame t + 1 whatever the inputs. It
+// scores a re-simulation, a nudged twin or another solver's output with the models' metrics.
+class Replay : public Predictor {
+ public:
+  Replay(std::string name, std::string folder) : name_(std::move(name)), folder_(std::move(folder)) {}
+  std::string name() const override { return name_; }
+  // Reads <folder>/<file name of seq>; throws naming both files when they do not match.
+  void begin(const dataset::Sequence& seq) override;
+  Points step(const dataset::Sequence& seq, int t, const Points&, const Points&, const Points&) override;
+
+ private:
+  std::string name_, folder_;
+  std::string loaded_;  // path of recorded_
+  dataset::Sequence recorded_;
+};
+
 // Median wall time per predicted frame, from a rollout of `frames` frames of `seq` run with
 // `threads` OpenMP threads (the previous thread count is restored).
 double median_ms_per_frame(Predictor& predictor, const dataset::Sequence& seq, int t0, int frames, int threads);

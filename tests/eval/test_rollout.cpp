@@ -12,6 +12,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <filesystem>
 #include <limits>
 #include <memory>
 
@@ -131,6 +132,44 @@ TEST(Rollout, GroundTruthHasZeroErrorAndTheDataCollisionRates) {
          seq.info.total_garment_vertices() / 5;
   EXPECT_NEAR(s.h_rate, h, 1e-12);
   EXPECT_GT(s.h_rate, 0.0);
+}
+
+// A replay of the data's own file scores like the ground truth; a shifted recording scores
+// its shift; a recording of other garments or too few frames is refused, naming its file.
+TEST(Rollout, ReplayScoresARecordingAndRefusesOneThatDoesNotMatch) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / "layersnet_replay_test";
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir / "data");
+  std::filesystem::create_directories(dir / "same");
+  std::filesystem::create_directories(dir / "shifted");
+  std::filesystem::create_directories(dir / "other");
+  dataset::Sequence seq = sequence(2);
+  dataset::write_sequence((dir / "data" / "00000.h5").string(), seq);
+  dataset::write_sequence((dir / "same" / "00000.h5").string(), seq);
+  dataset::Sequence shifted = seq;
+  for (auto& g : shifted.frames.garments) g.col(0).array() += 0.25f;
+  dataset::write_sequence((dir / "shifted" / "00000.h5").string(), shifted);
+  dataset::write_sequence((dir / "other" / "00000.h5").string(), sequence(1));
+  seq = dataset::read_sequence((dir / "data" / "00000.h5").string());  // info.path names the file
+
+  Replay same("same", (dir / "same").string()), moved("shifted", (dir / "shifted").string());
+  const SequenceResult s = score_rollout(seq, rollout(same, seq, 2, 5), {});
+  GroundTruth gt;
+  const SequenceResult g = score_rollout(seq, rollout(gt, seq, 2, 5), {});
+  EXPECT_EQ(s.error, 0.0);
+  EXPECT_EQ(s.h_rate, g.h_rate);
+  EXPECT_NEAR(score_rollout(seq, rollout(moved, seq, 2, 5), {}).error, 0.25, 1e-5);
+
+  Replay other("other", (dir / "other").string()), missing("missing", (dir / "none").string());
+  try {
+    rollout(other, seq, 2, 5);
+    ADD_FAILURE() << "a recording with other garments was replayed";
+  } catch (const std::exception& e) {
+    EXPECT_NE(std::string(e.what()).find((dir / "other" / "00000.h5").string()), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("1 garments, not 2"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(rollout(missing, seq, 2, 5), std::runtime_error);
+  std::filesystem::remove_all(dir);
 }
 
 TEST(Rollout, StatsRoundTripThroughCheckpointNames) {
