@@ -22,6 +22,22 @@ bool holds_run(const std::string& run_dir);
 void write_text_atomic(const std::string& path, const std::string& text);
 void append_line(const std::string& path, const std::string& line);
 
+// Exclusive hold of a run directory for one training process: an flock on <run>/lock, which
+// the kernel releases when the process ends however it ends (kill -9 included), so a stale
+// lock never blocks a resume. The file names the holder (pid, host, start time) for the error
+// the next process gets.
+class RunLock {
+ public:
+  // Throws std::runtime_error naming the holder when another process holds the lock.
+  explicit RunLock(const std::string& run_dir);
+  ~RunLock();
+  RunLock(const RunLock&) = delete;
+  RunLock& operator=(const RunLock&) = delete;
+
+ private:
+  int fd_ = -1;
+};
+
 // NormalisationStats <-> checkpoint /stats arrays ("position.mean", "position.std", ...).
 std::map<std::string, std::vector<double>> stats_to_arrays(const dataset::NormalisationStats& stats);
 // Throws std::runtime_error naming `origin` and the missing array.

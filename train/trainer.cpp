@@ -120,6 +120,9 @@ class Run {
   void restore(const std::string& path);
   void run_epoch(int epoch);
   bool run_batch(int epoch, int ngs, const std::vector<int64_t>& order);  // false: max_steps reached
+  bool step_cap_reached() const {
+    return config_.train.max_steps > 0 && batches_before_ + summary_.batches >= config_.train.max_steps;
+  }
   double validate();
   double validate_rollouts();  // train.val_rollout_frames > 0
   void save(const std::string& path);
@@ -142,6 +145,7 @@ class Run {
   std::vector<uint8_t> shuffle_at_epoch_start_;
   TrainingState state_;
   int64_t batches_per_epoch_ = 0;
+  int64_t batches_before_ = 0;  // batches of the run before this process started (resume)
   TrainSummary summary_;
   // Progress window (since the last log line).
   LossParts window_loss_;
@@ -230,6 +234,7 @@ TrainSummary Run::execute() {
   if (tc.threads > 0) omp_set_num_threads(tc.threads);
   threads_ = std::max(1, omp_get_max_threads());
   fs::create_directories(options_.run_dir);
+  const RunLock lock(options_.run_dir);  // before anything is read or written there
   if (!options_.resume && holds_run(options_.run_dir))
     throw std::runtime_error(options_.run_dir + " already holds a run; continue it with `layersnet train --resume " +
                              options_.run_dir + "` or choose another --run directory");
@@ -273,9 +278,11 @@ TrainSummary Run::execute() {
        << batches_per_epoch_ << " batches of " << tc.batch_size << ", " << tc.epochs << " epochs, " << threads_
        << " threads, " << params_.total_size() << " parameter slots -> " << options_.run_dir << "\n";
 
+  // max_steps counts every batch of the run, those before a resume too.
+  batches_before_ = state_.epoch * batches_per_epoch_ + (state_.position + tc.batch_size - 1) / tc.batch_size;
   window_start_ = Clock::now();
   while (state_.epoch < tc.epochs) {
-    if (tc.max_steps > 0 && summary_.batches >= tc.max_steps) break;
+    if (step_cap_reached()) break;
     run_epoch(static_cast<int>(state_.epoch));
   }
   // A max_steps stop inside an epoch keeps its work: a checkpoint of where it stopped, from
@@ -332,7 +339,7 @@ void Run::run_epoch(int epoch) {
 
 bool Run::run_batch(int epoch, int ngs, const std::vector<int64_t>& order) {
   const TrainConfig& tc = config_.train;
-  if (tc.max_steps > 0 && summary_.batches >= tc.max_steps) return false;
+  if (step_cap_reached()) return false;
   const auto t0 = Clock::now();
   const int64_t begin = state_.position;
   const int nb = static_cast<int>(std::min<int64_t>(tc.batch_size, train_->num_samples() - begin));

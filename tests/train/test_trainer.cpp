@@ -370,6 +370,45 @@ TEST_F(TrainerTest, MaxStepsStopInsideAnEpochLeavesAResumableCheckpoint) {
   EXPECT_EQ(std::memcmp(a.data(), b.data(), a.size() * sizeof(float)), 0);
 }
 
+// The cap is a total over resumes: a run stopped at 2 and resumed under a cap of 3 adds one.
+TEST_F(TrainerTest, MaxStepsCountsTheUpdatesBeforeAResume) {
+  const std::string data = make_dataset(3, 0, 8);
+  const Config two = tiny_config(data, {"train.epochs=3", "train.max_steps=2", "train.checkpoint_every=0"});
+  EXPECT_EQ(train(two, options("run")).updates, 2);
+  const Config three = tiny_config(data, {"train.epochs=3", "train.max_steps=3", "train.checkpoint_every=0"});
+  TrainOptions resume = options("run");
+  resume.resume = true;
+  const TrainSummary s = train(three, resume);
+  EXPECT_EQ(s.batches, 1);
+  EXPECT_EQ(s.updates, 3);
+  EXPECT_EQ(train(three, resume).batches, 0);  // at the cap: nothing more
+}
+
+// A second trainer on a run directory in use is refused, naming the holder; the lock goes
+// with its holder.
+TEST_F(TrainerTest, ARunDirectoryInUseIsRefusedNamingItsHolder) {
+  const std::string data = make_dataset(1, 0, 6);
+  const Config c = tiny_config(data, {"train.epochs=1"});
+  fs::create_directories(dir_ / "run");
+  {
+    const RunLock held((dir_ / "run").string());
+    for (const bool resume : {false, true}) {
+      TrainOptions o = options("run");
+      o.resume = resume;
+      try {
+        train(c, o);
+        ADD_FAILURE() << "trained in a directory another process holds (resume " << resume << ")";
+      } catch (const std::exception& e) {
+        const std::string what = e.what();
+        EXPECT_NE(what.find("in use"), std::string::npos) << what;
+        EXPECT_NE(what.find("pid " + std::to_string(::getpid())), std::string::npos) << what;
+      }
+    }
+    EXPECT_FALSE(fs::exists(dir_ / "run" / "config.toml"));  // nothing written by the refused runs
+  }
+  EXPECT_GT(train(c, options("run")).updates, 0);
+}
+
 TEST_F(TrainerTest, NonFiniteGradientSkipsTheUpdateAndStopsAfterKInARow) {
   const std::string data = make_dataset(2, 0, 7);
   {  // One bad batch: skipped, logged with its samples, the run goes on.
