@@ -8,6 +8,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <sstream>
@@ -99,6 +100,88 @@ void read_tensor_group(hid_t file, const std::string& path, const std::string& g
                    " difference(s); was it trained with another model size?):" + diff.str());
 }
 
+// FNV-1a, 64 bit: cheap, dependency-free, and enough to see a changed byte (not an attacker).
+class Fnv1a64 {
+ public:
+  void bytes(const void* data, std::size_t n) {
+    const auto* p = static_cast<const uint8_t*>(data);
+    for (std::size_t i = 0; i < n; ++i) h_ = (h_ ^ p[i]) * 0x100000001b3ull;
+  }
+  template <class T>
+  void value(const T& v) { bytes(&v, sizeof v); }
+  void text(const std::string& s) { value(s.size()), bytes(s.data(), s.size()); }
+  std::string hex() const {
+    char out[32];
+    std::snprintf(out, sizeof out, "fnv1a64:%016llx", static_cast<unsigned long long>(h_));
+    return out;
+  }
+
+ private:
+  uint64_t h_ = 0xcbf29ce484222325ull;
+};
+
+// What the checksum covers: everything a checkpoint holds, in one fixed order, from the
+// in-memory values (so writer and reader hash the same thing).
+std::string content_checksum(const ad::ParamStore<float>& params, const Checkpoint& cp) {
+  Fnv1a64 h;
+  h.text(cp.config_toml);
+  h.value(cp.has_optimizer);
+  const auto tensors = [&](std::span<const float> flat) {
+    for (const auto& e : params.entries()) {
+      h.text(e.name);
+      h.bytes(flat.data() + e.offset, static_cast<std::size_t>(e.rows * e.cols) * sizeof(float));
+    }
+  };
+  tensors(params.values());
+  if (cp.has_optimizer) {
+    tensors(params.moment1());
+    tensors(params.moment2());
+  }
+  const TrainingState& s = cp.state;
+  for (const int64_t v : {s.epoch, s.position, s.global_step, s.nonfinite_in_row}) h.value(v);
+  h.value(s.best_val_error);
+  for (const auto& [name, bytes] : s.rng) {
+    h.text(name);
+    h.value(bytes.size());
+    h.bytes(bytes.data(), bytes.size());
+  }
+  for (const auto& [name, values] : cp.stats) {
+    h.text(name);
+    h.value(values.size());
+    h.bytes(values.data(), values.size() * sizeof(double));
+  }
+  return h.hex();
+}
+
+// Values no training run writes: a file that holds them was damaged or edited.
+void check_plausible(const std::string& path, const ad::ParamStore<float>& params, const Checkpoint& cp) {
+  const auto first_bad = [&](std::span<const float> flat, auto bad) -> std::string {
+    for (const auto& e : params.entries())
+      for (int64_t i = 0; i < e.rows * e.cols; ++i)
+        if (bad(flat[static_cast<std::size_t>(e.offset + i)])) return e.name;
+    return "";
+  };
+  const auto non_finite = [](float v) { return !std::isfinite(v); };
+  if (const std::string n = first_bad(params.values(), non_finite); !n.empty())
+    fail(path, "/weights/" + n + " holds non-finite values; use an earlier checkpoint");
+  if (cp.has_optimizer) {
+    if (const std::string n = first_bad(params.moment1(), non_finite); !n.empty())
+      fail(path, "/adam/m/" + n + " holds non-finite values; use an earlier checkpoint");
+    if (const std::string n = first_bad(params.moment2(), [](float v) { return !(v >= 0) || !std::isfinite(v); });
+        !n.empty())
+      fail(path, "/adam/v/" + n + " holds a negative or non-finite second moment (never written by Adam); use an "
+                 "earlier checkpoint");
+  }
+  for (const auto& [name, values] : cp.stats)
+    for (const double v : values) {
+      const bool is_std = name.size() > 4 && name.compare(name.size() - 4, 4, ".std") == 0;
+      if (!std::isfinite(v) || (is_std && v <= 0))
+        fail(path, "/stats/" + name + " holds " + std::to_string(v) +
+                       (is_std ? " (a std must be finite and > 0)" : " (must be finite)") +
+                       "; the normalisation statistics are damaged");
+    }
+}
+
 void fsync_path(const std::string& path) {
   const int fd = ::open(path.c_str(), O_RDONLY);
   if (fd >= 0) {
@@ -117,6 +200,7 @@ void write_checkpoint(const std::string& path, const ad::ParamStore<float>& para
     h5::write_string_attr(f, "format", kCheckpointFormat);
     h5::write_int_attr(f, "version", kCheckpointVersion);
     h5::write_string_attr(f, "program", std::string("layersnet ") + LAYERSNET_VERSION);
+    h5::write_string_attr(f, "checksum", content_checksum(params, cp));
     {
       h5::Handle g = h5::create_group(f, "config", {tmp, "/config"});
       h5::write_string_attr(g.get(), "toml", cp.config_toml);
@@ -208,6 +292,7 @@ Checkpoint read_checkpoint(const std::string& path, ad::ParamStore<float>& param
       h5::Handle st = h5::open_group(f, "state", sw);
       cp.state.epoch = h5::read_int_attr(st.get(), "epoch", sw);
       cp.state.position = h5::read_int_attr(st.get(), "position", sw);
+      if (h5::has_attr(st.get(), "global_step")) cp.state.global_step = h5::read_int_attr(st.get(), "global_step", sw);
       cp.state.best_val_error = h5::read_float_attr(st.get(), "best_val_error", sw);
       cp.state.nonfinite_in_row = h5::read_int_attr(st.get(), "nonfinite_in_row", sw);
       const h5::Where rw{path, "/state/rng"};
@@ -224,6 +309,14 @@ Checkpoint read_checkpoint(const std::string& path, ad::ParamStore<float>& param
         cp.stats[name] = read_doubles(ds.get(), w);
       }
     }
+    if (h5::has_attr(f, "checksum")) {
+      const std::string stored = h5::read_string_attr(f, "checksum", {path, "/"});
+      const std::string actual = content_checksum(params, cp);
+      if (stored != actual)
+        fail(path, "content does not match its checksum (stored " + stored + ", computed " + actual +
+                       "): the file was damaged after it was written; use an earlier checkpoint");
+    }
+    check_plausible(path, params, cp);
     return cp;
   } catch (const dataset::DatasetError& e) {
     throw CheckpointError(std::string("checkpoint is incomplete or corrupted: ") + e.what());

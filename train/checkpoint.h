@@ -1,7 +1,9 @@
 #pragma once
 // Training checkpoints in HDF5, readable by h5py:
 //
-//   /                 attrs format = "layersnet-checkpoint", version = 1, program = "layersnet X.Y.Z"
+//   /                 attrs format = "layersnet-checkpoint", version = 1, program = "layersnet X.Y.Z",
+//                     checksum = "fnv1a64:<16 hex digits>" over everything below (absent in files
+//                     of older program versions, which load unchecked)
 //   /config           attr  toml: the fully resolved configuration (text)
 //   /weights/<name>   float32 (rows, cols), one per parameter, dotted names
 //                     ("encoder.layers.0.attn.q_proj.weight")
@@ -56,7 +58,9 @@ void write_checkpoint(const std::string& path, const ad::ParamStore<float>& para
 
 // Reads `path` into `params` (whose layout must match: same names and shapes; every
 // difference is listed in the error) and returns the rest. Refuses other formats and
-// versions, and truncated or corrupted files, with a message naming the file.
+// versions, truncated or corrupted files, content that does not match its checksum, and
+// values no training writes (non-finite weights, moments or statistics, a negative Adam second
+// moment, a statistics std <= 0), with a message naming the file.
 Checkpoint read_checkpoint(const std::string& path, ad::ParamStore<float>& params);
 
 // Only the config text of a checkpoint (to rebuild the model before reading weights).

@@ -254,8 +254,25 @@ TrainSummary Run::execute() {
       out_ << options_.run_dir << ": no checkpoint yet; the run starts from its beginning\n";
       metric("{\"event\":\"resume\",\"checkpoint\":null}");
     } else {
-      restore(checkpoints.back());
-      resumed_from = checkpoints.back();
+      // A damaged newest checkpoint (torn by a full disk, a changed byte) costs only the work
+      // since the one before: it is set aside as <name>.damaged, the evidence kept.
+      std::string reasons;
+      for (auto it = checkpoints.rbegin(); it != checkpoints.rend() && resumed_from.empty(); ++it) {
+        try {
+          restore(*it);
+          resumed_from = *it;
+        } catch (const std::runtime_error& e) {
+          reasons += std::string("\n  ") + e.what();
+          std::error_code ec;
+          fs::rename(*it, *it + ".damaged", ec);
+          out_ << "warning: cannot resume from " << *it << ": " << e.what() << "\n  set aside as " << *it
+               << ".damaged; trying the checkpoint before it\n";
+          metric("{\"event\":\"damaged_checkpoint\",\"checkpoint\":" + json_string(*it) + "}");
+        }
+      }
+      if (resumed_from.empty())
+        throw CheckpointError(options_.run_dir + ": no intact checkpoint to resume from:" + reasons +
+                              "\nstart a new run with another --run directory");
     }
   }
   open_data();  // after restore: samples are built with the run's own statistics

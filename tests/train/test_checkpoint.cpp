@@ -5,7 +5,10 @@
 
 #include <gtest/gtest.h>
 
+#include <hdf5.h>
+
 #include <algorithm>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <random>
@@ -163,6 +166,75 @@ TEST_F(CheckpointTest, TruncatedCorruptedAndForeignFilesAreRefused) {
   EXPECT_THROW(read_checkpoint(corrupted, a), CheckpointError);
 
   EXPECT_THROW(read_checkpoint((dir_ / "missing.h5").string(), a), CheckpointError);
+}
+
+// Expects read_checkpoint(path) to throw a CheckpointError whose message holds `needle`.
+void expect_refused(const std::string& path, ad::ParamStore<float>& p, const std::string& needle) {
+  try {
+    read_checkpoint(path, p);
+    ADD_FAILURE() << path << " was loaded";
+  } catch (const CheckpointError& e) {
+    EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find(path), std::string::npos) << e.what();
+  }
+}
+
+TEST_F(CheckpointTest, AChangedWeightByteDamagedStatisticsAndANegativeSecondMomentAreRefused) {
+  ad::ParamStore<float> a;
+  make_params(a, 8);
+  fill_random(a, 5);
+  Checkpoint cp = sample_checkpoint();
+  cp.stats = {{"position.mean", {0.1, 0.2, 0.3}}, {"position.std", {1.0, 2.0, 3.0}}};
+  const std::string path = (dir_ / "c.h5").string();
+  write_checkpoint(path, a, cp);
+
+  // One byte of one weight changed where HDF5 stores it (its metadata stays intact).
+  const std::string flipped = (dir_ / "flipped.h5").string();
+  fs::copy_file(path, flipped);
+  haddr_t offset = HADDR_UNDEF;
+  {
+    const hid_t f = H5Fopen(flipped.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
+    const hid_t ds = H5Dopen2(f, "/weights/decoder.proj.layers.2.weight", H5P_DEFAULT);
+    offset = H5Dget_offset(ds);
+    H5Dclose(ds);
+    H5Fclose(f);
+  }
+  ASSERT_NE(offset, HADDR_UNDEF);
+  {
+    std::fstream f(flipped, std::ios::in | std::ios::out | std::ios::binary);
+    f.seekg(static_cast<std::streamoff>(offset) + 5);
+    char byte = 0;
+    f.read(&byte, 1);
+    byte ^= 0x10;
+    f.seekp(static_cast<std::streamoff>(offset) + 5);
+    f.write(&byte, 1);
+  }
+  ad::ParamStore<float> b;
+  make_params(b, 8);
+  expect_refused(flipped, b, "checksum");
+  read_checkpoint(path, b);  // the original still loads
+
+  // Values no training writes, even with a matching checksum (written that way).
+  Checkpoint nan_stats = cp;
+  nan_stats.stats["position.std"][1] = std::nan("");
+  write_checkpoint((dir_ / "nan_stats.h5").string(), a, nan_stats);
+  expect_refused((dir_ / "nan_stats.h5").string(), b, "/stats/position.std");
+  Checkpoint zero_std = cp;
+  zero_std.stats["position.std"][0] = 0;
+  write_checkpoint((dir_ / "zero_std.h5").string(), a, zero_std);
+  expect_refused((dir_ / "zero_std.h5").string(), b, "std must be finite and > 0");
+  ad::ParamStore<float> negative;
+  make_params(negative, 8);
+  fill_random(negative, 5);
+  negative.moment2()[3] = -1e-3f;
+  write_checkpoint((dir_ / "negative_v.h5").string(), negative, cp);
+  expect_refused((dir_ / "negative_v.h5").string(), b, "negative or non-finite second moment");
+  ad::ParamStore<float> nan_weight;
+  make_params(nan_weight, 8);
+  fill_random(nan_weight, 5);
+  nan_weight.values()[0] = std::nanf("");
+  write_checkpoint((dir_ / "nan_weight.h5").string(), nan_weight, cp);
+  expect_refused((dir_ / "nan_weight.h5").string(), b, "non-finite values");
 }
 
 TEST_F(CheckpointTest, LoadModelRebuildsTheModelFromTheEmbeddedConfig) {

@@ -370,6 +370,44 @@ TEST_F(TrainerTest, MaxStepsStopInsideAnEpochLeavesAResumableCheckpoint) {
   EXPECT_EQ(std::memcmp(a.data(), b.data(), a.size() * sizeof(float)), 0);
 }
 
+// A damaged newest checkpoint is set aside and the run resumes from the one before, ending
+// bit-identical to the uninterrupted run.
+TEST_F(TrainerTest, ResumeFallsBackToTheNewestIntactCheckpoint) {
+  const std::string data = make_dataset(3, 0, 8);
+  const std::vector<std::string> common = {"train.epochs=2", "train.rollout_steps=[0, 1]", "train.checkpoint_every=1",
+                                           "train.keep_checkpoints=3"};
+  auto with = [&](std::vector<std::string> extra) {
+    std::vector<std::string> all = common;
+    all.insert(all.end(), extra.begin(), extra.end());
+    return tiny_config(data, all);
+  };
+  const Config whole = with({});
+  train(whole, options("whole"));
+  train(with({"train.max_steps=4"}), options("part"));
+  const auto kept = list_checkpoints((dir_ / "part").string());
+  ASSERT_GE(kept.size(), 2u);
+  fs::resize_file(kept.back(), fs::file_size(kept.back()) / 2);  // torn, as by a full disk
+  TrainOptions resume = options("part");
+  resume.resume = true;
+  train(whole, resume);
+  EXPECT_NE(log_.str().find("cannot resume from " + kept.back()), std::string::npos) << log_.str();
+  EXPECT_TRUE(fs::exists(kept.back() + ".damaged"));
+  int64_t step_whole = 0, step_part = 0;
+  const auto a = final_weights(dir_ / "whole", whole, &step_whole), b = final_weights(dir_ / "part", whole, &step_part);
+  EXPECT_EQ(step_whole, step_part);
+  ASSERT_EQ(a.size(), b.size());
+  EXPECT_EQ(std::memcmp(a.data(), b.data(), a.size() * sizeof(float)), 0);
+
+  // Nothing intact at all: an error listing why each one was refused.
+  for (const auto& c : list_checkpoints((dir_ / "part").string())) fs::resize_file(c, 100);
+  try {
+    train(whole, resume);
+    ADD_FAILURE() << "resumed with no intact checkpoint";
+  } catch (const CheckpointError& e) {
+    EXPECT_NE(std::string(e.what()).find("no intact checkpoint"), std::string::npos) << e.what();
+  }
+}
+
 // The cap is a total over resumes: a run stopped at 2 and resumed under a cap of 3 adds one.
 TEST_F(TrainerTest, MaxStepsCountsTheUpdatesBeforeAResume) {
   const std::string data = make_dataset(3, 0, 8);
