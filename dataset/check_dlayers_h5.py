@@ -65,12 +65,27 @@ def attr(p, obj, name, kind):
     if not np.all(np.isfinite(a)):
         p.add(obj.name, f"attribute '{name}' is not finite")
         return None
+    with np.errstate(over="ignore"):
+        if not np.all(np.isfinite(a.astype(np.float32))):
+            p.add(obj.name, f"attribute '{name}' is not finite in float32")
+            return None
     return a
 
 
-def dataset(p, parent, name, kind, shape):
+def property_attr(p, obj, name):
+    """A physical property (friction, stiffness, mass): a float, finite in float32, >= 0."""
+    a = attr(p, obj, name, "float")
+    if a is not None and a < 0:
+        p.add(obj.name, f"attribute '{name}' is negative")
+
+
+MAX_SCENE_COORDINATE = 1e4  # scene units: 1 km at the x10 convention
+
+
+def dataset(p, parent, name, kind, shape, coordinates=False):
     """The array of dataset parent/name if its dtype kind ('f' or 'i') and shape match; shape
-    entries None match any size. Returns None (and records why) otherwise."""
+    entries None match any size; coordinates: every |value| <= MAX_SCENE_COORDINATE. Returns
+    None (and records why) otherwise."""
     where = f"{parent.name.rstrip('/')}/{name}"
     if name not in parent:
         p.add(where, "missing dataset")
@@ -94,6 +109,13 @@ def dataset(p, parent, name, kind, shape):
     a = d[()]
     if kind == "f" and not np.all(np.isfinite(a)):
         p.add(where, "holds non-finite values")
+        return None
+    with np.errstate(over="ignore"):
+        if kind == "f" and not np.all(np.isfinite(a.astype(np.float32))):
+            p.add(where, "holds values that are not finite in float32")
+            return None
+    if coordinates and a.size and np.abs(a).max() > MAX_SCENE_COORDINATE:
+        p.add(where, f"holds coordinates beyond the scene extent +-{MAX_SCENE_COORDINATE:g} units")
         return None
     return a
 
@@ -162,9 +184,9 @@ def check_body(p, f):
         p.add("/body", "missing group")
         return None
     b = f["body"]
-    verts = dataset(p, b, "vertices", "f", (None, None, 3))
+    verts = dataset(p, b, "vertices", "f", (None, None, 3), coordinates=True)
     faces = dataset(p, b, "faces", "i", (None, 3))
-    friction = attr(p, b, "friction", "float")
+    property_attr(p, b, "friction")
     T = None
     if verts is not None:
         T = verts.shape[0]
@@ -176,10 +198,9 @@ def check_body(p, f):
             if np.einsum("ij,ij->i", a, np.cross(bb, c)).sum() < 0:
                 p.add("/body/faces", "faces wind clockwise seen from outside (normals point into the body)")
     if "translation" in b:
-        tr = dataset(p, b, "translation", "f", (None, 3))
+        tr = dataset(p, b, "translation", "f", (None, 3), coordinates=True)
         if tr is not None and T is not None and tr.shape[0] != T:
             p.add("/body/translation", f"{tr.shape[0]} frames, the body has {T}")
-    del friction
     return T
 
 
@@ -219,7 +240,7 @@ def check_garments(p, f, T):
 
 def check_garment(p, g, T):
     where = g.name
-    verts = dataset(p, g, "vertices", "f", (None, None, 3))
+    verts = dataset(p, g, "vertices", "f", (None, None, 3), coordinates=True)
     faces = dataset(p, g, "faces", "i", (None, 3))
     n = None
     if verts is not None:
@@ -237,12 +258,12 @@ def check_garment(p, g, T):
     if panel is not None and len(panel) and panel.min() < 0:
         p.add(f"{where}/panel", "negative panel index")
     if "rest" in g:
-        dataset(p, g, "rest", "f", (n, 3))
+        dataset(p, g, "rest", "f", (n, 3), coordinates=True)
     t = attr(p, g, "type", "str")
     if t is not None and not t:
         p.add(where, "attribute 'type' is empty")
     for a in GARMENT_ATTRS:
-        attr(p, g, a, "float")
+        property_attr(p, g, a)
 
 
 def check_wind(p, f, T):

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <set>
+#include <sstream>
 
 namespace layersnet::dataset {
 namespace {
@@ -61,6 +62,42 @@ Faces read_faces(hid_t loc, const std::string& name, const Where& where, int64_t
   return faces;
 }
 
+std::string number(double v) {
+  std::ostringstream s;
+  s << v;  // 6 significant digits: "1e+300", "-5"
+  return s.str();
+}
+
+// Float attribute, finite also as the float32 the program computes with.
+double read_float32_attr(hid_t obj, const std::string& name, const Where& where) {
+  const double v = h5::read_float_attr(obj, name, where);
+  if (!std::isfinite(static_cast<float>(v)))
+    where.fail("attribute '" + name + "' = " + number(v) + " is not finite in float32");
+  return v;
+}
+
+// A physical property (friction, stiffness, mass): finite in float32 and >= 0.
+float read_property_attr(hid_t obj, const std::string& name, const Where& where) {
+  const double v = read_float32_attr(obj, name, where);
+  if (v < 0) where.fail("attribute '" + name + "' = " + number(v) + " is negative");
+  return static_cast<float>(v);
+}
+
+// Every |coordinate| <= kMaxSceneCoordinate; the message names the first frame and vertex
+// beyond it (frames counted from `first_frame`, rows of `rows_per_frame`).
+void check_extent(const std::vector<float>& v, const Where& where, int first_frame = 0, int64_t rows_per_frame = 0) {
+  for (size_t i = 0; i < v.size(); ++i)
+    if (std::abs(v[i]) > kMaxSceneCoordinate) {
+      const int64_t row = static_cast<int64_t>(i / 3);
+      const std::string at_row = rows_per_frame > 0 ? "frame " + std::to_string(first_frame + row / rows_per_frame) +
+                                                          ", vertex " + std::to_string(row % rows_per_frame)
+                                                    : "row " + std::to_string(row);
+      where.fail("holds the coordinate " + number(v[i]) + " at " + at_row + ", beyond the scene extent +-" +
+                 std::to_string(static_cast<int>(kMaxSceneCoordinate)) +
+                 " units (damaged data, or not in scene units?)");
+    }
+}
+
 Points to_points(std::vector<float>&& v) {
   Points p(static_cast<Eigen::Index>(v.size() / 3), 3);
   std::copy(v.begin(), v.end(), p.data());
@@ -90,14 +127,16 @@ void read_root_attributes(hid_t file, SequenceInfo& info) {
   if (version != kFormatVersion)
     root.fail("attribute 'version' is " + std::to_string(version) +
               ", must be 1 (this reader knows format version 1 only)");
-  info.fps = static_cast<float>(h5::read_float_attr(file, "fps", root));
+  info.fps = static_cast<float>(read_float32_attr(file, "fps", root));
   if (!(info.fps > 0)) root.fail("attribute 'fps' must be > 0, is " + std::to_string(info.fps));
   const std::string up = h5::read_string_attr(file, "up_axis", root);
   if (up != "z" && up != "y") root.fail("attribute 'up_axis' is '" + up + "', must be 'z' or 'y'");
   info.up_axis = up[0];
-  info.scale = static_cast<float>(h5::read_float_attr(file, "scale", root));
+  info.scale = static_cast<float>(read_float32_attr(file, "scale", root));
   if (!(info.scale > 0)) root.fail("attribute 'scale' must be > 0, is " + std::to_string(info.scale));
   const std::vector<double> g = h5::read_float_vector_attr(file, "gravity", 3, root);
+  for (const double c : g)
+    if (!std::isfinite(static_cast<float>(c))) root.fail("attribute 'gravity' is not finite in float32");
   info.gravity = Eigen::Vector3f(static_cast<float>(g[0]), static_cast<float>(g[1]), static_cast<float>(g[2]));
   const double norm = std::sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
   if (norm > 0) {
@@ -126,13 +165,14 @@ void read_body(hid_t file, SequenceInfo& info) {
   info.body_faces = read_faces(body.get(), "faces", at(info.path, "/body/faces"), info.num_body_vertices);
   const int T = info.num_frames;
   if (h5::has_link(body.get(), "translation")) {
-    info.translation = to_points(read_float_array(body.get(), "translation",
-                                                  at(info.path, "/body/translation"), {T, 3}));
+    std::vector<float> translation = read_float_array(body.get(), "translation", at(info.path, "/body/translation"), {T, 3});
+    check_extent(translation, at(info.path, "/body/translation"), 0, 1);
+    info.translation = to_points(std::move(translation));
     info.has_translation = true;
   } else {
     info.translation = Points::Zero(T, 3);
   }
-  info.body_friction = static_cast<float>(h5::read_float_attr(body.get(), "friction", at(info.path, "/body")));
+  info.body_friction = read_property_attr(body.get(), "friction", at(info.path, "/body"));
 }
 
 GarmentMesh read_garment(hid_t garments, const std::string& name, SequenceInfo& info) {
@@ -163,16 +203,19 @@ GarmentMesh read_garment(hid_t garments, const std::string& name, SequenceInfo& 
   }
   if (negative) wp.fail(std::to_string(negative) + " negative panel ids (must be 0-based)");
   m.panel.assign(panel.begin(), panel.end());
-  if (h5::has_link(g.get(), "rest"))
-    m.rest = to_points(read_float_array(g.get(), "rest", at(info.path, gp + "/rest"), {m.num_vertices, 3}));
+  if (h5::has_link(g.get(), "rest")) {
+    std::vector<float> rest = read_float_array(g.get(), "rest", at(info.path, gp + "/rest"), {m.num_vertices, 3});
+    check_extent(rest, at(info.path, gp + "/rest"));
+    m.rest = to_points(std::move(rest));
+  }
   const Where wg = at(info.path, gp);
   m.type = h5::read_string_attr(g.get(), "type", wg);
   if (m.type.find_first_not_of(" \t\n") == std::string::npos) wg.fail("attribute 'type' is empty");
   auto& a = m.attributes;
-  a.tension_stiffness = static_cast<float>(h5::read_float_attr(g.get(), "tension_stiffness", wg));
-  a.bending_stiffness = static_cast<float>(h5::read_float_attr(g.get(), "bending_stiffness", wg));
-  a.mass = static_cast<float>(h5::read_float_attr(g.get(), "mass", wg));
-  a.self_friction = static_cast<float>(h5::read_float_attr(g.get(), "self_friction", wg));
+  a.tension_stiffness = read_property_attr(g.get(), "tension_stiffness", wg);
+  a.bending_stiffness = read_property_attr(g.get(), "bending_stiffness", wg);
+  a.mass = read_property_attr(g.get(), "mass", wg);
+  a.self_friction = read_property_attr(g.get(), "self_friction", wg);
   return m;
 }
 
@@ -290,7 +333,10 @@ FrameWindow SequenceFile::read_frames(int first, int count) const {
   auto read = [&](const std::string& path) {
     const Where where = at(info_.path, path);
     h5::Handle ds = h5::open_dataset(f, path, where);
-    return to_points(h5::read_floats(ds.get(), h5::dataset_info(ds.get(), where), where, first, count));
+    const h5::ArrayInfo shape = h5::dataset_info(ds.get(), where);
+    std::vector<float> v = h5::read_floats(ds.get(), shape, where, first, count);
+    check_extent(v, where, first, static_cast<int64_t>(shape.dims[1]));
+    return to_points(std::move(v));
   };
   w.body = read("/body/vertices");
   for (const auto& g : info_.garments) w.garments.push_back(read(garment_path(g.name) + "/vertices"));

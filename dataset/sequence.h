@@ -162,5 +162,9 @@ void validate_sequence(const Sequence& seq, const std::string& file);
 inline constexpr const char* kFormatName = "dlayers-h5";
 inline constexpr int kFormatVersion = 1;
 inline constexpr double kQuaternionTolerance = 1e-3;  // | |q| - 1 | allowed
+// Bound on every coordinate (positions, root translation, rest shapes), scene units: 1 km at
+// the x10 convention, where a scene spans metres. Beyond it the data is damaged, and its
+// squares would overflow the float32 statistics.
+inline constexpr double kMaxSceneCoordinate = 1e4;
 
 }  // namespace layersnet::dataset

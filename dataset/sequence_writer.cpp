@@ -15,6 +15,16 @@ void check_finite(const float* p, Eigen::Index n, const std::string& file, const
       throw DatasetError(file, path, "non-finite value at flat index " + std::to_string(i));
 }
 
+// Finite and within the scene extent (kMaxSceneCoordinate), as the reader requires.
+void check_coordinates(const float* p, Eigen::Index n, const std::string& file, const std::string& path) {
+  check_finite(p, n, file, path);
+  for (Eigen::Index i = 0; i < n; ++i)
+    if (std::abs(p[i]) > kMaxSceneCoordinate)
+      throw DatasetError(file, path, "coordinate " + std::to_string(p[i]) + " at flat index " + std::to_string(i) +
+                                         " is beyond the scene extent +-" +
+                                         std::to_string(static_cast<int>(kMaxSceneCoordinate)) + " units");
+}
+
 void check_faces(const Faces& f, int n, const std::string& file, const std::string& path) {
   if (f.rows() == 0) throw DatasetError(file, path, "has no faces");
   if (f.minCoeff() < 0 || f.maxCoeff() >= n)
@@ -34,11 +44,11 @@ void validate_sequence(const Sequence& seq, const std::string& file) {
   if (seq.frames.first != 0 || seq.frames.count != T) fail("/", "the sequence must hold all frames");
   if (s.num_body_vertices <= 0 || seq.frames.body.rows() != static_cast<Eigen::Index>(T) * s.num_body_vertices)
     fail("/body/vertices", "shape does not match (T, B, 3)");
-  check_finite(seq.frames.body.data(), seq.frames.body.size(), file, "/body/vertices");
+  check_coordinates(seq.frames.body.data(), seq.frames.body.size(), file, "/body/vertices");
   check_faces(s.body_faces, s.num_body_vertices, file, "/body/faces");
   if (s.translation.rows() != T) fail("/body/translation", "must have T rows");
-  check_finite(s.translation.data(), s.translation.size(), file, "/body/translation");
-  if (!std::isfinite(s.body_friction)) fail("/body", "friction is not finite");
+  check_coordinates(s.translation.data(), s.translation.size(), file, "/body/translation");
+  if (!std::isfinite(s.body_friction) || s.body_friction < 0) fail("/body", "friction must be finite and >= 0");
   if (s.garments.empty()) fail("/garments", "has no garment (at least one is required)");
   if (seq.frames.garments.size() != s.garments.size()) fail("/garments", "positions missing for some garments");
   std::set<std::string> names;
@@ -49,7 +59,7 @@ void validate_sequence(const Sequence& seq, const std::string& file) {
       fail(gp, "garment names must be unique, non-empty and without '/'");
     if (g.num_vertices <= 0 || seq.frames.garments[gi].rows() != static_cast<Eigen::Index>(T) * g.num_vertices)
       fail(gp + "/vertices", "shape does not match (T, N, 3)");
-    check_finite(seq.frames.garments[gi].data(), seq.frames.garments[gi].size(), file, gp + "/vertices");
+    check_coordinates(seq.frames.garments[gi].data(), seq.frames.garments[gi].size(), file, gp + "/vertices");
     check_faces(g.faces, g.num_vertices, file, gp + "/faces");
     if (g.uv.rows() != 3 * g.faces.rows()) fail(gp + "/uv", "must have 3 rows per face");
     check_finite(g.uv.data(), g.uv.size(), file, gp + "/uv");
@@ -57,12 +67,11 @@ void validate_sequence(const Sequence& seq, const std::string& file) {
     for (int32_t p : g.panel)
       if (p < 0) fail(gp + "/panel", "negative panel ids (must be 0-based)");
     if (g.rest.rows() != 0 && g.rest.rows() != g.num_vertices) fail(gp + "/rest", "must have N rows");
-    check_finite(g.rest.data(), g.rest.size(), file, gp + "/rest");
+    check_coordinates(g.rest.data(), g.rest.size(), file, gp + "/rest");
     if (g.type.find_first_not_of(" \t\n") == std::string::npos) fail(gp, "attribute 'type' is empty");
     const auto& a = g.attributes;
-    if (!std::isfinite(a.tension_stiffness) || !std::isfinite(a.bending_stiffness) || !std::isfinite(a.mass) ||
-        !std::isfinite(a.self_friction))
-      fail(gp, "attributes must be finite");
+    for (const float v : {a.tension_stiffness, a.bending_stiffness, a.mass, a.self_friction})
+      if (!std::isfinite(v) || v < 0) fail(gp, "attributes must be finite and >= 0");
   }
   if (s.has_wind) {
     if (s.wind_rotation.rows() != T || s.wind_strength.size() != T) fail("/wind", "must have T rows");

@@ -152,6 +152,11 @@ std::vector<BrokenCase> sequence_cases() {
   c.push_back({"body_inf_position", [](hid_t f) { edit_floats(f, "/body/vertices", [](auto& v, auto&) {
                  v[3 * 98 * 5 + 7] = std::numeric_limits<float>::infinity(); }); },
                "/body/vertices", "non-finite"});
+  c.push_back({"body_position_beyond_extent", [](hid_t f) { edit_floats(f, "/body/vertices", [](auto& v, auto&) {
+                 v[3 * 98 * 4 + 3 * 2 + 1] = 3e38f; }); },
+               "/body/vertices", "holds the coordinate 3e+38 at frame 4, vertex 2, beyond the scene extent"});
+  c.push_back({"body_friction_negative", set_float_attr("/body", "friction", -5.0), "/body",
+               "attribute 'friction' = -5 is negative"});
   c.push_back({"body_faces_uint32", [](hid_t f) { edit_ints(f, "/body/faces", [](auto&, auto&) {});
                  hid_t ds = H5Dopen2(f, "/body/faces", H5P_DEFAULT); hid_t sp = H5Dget_space(ds);
                  hsize_t d[2]; H5Sget_simple_extent_dims(sp, d, nullptr);
@@ -191,6 +196,8 @@ std::vector<BrokenCase> sequence_cases() {
   c.push_back({"garment_missing_mass", del_attr(kG0, "mass"), kG0, "missing attribute 'mass'"});
   c.push_back({"garment_inf_bending", set_float_attr(kG1, "bending_stiffness", std::numeric_limits<double>::infinity()),
                kG1, "'bending_stiffness' is not finite"});
+  c.push_back({"garment_mass_1e300", set_float_attr(kG0, "mass", 1e300), kG0,
+               "attribute 'mass' = 1e+300 is not finite in float32"});
   c.push_back({"garment_empty_type", set_string_attr(kG0, "type", ""), kG0, "attribute 'type' is empty"});
   c.push_back({"order_names_missing_garment", [](hid_t f) { with_object(f, "/garments", [](hid_t o) {
                  h5::write_string_array_attr(o, "order", {"g0_tee", "middle", "g1_jacket"}); }); },
