@@ -41,7 +41,7 @@ struct EvalCliOptions {
   std::string out = "eval_out";
   std::string precision = "float32";  // of the models' linear products: float32 | bf16 | float32,bf16
   std::vector<double> tethers;        // patch tether factors (eval/tether.h); empty: each checkpoint's own
-  std::vector<std::string> constraints;  // "on" / "off" (eval/constraints.h); empty: each checkpoint's own
+  std::vector<std::string> constraints;  // "on" / "off" (train/cloth_constraints.h); empty: each checkpoint's own
   std::vector<std::string> settings;     // "eval.KEY=VALUE" for every model
 };
 
@@ -228,7 +228,7 @@ LAYERSNET_COMMAND(eval, "Roll out checkpoints and baselines over a split; error,
                         ->check(layersnet::cli::kFiniteNonNegative);
                     sub.add_option("--constraints", o->constraints,
                                    "cloth constraints after every predicted frame (edge strain limit, collision shell; "
-                                   "eval/constraints.h): on, off, or off,on for every model both ways (default: each "
+                                   "train/cloth_constraints.h): on, off, or off,on for every model both ways (default: each "
                                    "checkpoint's eval.constraints)")
                         ->delimiter(',')
                         ->check(CLI::IsMember({"on", "off"}));

@@ -13,7 +13,7 @@
 #include "dataset/sequence.h"
 #include "dataset/stats.h"
 #include "dataset/wind.h"
-#include "eval/constraints.h"
+#include "train/cloth_constraints.h"
 #include "eval/metrics.h"
 #include "train/config.h"
 #include "train/train_data.h"
@@ -60,7 +60,7 @@ struct MarginTally {
         if (rest > 0) out.push_back((x.row(layout.offsets[k] + a) - x.row(layout.offsets[k] + b)).norm() / rest - 1.f);
       };
       for (const auto& [a, b] : mesh_edges(g.faces)) ratio(a, b, stretch);
-      for (const auto& [a, b] : layersnet::eval::far_corners(g.faces)) ratio(a, b, fold);
+      for (const auto& [a, b] : layersnet::far_corners(g.faces)) ratio(a, b, fold);
     }
     if (!layout.layered()) return;
     const Points inner = x.topRows(layout.num_vertices() - layout.outer_vertices());

@@ -123,7 +123,7 @@ int run_stress(const StressCliOptions& o) {
   else
     std::printf("patch tether off (eval.patch_tether = 0); the data's own max offset / rest patch radius: %.3f\n", data_tether);
   if (m.config.eval.constraints)
-    std::printf("cloth constraints on: edge strain <= %g, collision shell %g units, %d passes per frame (eval/constraints.h)\n",
+    std::printf("cloth constraints on: edge strain <= %g, collision shell %g units, %d passes per frame (train/cloth_constraints.h)\n",
                 m.config.eval.strain_limit, m.config.eval.collision_shell, m.config.eval.constraint_iterations);
   else
     std::printf("cloth constraints off (eval.constraints = false)\n");

@@ -70,29 +70,6 @@ int64_t count_layer_collisions(const Eigen::Ref<const Points>& outer, const Eige
   return count;
 }
 
-GarmentLayout garment_layout(const dataset::SequenceInfo& info) {
-  GarmentLayout L;
-  L.offsets.push_back(0);
-  for (const auto& g : info.garments) {
-    L.offsets.push_back(L.offsets.back() + g.num_vertices);
-    L.faces.push_back(g.faces);
-    L.types.push_back(g.type);
-  }
-  return L;
-}
-
-Faces inner_faces(const GarmentLayout& L) {
-  Eigen::Index rows = 0;
-  for (int g = 0; g + 1 < L.num_garments(); ++g) rows += L.faces[g].rows();
-  Faces out(rows, 3);
-  Eigen::Index r = 0;
-  for (int g = 0; g + 1 < L.num_garments(); ++g) {
-    out.middleRows(r, L.faces[g].rows()) = L.faces[g].array() + L.offsets[g];
-    r += L.faces[g].rows();
-  }
-  return out;
-}
-
 FrameMetrics frame_metrics(const GarmentLayout& L, const Eigen::Ref<const Points>& pred,
                            const Eigen::Ref<const Points>& truth, const Eigen::Ref<const Points>& body,
                            const Faces& body_faces, const CollisionOptions& o) {

@@ -29,6 +29,7 @@
 // All comparisons are strict (< 0), no epsilon, as the official code. Non-finite rows (a
 // diverged prediction) never count as collisions but stay in the denominators; the error
 // of such a frame is NaN.
+#include "dataset/garments.h"
 #include "dataset/sequence.h"
 
 #include <Eigen/Core>
@@ -57,18 +58,9 @@ int64_t count_layer_collisions(const Eigen::Ref<const Points>& outer, const Eige
                                const Faces& inner_faces, double max_distance = -1);
 
 // The garment layout of a sequence, for splitting the concatenated positions.
-struct GarmentLayout {
-  std::vector<int32_t> offsets;    // (G+1,) first vertex of each garment
-  std::vector<Faces> faces;        // per garment, local indices
-  std::vector<std::string> types;  // per garment
-  int num_garments() const { return static_cast<int>(types.size()); }
-  int num_vertices() const { return offsets.empty() ? 0 : offsets.back(); }
-  bool layered() const { return num_garments() >= 2; }  // the last garment is the outer layer
-  int outer_vertices() const { return layered() ? offsets.back() - offsets[offsets.size() - 2] : 0; }
-};
-GarmentLayout garment_layout(const dataset::SequenceInfo& info);
-// Inner garments' faces re-indexed into the concatenation of garments [0, G-1): (F_i, 3).
-Faces inner_faces(const GarmentLayout& layout);
+using dataset::GarmentLayout;
+using dataset::garment_layout;
+using dataset::inner_faces;
 
 // Everything one frame contributes (numerators and denominators, so sums stay exact).
 struct FrameMetrics {

@@ -1,6 +1,8 @@
 // Rollouts and predictors (see rollout.h).
 #include "eval/rollout.h"
 
+#include "dataset/garments.h"
+
 #include "eval/tether.h"
 
 #include "model/layersnet.h"
@@ -26,15 +28,7 @@ Points garments_at(const dataset::Sequence& seq, int t) {
   return x;
 }
 
-Points rest_garments(const dataset::Sequence& seq) {
-  Points x = garments_at(seq, 0);
-  Eigen::Index row = 0;
-  for (const auto& mesh : seq.info.garments) {
-    if (mesh.rest.rows() == mesh.num_vertices) x.middleRows(row, mesh.num_vertices) = mesh.rest;
-    row += mesh.num_vertices;
-  }
-  return x;
-}
+Points rest_garments(const dataset::Sequence& seq) { return dataset::rest_shapes(seq.info, garments_at(seq, 0)); }
 
 Points ConstantVelocity::step(const dataset::Sequence&, int, const Points&, const Points& x_prev,
                               const Points& x_now) {
@@ -134,7 +128,7 @@ void NetworkPredictor<T>::begin(const dataset::Sequence& seq) {
   tether_limit_.clear();
   if (config_.eval.patch_tether > 0) tether_limit_ = tether_limits(seq, *structure_, config_.eval.patch_tether);
   constraints_.reset();
-  if (config_.eval.constraints) constraints_ = std::make_unique<const ClothConstraints>(seq, config_.eval);
+  if (config_.eval.constraints) constraints_ = std::make_unique<const ClothConstraints>(seq.info, rest_garments(seq), config_.eval);
 }
 
 template <class T>

@@ -212,23 +212,7 @@ std::vector<GarmentBodyDistance> garment_body_distances(const dataset::Sequence&
   return out;
 }
 
-GarmentEdges garment_edges(const dataset::Sequence& seq) {
-  GarmentEdges out;
-  const Points rest = rest_garments(seq);
-  Eigen::Index offset = 0;
-  for (const dataset::GarmentMesh& mesh : seq.info.garments) {
-    std::set<std::pair<int, int>> seen;
-    for (int f = 0; f < mesh.num_faces(); ++f)
-      for (int c = 0; c < 3; ++c) {
-        const int a = mesh.faces(f, c), b = mesh.faces(f, (c + 1) % 3);
-        if (!seen.insert({std::min(a, b), std::max(a, b)}).second) continue;
-        out.rows.push_back({offset + a, offset + b});
-        out.rest.push_back((rest.row(offset + a) - rest.row(offset + b)).cast<double>().norm());
-      }
-    offset += mesh.num_vertices;
-  }
-  return out;
-}
+GarmentEdges garment_edges(const dataset::Sequence& seq) { return dataset::garment_edges(seq.info, rest_garments(seq)); }
 
 double max_edge_stretch(const GarmentEdges& edges, const Points& x) {
   double worst = 0;

@@ -40,6 +40,7 @@
 // step from the ground truth adds only 0.03–0.15 to the data's p99 (quick model), while a
 // garment stretched 3x everywhere (strain 2) must fail, so the factor stays below 2 / 0.885.
 #include "autodiff/params.h"
+#include "dataset/garments.h"
 #include "dataset/manifest.h"
 #include "dataset/sequence.h"
 #include "dataset/stats.h"
@@ -84,7 +85,7 @@ dataset::Sequence make_stress_sequence(const dataset::Sequence& source, const St
 // frame 0), scene units, via Dijkstra from every vertex (N_g² log N_g: fine for N_g ~ 10³).
 std::vector<double> garment_graph_diameters(const dataset::Sequence& seq);
 // The same from the edges already listed (garment_edges(seq)).
-struct GarmentEdges;
+using dataset::GarmentEdges;
 std::vector<double> garment_graph_diameters(const dataset::Sequence& seq, const GarmentEdges& edges);
 // Per garment (G,): B_g = c_g + kStretchAllowance · D_g (see above), from frame 0.
 std::vector<double> garment_distance_bounds(const dataset::Sequence& seq);
@@ -102,10 +103,6 @@ std::vector<GarmentBodyDistance> garment_body_distances(const dataset::Sequence&
 
 // Every mesh edge once, as rows of the layer-ordered garment points, garment by garment, with
 // its rest length (rest_garments: the file's /rest template, else frame 0).
-struct GarmentEdges {
-  std::vector<std::pair<Eigen::Index, Eigen::Index>> rows;
-  std::vector<double> rest;
-};
 GarmentEdges garment_edges(const dataset::Sequence& seq);
 // max over edges of length / rest length (edges of zero rest length skipped).
 double max_edge_stretch(const GarmentEdges& edges, const Points& x);

@@ -1,11 +1,7 @@
-// Cloth constraints (see constraints.h).
-#include "eval/constraints.h"
+#include "train/cloth_constraints.h"
 
+#include "dataset/garments.h"
 #include "dataset/neighbours.h"
-#include "eval/metrics.h"
-#include "eval/stress.h"
-
-#include "eval/rollout.h"
 
 #include <algorithm>
 #include <cmath>
@@ -13,7 +9,7 @@
 #include <map>
 #include <memory>
 
-namespace layersnet::eval {
+namespace layersnet {
 namespace {
 
 // Relative slack under which a constraint counts as met (float round-off of earlier moves).
@@ -77,17 +73,17 @@ std::vector<std::pair<int32_t, int32_t>> far_corners(const dataset::Faces& faces
   return out;
 }
 
-ClothConstraints::ClothConstraints(const dataset::Sequence& seq, const EvalConfig& settings)
-    : settings_(settings), reach_(kReachMetres * seq.info.scale), body_faces_(seq.info.body_faces) {
-  const GarmentEdges edges = garment_edges(seq);
+ClothConstraints::ClothConstraints(const dataset::SequenceInfo& info, const dataset::Points& rest,
+                                   const EvalConfig& settings)
+    : settings_(settings), reach_(kReachMetres * info.scale), body_faces_(info.body_faces) {
+  const dataset::GarmentEdges edges = dataset::garment_edges(info, rest);
   for (size_t e = 0; e < edges.rows.size(); ++e)
     if (edges.rest[e] > 0) {
       edges_.emplace_back(static_cast<int32_t>(edges.rows[e].first), static_cast<int32_t>(edges.rows[e].second));
       rest_.push_back(static_cast<float>(edges.rest[e]));
     }
-  const Points rest = rest_garments(seq);
   Eigen::Index offset = 0;
-  for (const dataset::GarmentMesh& mesh : seq.info.garments) {
+  for (const dataset::GarmentMesh& mesh : info.garments) {
     for (const auto& [a, b] : far_corners(mesh.faces)) {
       const float length = (rest.row(offset + a) - rest.row(offset + b)).norm();
       if (length <= 0) continue;
@@ -96,9 +92,9 @@ ClothConstraints::ClothConstraints(const dataset::Sequence& seq, const EvalConfi
     }
     offset += mesh.num_vertices;
   }
-  const GarmentLayout layout = garment_layout(seq.info);
+  const dataset::GarmentLayout layout = dataset::garment_layout(info);
   outer_begin_ = layout.num_vertices() - layout.outer_vertices();
-  if (layout.layered()) inner_faces_ = inner_faces(layout);
+  if (layout.layered()) inner_faces_ = dataset::inner_faces(layout);
 }
 
 ConstraintMoves ClothConstraints::apply(const Eigen::Ref<const dataset::Points>& body, dataset::Points& x) const {
@@ -131,4 +127,4 @@ ConstraintMoves ClothConstraints::apply(const Eigen::Ref<const dataset::Points>&
   return moves;
 }
 
-}  // namespace layersnet::eval
+}  // namespace layersnet

@@ -27,7 +27,7 @@
 #include <utility>
 #include <vector>
 
-namespace layersnet::eval {
+namespace layersnet {
 
 // What one apply() moved.
 struct ConstraintMoves {
@@ -42,10 +42,11 @@ std::vector<std::pair<int32_t, int32_t>> far_corners(const dataset::Faces& faces
 
 class ClothConstraints {
  public:
-  // Edges and rest lengths from the sequence's garments (rest template, else frame 0). Settings:
-  // eval.strain_limit (s; 0 = no edge step), fold_limit (f; 0 = no fold step), collision_shell
-  // (scene units; 0 = no collision steps), constraint_iterations; eval.constraints is not read.
-  ClothConstraints(const dataset::Sequence& seq, const EvalConfig& settings);
+  // Edges and rest lengths from the garments of `info` and their rest shapes `rest` (N, 3;
+  // dataset::rest_shapes). Settings: eval.strain_limit (s; 0 = no edge step), fold_limit (f;
+  // 0 = no fold step), collision_shell (scene units; 0 = no collision steps),
+  // constraint_iterations; eval.constraints is not read.
+  ClothConstraints(const dataset::SequenceInfo& info, const dataset::Points& rest, const EvalConfig& settings);
   // Projects x (N, 3, world, layer order) in place against the body of frame t (B, 3). A frame
   // with a non-finite value is left as it is (the rollout reports the divergence).
   ConstraintMoves apply(const Eigen::Ref<const dataset::Points>& body, dataset::Points& x) const;
@@ -62,4 +63,4 @@ class ClothConstraints {
   dataset::Faces inner_faces_;                      // inner garments' faces, rows [0, outer_begin_)
 };
 
-}  // namespace layersnet::eval
+}  // namespace layersnet

@@ -1,9 +1,9 @@
-// Cloth constraints (eval/constraints.h): cloth that already holds them is not moved; stretched
+// Cloth constraints (train/cloth_constraints.h): cloth that already holds them is not moved; stretched
 // edges come back within the limit; vertices inside the body or the inner layer are pushed onto
 // the shell; and a model's rollout with eval.constraints keeps every frame within them.
 #include "dataset/neighbours.h"
 #include "dataset/synthetic.h"
-#include "eval/constraints.h"
+#include "train/cloth_constraints.h"
 #include "eval/metrics.h"
 #include "eval/rollout.h"
 #include "eval/stress.h"
@@ -52,7 +52,7 @@ TEST(ClothConstraints, ClothThatHoldsThemIsNotMoved) {
   EvalConfig s;
   s.strain_limit = 1.1 * worst_strain(seq, garments_at(seq, 3));  // the data's own strain fits
   ASSERT_GT(s.strain_limit, 0.0);
-  const ClothConstraints constraints(seq, s);
+  const ClothConstraints constraints(seq.info, rest_garments(seq), s);
   Points x = garments_at(seq, 3);
   const Points before = x;
   const ConstraintMoves moves = constraints.apply(seq.body_at(3), x);
@@ -68,7 +68,7 @@ TEST(ClothConstraints, StretchedEdgesComeBackWithinTheLimit) {
   s.constraint_iterations = 40;
   Points x = crumpled(seq);
   ASSERT_GT(worst_strain(seq, x), 0.2);
-  const ConstraintMoves moves = ClothConstraints(seq, s).apply(seq.body_at(3), x);
+  const ConstraintMoves moves = ClothConstraints(seq.info, rest_garments(seq), s).apply(seq.body_at(3), x);
   EXPECT_GT(moves.edges, 0);
   EXPECT_LE(worst_strain(seq, x), s.strain_limit + 0.01);
 }
@@ -80,7 +80,7 @@ TEST(ClothConstraints, FewPassesStillShrinkTheWorstStrain) {
   s.constraint_iterations = 1;
   Points x = crumpled(seq);
   const double before = worst_strain(seq, x);
-  ClothConstraints(seq, s).apply(seq.body_at(3), x);
+  ClothConstraints(seq.info, rest_garments(seq), s).apply(seq.body_at(3), x);
   EXPECT_LT(worst_strain(seq, x), 0.75 * before);
 }
 
@@ -118,7 +118,7 @@ TEST(ClothConstraints, FoldedTrianglePairsOpenToTheFoldLimit) {
     return worst;
   };
   ASSERT_LT(shortest(x), 1 - s.fold_limit - 0.1);
-  const ConstraintMoves moves = ClothConstraints(seq, s).apply(seq.body_at(3), x);
+  const ConstraintMoves moves = ClothConstraints(seq.info, rest_garments(seq), s).apply(seq.body_at(3), x);
   EXPECT_GT(moves.folds, 0);
   EXPECT_EQ(moves.edges, 0);
   EXPECT_GE(shortest(x), 1 - s.fold_limit - 0.01);
@@ -136,7 +136,7 @@ TEST(ClothConstraints, AVertexInsideTheBodyEndsOnTheShell) {
   const Eigen::Index v = 5, h = 20;  // an inner-garment vertex, moved 0.1 inside body vertex h
   x.row(v) = body.row(h) - 0.1f * body_normals.row(h);
   ASSERT_LT(signed_distance(x.row(v), body, seq.info.body_faces), 0.0);
-  const ConstraintMoves moves = ClothConstraints(seq, s).apply(body, x);
+  const ConstraintMoves moves = ClothConstraints(seq.info, rest_garments(seq), s).apply(body, x);
   EXPECT_EQ(moves.body, 1);
   EXPECT_NEAR(signed_distance(x.row(v), body, seq.info.body_faces), s.collision_shell, 1e-5);
   for (Eigen::Index u = 0; u < x.rows(); ++u) {
@@ -159,7 +159,7 @@ TEST(ClothConstraints, AnOuterVertexInsideTheInnerLayerEndsOnTheShell) {
   const Eigen::Index v = outer_begin + 7, y = 9;
   x.row(v) = inner.row(y) - 0.1f * inner_normals.row(y);
   ASSERT_LT(signed_distance(x.row(v), inner, faces), 0.0);
-  const ConstraintMoves moves = ClothConstraints(seq, s).apply(seq.body_at(3), x);
+  const ConstraintMoves moves = ClothConstraints(seq.info, rest_garments(seq), s).apply(seq.body_at(3), x);
   EXPECT_EQ(moves.layer, 1);
   EXPECT_NEAR(signed_distance(x.row(v), x.topRows(outer_begin), faces), s.collision_shell, 1e-5);
   // The shell is the same rule the layer-collision metric counts: no collision left.
@@ -170,7 +170,7 @@ TEST(ClothConstraints, ANonFiniteFrameIsLeftForTheRolloutToReport) {
   const dataset::Sequence seq = tubes();
   Points x = garments_at(seq, 3);
   x(4, 1) = std::numeric_limits<float>::quiet_NaN();
-  const ConstraintMoves moves = ClothConstraints(seq, EvalConfig{}).apply(seq.body_at(3), x);
+  const ConstraintMoves moves = ClothConstraints(seq.info, rest_garments(seq), EvalConfig{}).apply(seq.body_at(3), x);
   EXPECT_EQ(moves.edges + moves.body + moves.layer, 0);
   EXPECT_TRUE(std::isnan(x(4, 1)));
 }
