@@ -191,7 +191,9 @@ const Schema& schema() {
     k.add("train.adam_eps", [](Config& c) -> double& { return c.train.adam_eps; }, "Adam epsilon", {0, 1, {}});
     k.add("train.grad_clip", [](Config& c) -> double& { return c.train.grad_clip; }, "global gradient norm clip (0 = off)", {0, 1e9, {}});
     k.add("train.rollout_steps", [](Config& c) -> std::vector<int>& { return c.train.rollout_steps; }, "max self-fed steps T_n per epoch", {0, 1000, {}});
+    k.add("train.rollout_constraints", [](Config& c) -> bool& { return c.train.rollout_constraints; }, "project self-fed frames (curriculum and validation rollouts) onto the cloth constraints (eval.strain_limit, eval.collision_shell, ...)");
     k.add("train.input_noise", [](Config& c) -> double& { return c.train.input_noise; }, "std of noise on the input garment positions (scene units, 0 = off)", {0, 1e3, {}});
+    k.add("train.init_from", [](Config& c) -> std::string& { return c.train.init_from; }, "checkpoint or packed model whose weights (and statistics) start a new run; empty = random init");
     k.add("train.seed", [](Config& c) -> int64_t& { return c.train.seed; }, "random seed", {0, 9.0e15, {}});
     k.add("train.threads", [](Config& c) -> int& { return c.train.threads; }, "OpenMP threads (0 = all)", {0, 1024, {}});
     k.add("train.keep_checkpoints", [](Config& c) -> int& { return c.train.keep_checkpoints; }, "last N checkpoints kept", positive);
@@ -207,7 +209,7 @@ const Schema& schema() {
     k.add("eval.split", [](Config& c) -> std::string& { return c.eval.split; }, "split to evaluate", {0, 0, {"train", "val", "test"}});
     k.add("eval.frames", [](Config& c) -> int& { return c.eval.frames; }, "predicted frames per sequence", positive);
     k.add("eval.patch_tether", [](Config& c) -> double& { return c.eval.patch_tether; }, "rollouts keep each vertex within this many rest patch radii of its patch centre (0 = off, the default; eval/tether.h)", {0, 1e6, {}});
-    k.add("eval.constraints", [](Config& c) -> bool& { return c.eval.constraints; }, "rollouts project every predicted frame onto the cloth constraints: edge strain limit, collision shell (eval/constraints.h; not in the paper)");
+    k.add("eval.constraints", [](Config& c) -> bool& { return c.eval.constraints; }, "rollouts project every predicted frame onto the cloth constraints: edge strain limit, collision shell (train/cloth_constraints.h; not in the paper)");
     k.add("eval.strain_limit", [](Config& c) -> double& { return c.eval.strain_limit; }, "constraints: largest |edge length / rest length - 1| a rollout keeps (0 = no edge step)", {0, 0.99, {}});
     k.add("eval.fold_limit", [](Config& c) -> double& { return c.eval.fold_limit; }, "constraints: largest relative shortening of the distance between the far corners of two triangles sharing an edge (0 = no fold step)", {0, 0.99, {}});
     k.add("eval.collision_shell", [](Config& c) -> double& { return c.eval.collision_shell; }, "constraints: scene units a rollout keeps garments outside the body and the outer layer outside the inner one (0 = no collision step)", {0, 10, {}});

@@ -36,6 +36,14 @@ struct TrainConfig {
   std::vector<int> rollout_steps = {0, 1, 2, 3, 4, 5, 7, 7, 8, 9};  // max T_n per epoch (last repeats)
   double input_noise = 0.0;             // std of Gaussian noise on the input garment positions at t
                                         // (scene units; target stays the truth); 0 = off (official)
+  bool rollout_constraints = false;     // project every self-fed frame (training curriculum and
+                                        // validation rollouts) onto the cloth constraints, with the
+                                        // eval.* limits, as eval.constraints does at rollout time:
+                                        // the network then learns from the inputs it will see.
+                                        // Off (official)
+  std::string init_from;                // checkpoint or packed model whose weights start a new run
+                                        // (fine-tuning); its normalisation statistics replace the
+                                        // data set's, Adam starts fresh. Empty = random init
   int64_t seed = 0;
   int threads = 0;                      // 0 = all cores
   int keep_checkpoints = 3;             // last N kept, plus the best by validation error
@@ -59,7 +67,7 @@ struct EvalConfig {
   int frames = 36;  // predicted frames per sequence (official test: 36)
   double patch_tether = 0.0;  // rollouts: vertex within this × its patch's rest radius of its
                               // patch mates' centre (eval/tether.h); 0 = off (official, default)
-  // Cloth constraints after every predicted frame (eval/constraints.h; not in the paper).
+  // Cloth constraints after every predicted frame (train/cloth_constraints.h; not in the paper).
   bool constraints = false;
   double strain_limit = 0.05;      // largest |edge length / rest length − 1| kept
   double fold_limit = 0.0;         // largest shortening of the far-corner distance of two adjacent triangles (0 = none)

@@ -59,7 +59,7 @@ SampleOutcome train_sample(const TrainData& data, Window& window, int t, int sel
         for (int c = 0; c < 3; ++c) predicted[static_cast<std::size_t>(v * 3 + c)] = pred.vertex.value[v * 9 + c];
     }
     out.model_seconds += seconds_since(start);
-    window.set_garments_relative(f + 1, predicted.data());
+    window.feed_back(f + 1, predicted.data());
   }
   window.add_input_noise(t);
   auto start = clock::now();
@@ -130,7 +130,7 @@ double rollout_error(const TrainData& data, Window& window, int t0, int steps, c
   for (int f = t0; f < t0 + steps; ++f) {
     // Scored against frame f + 1 while the window still holds its truth, then fed back.
     sum += predict_and_score(data, window, f, config, tape, params, &predicted);
-    window.set_garments_relative(f + 1, predicted.data());
+    window.feed_back(f + 1, predicted.data());
   }
   return steps > 0 ? sum / steps : 0.0;
 }

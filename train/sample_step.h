@@ -8,7 +8,9 @@
 // k influence nothing, so we skip them: with T_n = ngs − k self-fed steps the rollout
 // starts from ground truth at t − T_n, feeds back T_n predictions (positions; velocities
 // and history follow from them) and takes the recorded step at t. Body, wind and gravity
-// always come from the ground truth.
+// always come from the ground truth. With train.rollout_constraints every fed-back frame is
+// first projected onto the cloth constraints (Window::feed_back), as rollouts do with
+// eval.constraints.
 #include "autodiff/params.h"
 #include "autodiff/tape.h"
 #include "train/config.h"

@@ -1,5 +1,7 @@
 #include "train/train_data.h"
 
+#include "dataset/garments.h"
+
 #include <algorithm>
 
 namespace layersnet {
@@ -25,6 +27,15 @@ void for_each_garment_coordinate(Window& w, int f, Set&& set) {
 void Window::set_garments_relative(int f, const float* relative) {
   const Eigen::Vector3f r = info->translation.row(f).transpose();
   for_each_garment_coordinate(*this, f, [&](float& x, std::size_t i) { x = relative[i] + r[static_cast<int>(i % 3)]; });
+}
+
+void Window::feed_back(int f, const float* relative) {
+  set_garments_relative(f, relative);
+  if (!constraints) return;
+  dataset::Points x(info->total_garment_vertices(), 3);
+  for_each_garment_coordinate(*this, f, [&](float& v, std::size_t i) { x.data()[i] = v; });
+  constraints->apply(frames.body_at(f, info->num_body_vertices), x);
+  for_each_garment_coordinate(*this, f, [&](float& v, std::size_t i) { v = x.data()[i]; });
 }
 
 void Window::add_input_noise(int f) {
@@ -60,6 +71,7 @@ TrainData::TrainData(const dataset::DatasetManifest& manifest, const std::string
       stats_(stats),
       sample_options_(sample_options_for(config.model)),
       max_open_files_(std::max(config.data.cache_sequences, 1)),
+      constraint_settings_(config.train.rollout_constraints ? std::optional<EvalConfig>(config.eval) : std::nullopt),
       ids_(manifest.split(split)),
       structures_(static_cast<float>(config.model.patch_size), static_cast<std::size_t>(std::max(config.data.cache_sequences, 1))) {
   const dataset::FrameSelection selection = frame_selection_for(config.data);
@@ -81,7 +93,15 @@ TrainData::OpenFile& TrainData::open(int sequence) {
     }
   auto file = std::make_shared<dataset::SequenceFile>(manifest_.sequence_path(ids_.at(static_cast<std::size_t>(sequence))));
   auto info = std::make_shared<const dataset::SequenceInfo>(file->info());
-  files_.push_front({sequence, std::move(file), std::move(info)});
+  std::shared_ptr<const ClothConstraints> constraints;
+  if (constraint_settings_) {
+    const dataset::FrameWindow first = file->read_frames(0, 1);
+    dataset::Points x(info->total_garment_vertices(), 3);
+    Eigen::Index row = 0;
+    for (const dataset::Points& g : first.garments) x.middleRows(row, g.rows()) = g, row += g.rows();
+    constraints = std::make_shared<const ClothConstraints>(*info, dataset::rest_shapes(*info, x), *constraint_settings_);
+  }
+  files_.push_front({sequence, std::move(file), std::move(info), std::move(constraints)});
   while (static_cast<int>(files_.size()) > max_open_files_) files_.pop_back();
   return files_.front();
 }
@@ -91,6 +111,7 @@ Window TrainData::read_window(int sequence, int t_first, int t_last) {
   Window w;
   w.sequence_id = ids_.at(static_cast<std::size_t>(sequence));
   w.info = f.info;
+  w.constraints = f.constraints;
   w.structure = structures_.get(w.sequence_id, *f.info);
   w.frames = f.file->read_frames(t_first - 2, t_last - t_first + 4);
   return w;

@@ -11,11 +11,13 @@
 #include "dataset/sample.h"
 #include "dataset/sequence.h"
 #include "dataset/stats.h"
+#include "train/cloth_constraints.h"
 #include "train/config.h"
 
 #include <cstdint>
 #include <list>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -41,6 +43,11 @@ struct Window {
   void set_garments_relative(int f, const float* relative);
   // Adds input_noise to the garments of frame f.
   void add_input_noise(int f);
+  // Cloth constraints of the sequence (train.rollout_constraints), else null.
+  std::shared_ptr<const ClothConstraints> constraints;
+  // Sets frame f's garments from root-relative predictions as set_garments_relative does, then
+  // projects them onto `constraints` (when set) against the body of frame f.
+  void feed_back(int f, const float* relative);
 };
 
 class TrainData {
@@ -72,6 +79,7 @@ class TrainData {
     int sequence;
     std::shared_ptr<dataset::SequenceFile> file;
     std::shared_ptr<const dataset::SequenceInfo> info;
+    std::shared_ptr<const ClothConstraints> constraints;  // train.rollout_constraints only
   };
   OpenFile& open(int sequence);
 
@@ -80,6 +88,7 @@ class TrainData {
   dataset::NormalisationStats stats_;
   dataset::SampleOptions sample_options_;
   int max_open_files_;
+  std::optional<EvalConfig> constraint_settings_;  // train.rollout_constraints only
   std::vector<std::string> ids_;
   std::vector<int> first_t_;
   std::vector<int> rollout_start_;

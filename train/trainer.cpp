@@ -118,6 +118,7 @@ class Run {
  private:
   void open_data();
   void restore(const std::string& path);
+  void start_from(const std::string& path);  // train.init_from
   void run_epoch(int epoch);
   bool run_batch(int epoch, int ngs, const std::vector<int64_t>& order);  // false: max_steps reached
   bool step_cap_reached() const {
@@ -204,6 +205,25 @@ void Run::restore(const std::string& path) {
   summary_.updates = state_.global_step;
 }
 
+void Run::start_from(const std::string& path) {
+  const Checkpoint cp = read_checkpoint(path, params_);
+  // A fine-tuning run is a new run: the optimizer and its schedule start over.
+  for (auto moments : {params_.moment1(), params_.moment2()}) std::fill(moments.begin(), moments.end(), 0.0f);
+  Config saved = parse_config_text(cp.config_toml, path + ":/config");
+  saved.train = config_.train;
+  saved.eval = config_.eval;
+  saved.data = config_.data;
+  saved.loss = config_.loss;
+  if (to_toml(saved) != to_toml(config_))
+    out_ << "warning: " << path << " was trained with another [model] config than this run's; the weights fit its "
+         << "layout, but its radii or options differ\n";
+  // The weights expect inputs normalised as they were trained.
+  stats_ = stats_from_arrays(cp.stats, path);
+  out_ << "starting from the weights of " << path << " (" << cp.state.global_step << " updates)\n";
+  metric("{\"event\":\"init_from\",\"checkpoint\":" + json_string(path) + ",\"updates\":" +
+         std::to_string(cp.state.global_step) + "}");
+}
+
 void Run::save(const std::string& path) {
   if (!all_finite(params_.values()) || !all_finite(params_.moment1()) || !all_finite(params_.moment2()))
     throw TrainingStopped(path + ": not written: the parameters or Adam moments hold non-finite values (the updates "
@@ -248,10 +268,12 @@ TrainSummary Run::execute() {
   adam_ = std::make_unique<ad::Adam<float>>(
       params_, ad::AdamOptions{tc.learning_rate, tc.adam_beta1, tc.adam_beta2, tc.adam_eps, 0.0});
   std::string resumed_from;
+  if (!options_.resume && !tc.init_from.empty()) start_from(tc.init_from);
   if (options_.resume) {
     const auto checkpoints = list_checkpoints(options_.run_dir);
     if (checkpoints.empty()) {
       out_ << options_.run_dir << ": no checkpoint yet; the run starts from its beginning\n";
+      if (!tc.init_from.empty()) start_from(tc.init_from);
       metric("{\"event\":\"resume\",\"checkpoint\":null}");
     } else {
       // A damaged newest checkpoint (torn by a full disk, a changed byte) costs only the work

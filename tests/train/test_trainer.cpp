@@ -4,6 +4,7 @@
 #include "train/trainer.h"
 
 #include "autodiff/tape.h"
+#include "dataset/garments.h"
 #include "dataset/manifest.h"
 #include "dataset/stats.h"
 #include "dataset/synthetic.h"
@@ -274,6 +275,118 @@ TEST_F(TrainerTest, RolloutValidationFeedsPredictionsBackAndPicksBestByIt) {
   EXPECT_NE(metrics.find("\"rollout_error\""), std::string::npos);
   EXPECT_EQ(metrics.find("\"one_step_error\""), std::string::npos);
   EXPECT_TRUE(fs::exists(dir_ / "run" / "best.h5"));
+}
+
+// train.rollout_constraints: a fed-back frame is projected onto the cloth constraints (edges
+// back within eval.strain_limit of their rest length) before it becomes the next input; off,
+// the prediction is fed back as it is. Training with it differs from training without it.
+TEST_F(TrainerTest, RolloutConstraintsProjectTheFedBackFrames) {
+  const std::string data = make_dataset(2, 1, 8);
+  const std::vector<std::string> sets = {"train.epochs=1", "train.rollout_steps=[2]", "train.threads=1",
+                                         "train.val_rollout_frames=3", "eval.strain_limit=0.05",
+                                         "eval.collision_shell=0", "eval.constraint_iterations=200"};
+  auto with = [&](std::vector<std::string> extra) {
+    std::vector<std::string> all = sets;
+    all.insert(all.end(), extra.begin(), extra.end());
+    return tiny_config(data, all);
+  };
+  const Config on = with({"train.rollout_constraints=true"}), off = with({});
+  const dataset::DatasetManifest manifest = dataset::read_manifest(data);
+  const dataset::NormalisationStats stats = dataset::read_stats(manifest.stats_path());
+  // The truth of frame t + 1 stretched 1.5x about its centroid, root-relative, as a prediction.
+  auto stretched_prediction = [](const Window& w, int f) {
+    dataset::Points x(w.info->total_garment_vertices(), 3);
+    Eigen::Index row = 0;
+    for (int g = 0; g < w.info->num_garments(); ++g) {
+      const int n = w.info->garments[static_cast<std::size_t>(g)].num_vertices;
+      x.middleRows(row, n) = w.frames.garment_at(g, f, n);
+      row += n;
+    }
+    const Eigen::RowVector3f centre = x.colwise().mean();
+    dataset::Points rel = ((x.rowwise() - centre) * 1.5f).rowwise() + centre;
+    rel.rowwise() -= w.info->translation.row(f);
+    return rel;
+  };
+  for (const bool project : {false, true}) {
+    TrainData train_data(manifest, "train", stats, project ? on : off);
+    const int t = train_data.first_t(0) + 1;
+    Window w = train_data.read_window(0, t, t);
+    ASSERT_EQ(w.constraints != nullptr, project);
+    const dataset::Points rel = stretched_prediction(w, t + 1);
+    // Rest lengths of the sequence's garments, as the constraints use them.
+    dataset::Points first(w.info->total_garment_vertices(), 3);
+    {
+      dataset::SequenceFile file(manifest.sequence_path(train_data.ids()[0]));
+      const dataset::FrameWindow f0 = file.read_frames(0, 1);
+      Eigen::Index row = 0;
+      for (const auto& g : f0.garments) first.middleRows(row, g.rows()) = g, row += g.rows();
+    }
+    const dataset::GarmentEdges edges = dataset::garment_edges(*w.info, dataset::rest_shapes(*w.info, first));
+    w.feed_back(t + 1, rel.data());
+    dataset::Points x(w.info->total_garment_vertices(), 3);
+    Eigen::Index row = 0;
+    for (int g = 0; g < w.info->num_garments(); ++g) {
+      const int n = w.info->garments[static_cast<std::size_t>(g)].num_vertices;
+      x.middleRows(row, n) = w.frames.garment_at(g, t + 1, n);
+      row += n;
+    }
+    double worst = 0;
+    for (std::size_t e = 0; e < edges.rows.size(); ++e)
+      if (edges.rest[e] > 0)
+        worst = std::max(worst, std::abs((x.row(edges.rows[e].first) - x.row(edges.rows[e].second)).cast<double>().norm() /
+                                             edges.rest[e] - 1.0));
+    if (project) {
+      EXPECT_LE(worst, 0.05 + 1e-3) << "projected edges stay within the strain limit";
+    } else {
+      const dataset::Points expected = rel.rowwise() + w.info->translation.row(t + 1);
+      EXPECT_EQ(x, expected) << "without the key the prediction is fed back unchanged";
+      EXPECT_GT(worst, 0.3);
+    }
+  }
+  train(on, options("on"));
+  train(off, options("off"));
+  const auto w_on = final_weights(dir_ / "on", on), w_off = final_weights(dir_ / "off", off);
+  ASSERT_EQ(w_on.size(), w_off.size());
+  EXPECT_NE(std::memcmp(w_on.data(), w_off.data(), w_on.size() * sizeof(float)), 0)
+      << "projecting the self-fed frames changed nothing in training";
+}
+
+// train.init_from starts a new run from another run's weights (a full checkpoint or a packed
+// model): after one Adam update every weight lies within about one learning rate of them, the
+// optimizer starts over (step 1), and the run keeps the source's statistics.
+TEST_F(TrainerTest, InitFromStartsANewRunFromAnotherRunsWeights) {
+  const std::string data = make_dataset(2, 0, 7);
+  const Config base = tiny_config(data, {"train.epochs=1", "train.rollout_steps=[0]", "train.threads=1"});
+  train(base, options("source"));
+  int64_t source_step = 0;
+  const auto source = final_weights(dir_ / "source", base, &source_step);
+  ASSERT_GT(source_step, 1);
+  const std::string from = list_checkpoints((dir_ / "source").string()).back();
+  const Config tuned = tiny_config(data, {"train.epochs=1", "train.rollout_steps=[0]", "train.threads=1",
+                                          "train.max_steps=1", "train.learning_rate=0.001",
+                                          "train.init_from=" + from});
+  train(tuned, options("tuned"));
+  int64_t tuned_step = 0;
+  const auto w = final_weights(dir_ / "tuned", tuned, &tuned_step);
+  ASSERT_EQ(w.size(), source.size());
+  EXPECT_EQ(tuned_step, 1) << "the optimizer starts over";
+  float worst = 0;
+  for (std::size_t i = 0; i < w.size(); ++i) worst = std::max(worst, std::abs(w[i] - source[i]));
+  EXPECT_GT(worst, 0.f);
+  EXPECT_LE(worst, 1.01e-3f) << "one Adam step moves a weight by at most about the learning rate";
+  ad::ParamStore<float> p;
+  model::register_params(p, tuned.model);
+  const auto a = read_checkpoint(from, p).stats, b = read_checkpoint(list_checkpoints((dir_ / "tuned").string()).back(), p).stats;
+  EXPECT_EQ(a, b) << "the run keeps the statistics the weights were trained with";
+  EXPECT_NE(read_text(dir_ / "tuned" / "metrics.jsonl").find("\"event\":\"init_from\""), std::string::npos);
+  // A missing source is an error naming it.
+  const Config missing = tiny_config(data, {"train.epochs=1", "train.init_from=" + (dir_ / "nope.h5").string()});
+  try {
+    train(missing, options("missing"));
+    ADD_FAILURE() << "a missing init_from file was accepted";
+  } catch (const std::exception& e) {
+    EXPECT_NE(std::string(e.what()).find("nope.h5"), std::string::npos) << e.what();
+  }
 }
 
 // The validation rollout predicts from the first frame after the file's rest pose and ramp
