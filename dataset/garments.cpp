@@ -1,6 +1,7 @@
 #include "dataset/garments.h"
 
 #include <algorithm>
+#include <cmath>
 #include <set>
 #include <stdexcept>
 
@@ -27,6 +28,17 @@ Faces inner_faces(const GarmentLayout& L) {
     r += L.faces[g].rows();
   }
   return out;
+}
+
+Points garments_at(const SequenceInfo& info, const FrameWindow& frames, int t) {
+  Points x(info.total_garment_vertices(), 3);
+  Eigen::Index row = 0;
+  for (int g = 0; g < info.num_garments(); ++g) {
+    const int n = info.garments[static_cast<std::size_t>(g)].num_vertices;
+    x.middleRows(row, n) = frames.garment_at(g, t, n);
+    row += n;
+  }
+  return x;
 }
 
 Points rest_shapes(const SequenceInfo& info, const Points& first_frame) {
@@ -56,6 +68,17 @@ GarmentEdges garment_edges(const SequenceInfo& info, const Points& rest) {
       }
     offset += mesh.num_vertices;
   }
+  return out;
+}
+
+std::vector<double> edge_strains(const GarmentEdges& edges, const Points& x) {
+  std::vector<double> out;
+  out.reserve(edges.rows.size());
+  for (size_t e = 0; e < edges.rows.size(); ++e)
+    if (edges.rest[e] > 0) {
+      const auto [a, b] = edges.rows[e];
+      out.push_back(std::abs((x.row(a) - x.row(b)).cast<double>().norm() / edges.rest[e] - 1.0));
+    }
   return out;
 }
 

@@ -28,6 +28,9 @@ GarmentLayout garment_layout(const SequenceInfo& info);
 // Inner garments' faces re-indexed into the concatenation of garments [0, G-1): (F_i, 3).
 Faces inner_faces(const GarmentLayout& layout);
 
+// Garment positions of frame t (inside `frames`) concatenated in layer order: (N, 3).
+Points garments_at(const SequenceInfo& info, const FrameWindow& frames, int t);
+
 // Rest shapes (N, 3), scene units: each garment's /rest template, else its rows of
 // `first_frame` (the garments of frame 0, (N, 3)).
 Points rest_shapes(const SequenceInfo& info, const Points& first_frame);
@@ -39,5 +42,8 @@ struct GarmentEdges {
   std::vector<double> rest;
 };
 GarmentEdges garment_edges(const SequenceInfo& info, const Points& rest);
+// Strain |length / rest length − 1| of every edge in x (N, 3), in edge order (edges of zero
+// rest length skipped).
+std::vector<double> edge_strains(const GarmentEdges& edges, const Points& x);
 
 }  // namespace layersnet::dataset

@@ -17,16 +17,7 @@
 
 namespace layersnet::eval {
 
-Points garments_at(const dataset::Sequence& seq, int t) {
-  Points x(seq.info.total_garment_vertices(), 3);
-  Eigen::Index row = 0;
-  for (int g = 0; g < seq.info.num_garments(); ++g) {
-    const int n = seq.info.garments[g].num_vertices;
-    x.middleRows(row, n) = seq.garment_at(g, t);
-    row += n;
-  }
-  return x;
-}
+Points garments_at(const dataset::Sequence& seq, int t) { return dataset::garments_at(seq.info, seq.frames, t); }
 
 Points rest_garments(const dataset::Sequence& seq) { return dataset::rest_shapes(seq.info, garments_at(seq, 0)); }
 

@@ -16,7 +16,6 @@
 #include <functional>
 #include <limits>
 #include <queue>
-#include <set>
 #include <stdexcept>
 
 namespace layersnet::eval {
@@ -222,17 +221,6 @@ double max_edge_stretch(const GarmentEdges& edges, const Points& x) {
       worst = std::max(worst, (x.row(a) - x.row(b)).cast<double>().norm() / edges.rest[e]);
     }
   return worst;
-}
-
-std::vector<double> edge_strains(const GarmentEdges& edges, const Points& x) {
-  std::vector<double> out;
-  out.reserve(edges.rows.size());
-  for (size_t e = 0; e < edges.rows.size(); ++e)
-    if (edges.rest[e] > 0) {
-      const auto [a, b] = edges.rows[e];
-      out.push_back(std::abs((x.row(a) - x.row(b)).cast<double>().norm() / edges.rest[e] - 1.0));
-    }
-  return out;
 }
 
 StrainExtremes frame_strain(const GarmentEdges& edges, const Points& x) {

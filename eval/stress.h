@@ -106,9 +106,7 @@ std::vector<GarmentBodyDistance> garment_body_distances(const dataset::Sequence&
 GarmentEdges garment_edges(const dataset::Sequence& seq);
 // max over edges of length / rest length (edges of zero rest length skipped).
 double max_edge_stretch(const GarmentEdges& edges, const Points& x);
-// Strain |length / rest length − 1| of every edge in x (N, 3), in edge order (edges of zero
-// rest length skipped, as above).
-std::vector<double> edge_strains(const GarmentEdges& edges, const Points& x);
+using dataset::edge_strains;
 
 // Edge strain of one frame (p99 and max over edge_strains), or the worst of many frames.
 struct StrainExtremes {

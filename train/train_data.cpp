@@ -30,10 +30,9 @@ void Window::set_garments_relative(int f, const float* relative) {
 }
 
 void Window::feed_back(int f, const float* relative) {
-  set_garments_relative(f, relative);
-  if (!constraints) return;
-  dataset::Points x(info->total_garment_vertices(), 3);
-  for_each_garment_coordinate(*this, f, [&](float& v, std::size_t i) { x.data()[i] = v; });
+  if (!constraints) return set_garments_relative(f, relative);
+  dataset::Points x = Eigen::Map<const dataset::Points>(relative, info->total_garment_vertices(), 3);
+  x.rowwise() += info->translation.row(f);  // world, as set_garments_relative writes it
   constraints->apply(frames.body_at(f, info->num_body_vertices), x);
   for_each_garment_coordinate(*this, f, [&](float& v, std::size_t i) { v = x.data()[i]; });
 }
@@ -95,11 +94,8 @@ TrainData::OpenFile& TrainData::open(int sequence) {
   auto info = std::make_shared<const dataset::SequenceInfo>(file->info());
   std::shared_ptr<const ClothConstraints> constraints;
   if (constraint_settings_) {
-    const dataset::FrameWindow first = file->read_frames(0, 1);
-    dataset::Points x(info->total_garment_vertices(), 3);
-    Eigen::Index row = 0;
-    for (const dataset::Points& g : first.garments) x.middleRows(row, g.rows()) = g, row += g.rows();
-    constraints = std::make_shared<const ClothConstraints>(*info, dataset::rest_shapes(*info, x), *constraint_settings_);
+    const dataset::Points first = dataset::garments_at(*info, file->read_frames(0, 1), 0);
+    constraints = std::make_shared<const ClothConstraints>(*info, dataset::rest_shapes(*info, first), *constraint_settings_);
   }
   files_.push_front({sequence, std::move(file), std::move(info), std::move(constraints)});
   while (static_cast<int>(files_.size()) > max_open_files_) files_.pop_back();

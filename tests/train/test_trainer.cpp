@@ -295,13 +295,7 @@ TEST_F(TrainerTest, RolloutConstraintsProjectTheFedBackFrames) {
   const dataset::NormalisationStats stats = dataset::read_stats(manifest.stats_path());
   // The truth of frame t + 1 stretched 1.5x about its centroid, root-relative, as a prediction.
   auto stretched_prediction = [](const Window& w, int f) {
-    dataset::Points x(w.info->total_garment_vertices(), 3);
-    Eigen::Index row = 0;
-    for (int g = 0; g < w.info->num_garments(); ++g) {
-      const int n = w.info->garments[static_cast<std::size_t>(g)].num_vertices;
-      x.middleRows(row, n) = w.frames.garment_at(g, f, n);
-      row += n;
-    }
+    const dataset::Points x = dataset::garments_at(*w.info, w.frames, f);
     const Eigen::RowVector3f centre = x.colwise().mean();
     dataset::Points rel = ((x.rowwise() - centre) * 1.5f).rowwise() + centre;
     rel.rowwise() -= w.info->translation.row(f);
@@ -314,27 +308,13 @@ TEST_F(TrainerTest, RolloutConstraintsProjectTheFedBackFrames) {
     ASSERT_EQ(w.constraints != nullptr, project);
     const dataset::Points rel = stretched_prediction(w, t + 1);
     // Rest lengths of the sequence's garments, as the constraints use them.
-    dataset::Points first(w.info->total_garment_vertices(), 3);
-    {
-      dataset::SequenceFile file(manifest.sequence_path(train_data.ids()[0]));
-      const dataset::FrameWindow f0 = file.read_frames(0, 1);
-      Eigen::Index row = 0;
-      for (const auto& g : f0.garments) first.middleRows(row, g.rows()) = g, row += g.rows();
-    }
+    const dataset::Points first =
+        dataset::garments_at(*w.info, dataset::SequenceFile(manifest.sequence_path(train_data.ids()[0])).read_frames(0, 1), 0);
     const dataset::GarmentEdges edges = dataset::garment_edges(*w.info, dataset::rest_shapes(*w.info, first));
     w.feed_back(t + 1, rel.data());
-    dataset::Points x(w.info->total_garment_vertices(), 3);
-    Eigen::Index row = 0;
-    for (int g = 0; g < w.info->num_garments(); ++g) {
-      const int n = w.info->garments[static_cast<std::size_t>(g)].num_vertices;
-      x.middleRows(row, n) = w.frames.garment_at(g, t + 1, n);
-      row += n;
-    }
-    double worst = 0;
-    for (std::size_t e = 0; e < edges.rows.size(); ++e)
-      if (edges.rest[e] > 0)
-        worst = std::max(worst, std::abs((x.row(edges.rows[e].first) - x.row(edges.rows[e].second)).cast<double>().norm() /
-                                             edges.rest[e] - 1.0));
+    const dataset::Points x = dataset::garments_at(*w.info, w.frames, t + 1);
+    const std::vector<double> strains = dataset::edge_strains(edges, x);
+    const double worst = *std::max_element(strains.begin(), strains.end());
     if (project) {
       EXPECT_LE(worst, 0.05 + 1e-3) << "projected edges stay within the strain limit";
     } else {
