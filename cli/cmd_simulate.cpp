@@ -1,0 +1,109 @@
+// `layersnet simulate --garment G.obj [--garment G2.obj ...] (--body-frames DIR | --body-pc2 F
+// --body-topology OBJ | --body-h5 F) [--checkpoint C] [--wind W] [--fps F] [--scale S] [--up z|y]
+// --out DIR`: the learned simulator on a user's outfit and motion (eval/simulate.h).
+#include "cli/command_registry.h"
+#include "cli/program_files.h"
+#include "eval/simulate.h"
+
+#include <Eigen/Core>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdio>
+#include <memory>
+
+namespace {
+using namespace layersnet;
+
+struct SimulateCliOptions {
+  eval::SceneInputs scene;
+  std::vector<std::string> garments;  // "PATH[,key=value...]"
+  std::string checkpoint;
+  std::string up = "z";
+  std::vector<std::string> settings;  // "eval.KEY=VALUE"
+  eval::SimulateOutputs outputs;
+  std::string out;
+};
+
+constexpr const char* kShippedModel = "models/medium/model.h5";
+
+// "frame 40/199, 0.21 s/frame, ETA 33 s" on stderr: in place on a terminal, else every 10 %.
+eval::ProgressFn progress_reporter() {
+  const auto start = std::chrono::steady_clock::now();
+  const bool terminal = isatty(2);
+  return [start, terminal, last_tenth = -1](int done, int total) mutable {
+    const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    const int tenth = done * 10 / total;
+    if (!terminal && tenth == last_tenth && done != total) return;
+    last_tenth = tenth;
+    std::fprintf(stderr, "%ssimulate: frame %d/%d, %.2f s/frame, ETA %.0f s%s", terminal ? "\r" : "", done, total,
+                 elapsed / done, elapsed / done * (total - done), terminal && done != total ? "" : "\n");
+    std::fflush(stderr);
+  };
+}
+
+int run_simulate(SimulateCliOptions& o) {
+  for (const std::string& spec : o.garments) o.scene.garments.push_back(eval::parse_garment_spec(spec));
+  o.scene.up_axis = o.up.front();
+  std::string checkpoint = o.checkpoint;
+  if (checkpoint.empty()) {
+    checkpoint = cli::find_program_file(kShippedModel).string();
+    if (checkpoint.empty())
+      throw std::runtime_error(std::string(kShippedModel) +
+                               " not found next to the program or in the working directory; pass --checkpoint");
+  }
+  eval::Scene scene = eval::build_scene(o.scene);  // every input checked before the model loads
+  Eigen::setNbThreads(1);  // the model's ops own the threads; nested GEMM threads only contend
+  auto model = eval::load_model_predictor(checkpoint, checkpoint, nullptr);
+  model->apply_eval_settings(o.settings);
+  std::fprintf(stderr, "simulate: %d garments, %d body frames at %g fps, model %s\n",
+               scene.sequence.info.num_garments(), scene.body_frames, scene.sequence.info.fps, checkpoint.c_str());
+  const eval::Rollout r = eval::simulate_scene(*model, scene, progress_reporter());
+  double ms = 0;
+  for (double s : r.step_ms) ms += s;
+  const int files = eval::write_simulation(o.out, scene, o.outputs);
+  std::printf("simulate: %d frames (%.1f ms/frame) -> %d files in %s\n", scene.body_frames,
+              ms / static_cast<double>(r.step_ms.size()), files, o.out.c_str());
+  return 0;
+}
+
+}  // namespace
+
+LAYERSNET_COMMAND(
+    simulate, "Animate your own garments (OBJ with UVs) on a body motion, no ground truth needed",
+    [](CLI::App& sub) {
+      auto o = std::make_shared<SimulateCliOptions>();
+      sub.footer(
+          "Units: the model works in the D-LAYERS x10 convention, 10 scene units per metre (a person about 18 units "
+          "tall), z up. --scale gives the input files' units per metre (1 for metres, 100 for centimetres) and --up "
+          "their up axis; inputs are converted on reading and the OBJ/PC2 outputs converted back. The garments start "
+          "at rest on the body's first frame; output frame k is body frame k. Outputs in --out: "
+          "<garment>/<garment>_NNNN.obj (UVs, normals), <garment>.pc2 and body.pc2 (Blender: Mesh Cache modifier), "
+          "body.obj, scene.h5 + dataset.json (D-LAYERS-H5, scale 10, z up, the first frame repeated 3 times "
+          "at rest: `inspect`, `eval`, `export`, `stress` read it), strip.png.");
+      sub.add_option("--garment", o->garments,
+                     "garment OBJ with UVs, posed on the body's first frame; repeat from the innermost to the "
+                     "outermost layer. Options after commas: name=, type=, pins=top-ring|FILE (0-based vertex "
+                     "indices), tension= (default 50), bending= (50), mass= (0.5), friction= (60), e.g. "
+                     "coat.obj,type=jacket,mass=0.4")
+          ->required();
+      sub.add_option("--body-frames", o->scene.body.obj_folder, "folder of body OBJ files, one per frame (name order)");
+      sub.add_option("--body-pc2", o->scene.body.pc2, "body motion as a PC2 point cache (with --body-topology)");
+      sub.add_option("--body-topology", o->scene.body.topology, "OBJ giving the faces of --body-pc2");
+      sub.add_option("--body-h5", o->scene.body.h5, "the body of a D-LAYERS-H5 file (its fps, scale, up axis, root)");
+      sub.add_option("--checkpoint", o->checkpoint, std::string("model (default: the shipped ") + kShippedModel + ")");
+      sub.add_option("--wind", o->scene.wind,
+                     "none | constant:dx,dy,dz,strength | CSV of rows frame,dx,dy,dz,strength (frames increasing, "
+                     "each row holds until the next); strength as D-LAYERS (Blender wind field, e.g. 400)")
+          ->default_val("none");
+      sub.add_option("--fps", o->scene.fps, "frames per second of the body motion")->default_val(30.f);
+      sub.add_option("--scale", o->scene.scale,
+                     "input units per metre: 10 = the D-LAYERS x10 convention, 1 = metres, 100 = centimetres")
+          ->default_val(10.f);
+      sub.add_option("--up", o->up, "up axis of the input files")->check(CLI::IsMember({"z", "y"}))->default_val("z");
+      sub.add_option("--frames", o->scene.max_frames, "use only the first N body frames (0 = all)")->default_val(0);
+      sub.add_option("--set", o->settings, "rollout setting of the model, e.g. --set eval.constraints=false");
+      sub.add_option("--strip-frames", o->outputs.strip_frames, "panels in strip.png (0 = no strip)")->default_val(4);
+      sub.add_option("--out", o->out, "output folder")->required();
+      return [o] { return run_simulate(*o); };  // errors: reported by cli/main.cpp
+    });

@@ -1,0 +1,338 @@
+// `layersnet simulate` end to end: a tiny synthetic scene written as a user would give it (body
+// frames and garments as OBJ), a freshly initialised tiny model (configs/tiny.toml), the same
+// answer as the internal rollout, the errors of bad inputs, and Blender reading the outputs.
+#include "dataset/mesh_io.h"
+#include "dataset/stats.h"
+#include "dataset/synthetic.h"
+#include "eval/rollout.h"
+#include "eval/simulate.h"
+#include "model/params_layout.h"
+#include "train/checkpoint.h"
+#include "train/config.h"
+
+#include "tests/eval/cli_test_util.h"
+
+#include <Eigen/Core>
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+namespace layersnet::eval {
+namespace {
+
+namespace fs = std::filesystem;
+using cli_test::run_cli;
+
+// A body 1.7 m tall (17 units at the x10 convention) in two tube garments.
+dataset::SyntheticOptions scene_options() {
+  dataset::SyntheticOptions o;
+  o.garments = 2;
+  o.frames = 8;
+  o.rings = 4;
+  o.segments = 8;
+  o.body_rings = 6;
+  o.body_segments = 8;
+  o.height = 17.f;
+  return o;
+}
+
+class Simulate : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    root_ = fs::temp_directory_path() / ("layersnet_simulate_test_" + std::to_string(::getpid()));
+    fs::remove_all(root_);
+    const auto m = dataset::write_synthetic_dataset((root_ / "data").string(), 1, 0, 0, scene_options());
+    const auto stats = dataset::compute_stats(m);
+    seq_ = dataset::read_sequence(m.sequence_path(m.train.front()));
+    Config c = load_config({std::string(LAYERSNET_SOURCE_DIR) + "/configs/tiny.toml"});
+    ad::ParamStore<float> ps;
+    model::register_params(ps, c.model);
+    model::init_params(ps, c.model, 7);
+    Checkpoint cp;
+    cp.config_toml = to_toml(c);
+    cp.stats = stats_to_checkpoint(stats);
+    write_checkpoint(checkpoint(), ps, cp);
+    // The user's files: every body frame, and each garment at frame 0 with its UVs.
+    fs::create_directories(root_ / "body");
+    for (int t = 0; t < seq_.info.num_frames; ++t) {
+      char name[32];
+      std::snprintf(name, sizeof name, "frame_%04d.obj", t);
+      dataset::write_obj((root_ / "body" / name).string(), seq_.body_at(t), seq_.info.body_faces);
+    }
+    for (int g = 0; g < seq_.info.num_garments(); ++g) {
+      const auto& mesh = seq_.info.garments[g];
+      dataset::write_obj(garment_obj(g), seq_.garment_at(g, 0), mesh.faces, &mesh.uv);
+    }
+  }
+  static void TearDownTestSuite() {
+    if (!std::getenv("LAYERSNET_SIMULATE_TEST_KEEP")) fs::remove_all(root_);
+  }
+  static std::string checkpoint() { return (root_ / "tiny.h5").string(); }
+  static std::string garment_obj(int g) { return (root_ / (seq_.info.garments[g].name + ".obj")).string(); }
+  // --garment options with the source's own attributes and types.
+  static std::string garment_args() {
+    std::string args;
+    for (int g = 0; g < seq_.info.num_garments(); ++g) {
+      const auto& m = seq_.info.garments[g];
+      std::ostringstream s;
+      s.precision(9);
+      s << " --garment " << garment_obj(g) << ",type=" << m.type << ",tension=" << m.attributes.tension_stiffness
+        << ",bending=" << m.attributes.bending_stiffness << ",mass=" << m.attributes.mass
+        << ",friction=" << m.attributes.self_friction;
+      args += s.str();
+    }
+    return args;
+  }
+  static SceneInputs inputs() {
+    SceneInputs in;
+    in.body.obj_folder = (root_ / "body").string();
+    for (int g = 0; g < seq_.info.num_garments(); ++g) in.garments.push_back(parse_garment_spec(garment_obj(g)));
+    return in;
+  }
+  // The message of the SimulateError or DatasetError that build_scene throws.
+  static std::string scene_error(const SceneInputs& in) {
+    try {
+      build_scene(in);
+    } catch (const std::exception& e) {
+      return e.what();
+    }
+    return "(no error)";
+  }
+  static fs::path root_;
+  static dataset::Sequence seq_;
+};
+fs::path Simulate::root_;
+dataset::Sequence Simulate::seq_;
+
+// The internal road: the source sequence started from rest by hand (its first body frame three
+// times, the garments at their frame-0 positions, which are also the rest shapes), rolled out by
+// eval::rollout. simulate must give the same positions from the OBJ files.
+TEST_F(Simulate, SameAnswerAsTheInternalRolloutFromRest) {
+  int code = 0;
+  const fs::path out = root_ / "out_roads";
+  const std::string text = run_cli("simulate --checkpoint " + checkpoint() + " --body-frames " +
+                                       (root_ / "body").string() + garment_args() + " --out " + out.string(),
+                                   &code);
+  ASSERT_EQ(code, 0) << text;
+
+  const int K = seq_.info.num_frames, B = seq_.info.num_body_vertices;
+  dataset::Sequence start = seq_;
+  start.info.num_frames = start.frames.count = K + 2;
+  start.info.body_friction = 60.f;  // simulate's default
+  start.frames.body.resize(static_cast<Eigen::Index>(K + 2) * B, 3);
+  for (int t = 0; t < K + 2; ++t)
+    start.frames.body.middleRows(static_cast<Eigen::Index>(t) * B, B) = seq_.body_at(std::max(0, t - 2));
+  start.info.translation = estimated_root_translation(start.frames.body, B);
+  for (int g = 0; g < seq_.info.num_garments(); ++g) {
+    const int n = seq_.info.garments[g].num_vertices;
+    const dataset::Points x0 = seq_.garment_at(g, 0);
+    start.info.garments[g].rest = x0;
+    start.frames.garments[g].resize(static_cast<Eigen::Index>(K + 2) * n, 3);
+    for (int t = 0; t < K + 2; ++t) start.frames.garments[g].middleRows(static_cast<Eigen::Index>(t) * n, n) = x0;
+  }
+  Eigen::setNbThreads(1);  // as the command
+  auto model = load_model_predictor(checkpoint(), "tiny", nullptr);
+  const Rollout internal = rollout(*model, start, 2, K - 1);
+  ASSERT_EQ(internal.frames.size(), static_cast<size_t>(K - 1));
+
+  const dataset::Sequence written = dataset::read_sequence((out / "scene.h5").string());
+  ASSERT_EQ(written.info.num_frames, K + 2);
+  double worst_h5 = 0, worst_pc2 = 0, worst_obj = 0;
+  Eigen::Index offset = 0;
+  for (int g = 0; g < seq_.info.num_garments(); ++g) {
+    const auto& mesh = seq_.info.garments[g];
+    const int n = mesh.num_vertices;
+    const dataset::PointCache cache = dataset::read_pc2((out / (mesh.name + ".pc2")).string());
+    ASSERT_EQ(cache.frames.size(), static_cast<size_t>(K));
+    EXPECT_EQ(cache.frames[0], seq_.garment_at(g, 0));  // output frame 0: the start
+    for (int k = 1; k < K; ++k) {
+      const dataset::Points expected = internal.frames[k - 1].middleRows(offset, n);
+      worst_h5 = std::max(worst_h5, static_cast<double>((written.garment_at(g, k + 2) - expected).cwiseAbs().maxCoeff()));
+      worst_pc2 = std::max(worst_pc2, static_cast<double>((cache.frames[k] - expected).cwiseAbs().maxCoeff()));
+      char name[64];
+      std::snprintf(name, sizeof name, "%s_%04d.obj", mesh.name.c_str(), k);
+      const dataset::ObjMesh obj = dataset::read_obj((out / mesh.name / name).string());
+      worst_obj = std::max(worst_obj, static_cast<double>((obj.positions - expected).cwiseAbs().maxCoeff()));
+      EXPECT_EQ(obj.uv, mesh.uv);
+      EXPECT_EQ(obj.faces, mesh.faces);
+    }
+    offset += n;
+  }
+  EXPECT_LE(worst_h5, 1e-6);
+  EXPECT_LE(worst_pc2, 1e-6);
+  EXPECT_LE(worst_obj, 1e-6);
+  std::printf("largest difference to the internal rollout: h5 %g, pc2 %g, obj %g\n", worst_h5, worst_pc2, worst_obj);
+  EXPECT_FALSE(fs::exists(out / (".simulate-partial-" + std::to_string(::getpid()))));
+
+  // The output is a data set the other commands read.
+  const std::string check = run_cli("inspect --check " + out.string(), &code);
+  EXPECT_EQ(code, 0) << check;
+  const std::string scored = run_cli("eval --checkpoint " + checkpoint() + " --dataset " + out.string() +
+                                         " --split test --frames 3 --speed-frames 2 --out " + (out / "eval").string(),
+                                     &code);
+  EXPECT_EQ(code, 0) << scored;
+  const std::string exported = run_cli("export --checkpoint " + checkpoint() + " --dataset " + out.string() +
+                                           " --split test --frames 3 --out " + (out / "export").string(),
+                                       &code);
+  EXPECT_EQ(code, 0) << exported;
+  const std::string stressed = run_cli("stress --checkpoint " + checkpoint() + " --dataset " + out.string() +
+                                           " --sequence scene --frames 6 --winds 0 --precision-frames 2",
+                                       &code);
+  EXPECT_TRUE(code == 0 || code == 4) << stressed;  // 4: a bound broke, which an untrained model may do
+  EXPECT_NE(stressed.find("scene"), std::string::npos) << stressed;
+}
+
+TEST_F(Simulate, GarmentWithoutUvsIsRefusedNamingTheFile) {
+  const fs::path obj = root_ / "no_uv.obj";
+  dataset::write_obj(obj.string(), seq_.garment_at(0, 0), seq_.info.garments[0].faces);
+  SceneInputs in = inputs();
+  in.garments[0].obj = obj.string();
+  const std::string e = scene_error(in);
+  EXPECT_NE(e.find(obj.string() + ": has no texture coordinates (vt)"), std::string::npos) << e;
+  EXPECT_NE(e.find("export the OBJ with UV coordinates"), std::string::npos) << e;
+}
+
+TEST_F(Simulate, FacesThatAreNotTrianglesOrQuadsAreRefused) {
+  const fs::path obj = root_ / "pentagon.obj";
+  std::ofstream(obj) << "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv -1 0.5 0\nvt 0 0\nf 1/1 2/1 3/1 4/1 5/1\n";
+  SceneInputs in = inputs();
+  in.garments[0].obj = obj.string();
+  const std::string e = scene_error(in);
+  EXPECT_NE(e.find(obj.string() + ": line 7: a face with 5 corners"), std::string::npos) << e;
+  EXPECT_NE(e.find("triangulate"), std::string::npos) << e;
+}
+
+TEST_F(Simulate, QuadsAreSplitIntoTriangles) {
+  const fs::path obj = root_ / "quad.obj";
+  std::ofstream(obj) << "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nf 1/1 2/2 3/3 4/4\n";
+  const dataset::ObjMesh m = dataset::read_obj(obj.string());
+  ASSERT_EQ(m.faces.rows(), 2);
+  EXPECT_EQ(m.quads, 1);
+  EXPECT_EQ(m.faces.row(1), (Eigen::RowVector3i(0, 2, 3)));
+  EXPECT_EQ(m.uv.row(5), (Eigen::RowVector2f(0, 1)));
+  EXPECT_EQ(dataset::uv_islands(m.faces, m.uv), (std::vector<int32_t>{0, 0}));
+}
+
+TEST_F(Simulate, BodyFramesWithDifferentVertexCountsAreRefused) {
+  const fs::path folder = root_ / "body_uneven";
+  fs::create_directories(folder);
+  fs::copy_file(root_ / "body" / "frame_0000.obj", folder / "a.obj", fs::copy_options::overwrite_existing);
+  const dataset::Points fewer = seq_.body_at(1).topRows(seq_.info.num_body_vertices - 2);
+  dataset::write_obj((folder / "b.obj").string(), fewer, dataset::Faces(dataset::Faces::Constant(1, 3, 0)));
+  SceneInputs in = inputs();
+  in.body.obj_folder = folder.string();
+  const std::string e = scene_error(in);
+  EXPECT_NE(e.find((folder / "b.obj").string() + ": has " + std::to_string(fewer.rows()) + " vertices but " +
+                   (folder / "a.obj").string()),
+            std::string::npos)
+      << e;
+  EXPECT_NE(e.find("every body frame needs the same mesh"), std::string::npos) << e;
+}
+
+TEST_F(Simulate, GarmentFarFromTheBodyIsRefused) {
+  const fs::path obj = root_ / "far.obj";
+  dataset::Points x = seq_.garment_at(0, 0);
+  x.col(0).array() += 40.f;  // 4 m to the side
+  dataset::write_obj(obj.string(), x, seq_.info.garments[0].faces, &seq_.info.garments[0].uv);
+  SceneInputs in = inputs();
+  in.garments[0].obj = obj.string();
+  const std::string e = scene_error(in);
+  EXPECT_NE(e.find(obj.string() + ": the garment's centroid"), std::string::npos) << e;
+  EXPECT_NE(e.find("outside the body's first frame"), std::string::npos) << e;
+}
+
+TEST_F(Simulate, OuterGarmentInsideTheInnerOneSaysTheOrderIsWrong) {
+  SceneInputs in = inputs();
+  std::swap(in.garments[0], in.garments[1]);
+  const std::string e = scene_error(in);
+  EXPECT_NE(e.find(garment_obj(0) + ": lies inside " + garment_obj(1)), std::string::npos) << e;
+  EXPECT_NE(e.find("the order is probably wrong"), std::string::npos) << e;
+}
+
+TEST_F(Simulate, BodyInMetresUnderTheX10ConventionIsRefused) {
+  // The same scene in metres, given without --scale 1: 1.7 units tall.
+  const fs::path folder = root_ / "body_metres";
+  fs::create_directories(folder);
+  for (int t = 0; t < 3; ++t)
+    dataset::write_obj((folder / ("f" + std::to_string(t) + ".obj")).string(), seq_.body_at(t) / 10.f,
+                       seq_.info.body_faces);
+  SceneInputs in = inputs();
+  in.body.obj_folder = folder.string();
+  const std::string e = scene_error(in);
+  EXPECT_NE(e.find(folder.string() + ": the body is 1.70 units tall along z, which is 0.170 m at --scale 10.000"),
+            std::string::npos)
+      << e;
+  EXPECT_NE(e.find("the files look like metres: pass --scale 1"), std::string::npos) << e;
+}
+
+TEST_F(Simulate, EmptyOrUnsortedWindCsvIsRefused) {
+  const fs::path empty = root_ / "wind_empty.csv", unsorted = root_ / "wind_unsorted.csv";
+  std::ofstream(empty) << "frame,dx,dy,dz,strength\n";
+  std::ofstream(unsorted) << "frame,dx,dy,dz,strength\n0,1,0,0,100\n5,0,1,0,200\n3,0,0,1,50\n";
+  SceneInputs in = inputs();
+  in.wind = empty.string();
+  std::string e = scene_error(in);
+  EXPECT_NE(e.find(empty.string() + ": the wind CSV has no rows"), std::string::npos) << e;
+  in.wind = unsorted.string();
+  e = scene_error(in);
+  EXPECT_NE(e.find(unsorted.string() + ": line 4: frame 3 after frame 5: frames must increase"), std::string::npos)
+      << e;
+}
+
+TEST_F(Simulate, WindCsvAndPinsShapeTheScene) {
+  const fs::path csv = root_ / "wind.csv";
+  std::ofstream(csv) << "frame,dx,dy,dz,strength\n2,1,0,0,400\n";
+  SceneInputs in = inputs();
+  in.wind = csv.string();
+  in.garments[1].pins = "top-ring";
+  const Scene scene = build_scene(in);
+  const auto& info = scene.sequence.info;
+  ASSERT_TRUE(info.has_wind);
+  EXPECT_EQ(info.wind_strength[kSceneRestFrames - 1 + 1], 0.f);  // body frame 1: calm
+  EXPECT_EQ(info.wind_strength[kSceneRestFrames - 1 + 2], 400.f);
+  const Eigen::Vector4f q = info.wind_rotation.row(kSceneRestFrames + 1).transpose();
+  EXPECT_NEAR((Eigen::Quaternionf(q[0], q[1], q[2], q[3]) * Eigen::Vector3f::UnitZ() - Eigen::Vector3f::UnitX()).norm(),
+              0.f, 1e-6f);
+  // The top ring of the outer tube: its highest row of vertices.
+  const int segments = scene_options().segments;
+  ASSERT_EQ(scene.pins[1].size(), static_cast<size_t>(segments));
+  EXPECT_EQ(scene.pins[1].front(), info.garments[1].num_vertices - segments);
+}
+
+TEST_F(Simulate, ABadInputLeavesNoOutputBehind) {
+  int code = 0;
+  const fs::path out = root_ / "out_refused";
+  const std::string text = run_cli("simulate --checkpoint " + checkpoint() + " --body-frames " +
+                                       (root_ / "body").string() + " --garment " + garment_obj(1) + " --garment " +
+                                       garment_obj(0) + " --out " + out.string(),
+                                   &code);
+  EXPECT_EQ(code, 1) << text;
+  EXPECT_NE(text.find("layersnet simulate: error: " + garment_obj(0) + ": lies inside"), std::string::npos) << text;
+  EXPECT_FALSE(fs::exists(out));
+}
+
+TEST_F(Simulate, Pc2RoundTripsExactly) {
+  dataset::PointCache cache;
+  cache.start_frame = 1;
+  for (int t = 0; t < 3; ++t) cache.frames.push_back(seq_.garment_at(0, t));
+  const std::string path = (root_ / "round.pc2").string();
+  dataset::write_pc2(path, cache);
+  EXPECT_EQ(fs::file_size(path), 32u + 3u * seq_.info.garments[0].num_vertices * 12u);
+  const dataset::PointCache back = dataset::read_pc2(path);
+  EXPECT_EQ(back.start_frame, 1.f);
+  ASSERT_EQ(back.frames.size(), 3u);
+  for (int t = 0; t < 3; ++t) EXPECT_EQ(back.frames[t], cache.frames[t]);
+  fs::resize_file(path, fs::file_size(path) - 4);
+  try {
+    dataset::read_pc2(path);
+    ADD_FAILURE() << "a truncated PC2 was read";
+  } catch (const dataset::DatasetError& e) {
+    EXPECT_NE(std::string(e.what()).find("truncated"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace layersnet::eval
