@@ -14,6 +14,7 @@
 
 #include <Eigen/Core>
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include <cstdlib>
 #include <filesystem>
@@ -25,6 +26,17 @@ namespace {
 
 namespace fs = std::filesystem;
 using cli_test::run_cli;
+
+// Runs a shell command (stderr merged into the returned text); *code = its exit status.
+std::string run_cli_command(const std::string& command, int* code) {
+  std::FILE* p = popen((command + " 2>&1").c_str(), "r");
+  std::string out;
+  char buf[4096];
+  while (std::fgets(buf, sizeof buf, p)) out += buf;
+  const int status = pclose(p);
+  *code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return out;
+}
 
 // A body 1.7 m tall (17 units at the x10 convention) in two tube garments.
 dataset::SyntheticOptions scene_options() {
@@ -183,6 +195,44 @@ TEST_F(Simulate, SameAnswerAsTheInternalRolloutFromRest) {
                                        &code);
   EXPECT_TRUE(code == 0 || code == 4) << stressed;  // 4: a bound broke, which an untrained model may do
   EXPECT_NE(stressed.find("scene"), std::string::npos) << stressed;
+}
+
+// Blender imports the OBJ sequence and plays the PC2 through its Mesh Cache modifier: the same
+// vertex count and positions as the D-LAYERS-H5 output.
+TEST_F(Simulate, BlenderReadsTheObjSequenceAndThePc2) {
+  if (std::system("blender --version > /dev/null 2>&1") != 0) GTEST_SKIP() << "blender not installed";
+  int code = 0;
+  const fs::path out = root_ / "out_blender";
+  const std::string text = run_cli("simulate --checkpoint " + checkpoint() + " --body-frames " +
+                                       (root_ / "body").string() + garment_args() + " --out " + out.string(),
+                                   &code);
+  ASSERT_EQ(code, 0) << text;
+  const int K = seq_.info.num_frames, g = 1;
+  const std::string garment = seq_.info.garments[g].name;
+  const std::string script = std::string(LAYERSNET_SOURCE_DIR) + "/tests/cli/blender_reads_simulation.py";
+  const std::string blender = run_cli_command("blender -b --factory-startup --python-exit-code 1 --python " + script +
+                                                  " -- " + out.string() + " " + garment + " 0 1 " +
+                                                  std::to_string(K - 1),
+                                              &code);
+  ASSERT_EQ(code, 0) << blender;
+  const auto at = blender.find("RESULT ");
+  ASSERT_NE(at, std::string::npos) << blender;
+  const auto result = nlohmann::json::parse(blender.substr(at + 7, blender.find('\n', at) - at - 7));
+  EXPECT_EQ(result["uv_layers"], 1);
+  const dataset::Sequence written = dataset::read_sequence((out / "scene.h5").string());
+  const int n = written.info.garments[g].num_vertices;
+  for (int k : {0, 1, K - 1}) {
+    const dataset::Points expected = written.garment_at(g, k + kSceneRestFrames - 1);
+    for (const char* road : {"cache", "obj"}) {
+      const auto& positions = result[road][std::to_string(k)];
+      ASSERT_EQ(static_cast<int>(positions.size()), n) << road << " frame " << k;
+      double worst = 0;
+      for (int v = 0; v < n; ++v)
+        for (int c = 0; c < 3; ++c)
+          worst = std::max(worst, std::abs(positions[v][c].get<double>() - expected(v, c)));
+      EXPECT_LE(worst, 1e-6) << road << " frame " << k;
+    }
+  }
 }
 
 TEST_F(Simulate, GarmentWithoutUvsIsRefusedNamingTheFile) {
