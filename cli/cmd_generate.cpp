@@ -9,6 +9,7 @@
 //
 // Recipe (JSON; command-line flags override it): see generate/recipes/default.json.
 #include "cli/command_registry.h"
+#include "cli/program_files.h"
 
 #include <nlohmann/json.hpp>
 
@@ -110,19 +111,11 @@ long long sequence_seed(long long seed, int index, int attempt) {
   return static_cast<long long>(h & 0x7FFFFFFFull);
 }
 
-fs::path exe_dir() {
-  std::error_code ec;
-  const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
-  return ec ? fs::current_path() : exe.parent_path();
-}
-
 fs::path find_script(const std::string& given) {
   if (!given.empty()) return given;
-  for (const fs::path& c : {exe_dir() / "../../generate/make_sequence.py", exe_dir() / "../generate/make_sequence.py",
-                            fs::current_path() / "generate/make_sequence.py"}) {
-    if (fs::exists(c)) return fs::weakly_canonical(c);
-  }
-  throw GenerateError("generate/make_sequence.py not found next to the program; pass --script PATH");
+  const fs::path found = layersnet::cli::find_program_file("generate/make_sequence.py");
+  if (found.empty()) throw GenerateError("generate/make_sequence.py not found next to the program; pass --script PATH");
+  return found;
 }
 
 fs::path find_recipe(const std::string& given) {
