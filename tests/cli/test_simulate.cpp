@@ -235,6 +235,38 @@ TEST_F(Simulate, BlenderReadsTheObjSequenceAndThePc2) {
   }
 }
 
+// Y-up files in metres (Blender's OBJ export) give the scene of the z-up x10 files, and the
+// outputs go back to the files' axes and units.
+TEST_F(Simulate, YUpMetreFilesGiveTheSameScene) {
+  const auto to_y_up_metres = [](const dataset::Points& x) {
+    dataset::Points y(x.rows(), 3);
+    y.col(0) = x.col(0) / 10.f;
+    y.col(1) = x.col(2) / 10.f;
+    y.col(2) = -x.col(1) / 10.f;
+    return y;
+  };
+  const fs::path folder = root_ / "y_up";
+  fs::create_directories(folder / "body");
+  for (int t = 0; t < 3; ++t)
+    dataset::write_obj((folder / "body" / (std::to_string(t) + ".obj")).string(), to_y_up_metres(seq_.body_at(t)),
+                       seq_.info.body_faces);
+  SceneInputs in = inputs();
+  in.body.obj_folder = (folder / "body").string();
+  for (int g = 0; g < seq_.info.num_garments(); ++g) {
+    const auto& mesh = seq_.info.garments[g];
+    in.garments[g].obj = (folder / (mesh.name + ".obj")).string();
+    dataset::write_obj(in.garments[g].obj, to_y_up_metres(seq_.garment_at(g, 0)), mesh.faces, &mesh.uv);
+  }
+  in.up_axis = 'y';
+  in.scale = 1.f;
+  const Scene scene = build_scene(in);
+  const Scene reference = build_scene(inputs());
+  EXPECT_LE((scene.sequence.body_at(4) - reference.sequence.body_at(4)).cwiseAbs().maxCoeff(), 1e-5f);
+  EXPECT_LE((scene.sequence.garment_at(1, 0) - reference.sequence.garment_at(1, 0)).cwiseAbs().maxCoeff(), 1e-5f);
+  EXPECT_LE((scene.to_input_units(scene.sequence.body_at(4)) - to_y_up_metres(seq_.body_at(2))).cwiseAbs().maxCoeff(),
+            1e-6f);
+}
+
 TEST_F(Simulate, GarmentWithoutUvsIsRefusedNamingTheFile) {
   const fs::path obj = root_ / "no_uv.obj";
   dataset::write_obj(obj.string(), seq_.garment_at(0, 0), seq_.info.garments[0].faces);
@@ -307,7 +339,7 @@ TEST_F(Simulate, BodyInMetresUnderTheX10ConventionIsRefused) {
   const fs::path folder = root_ / "body_metres";
   fs::create_directories(folder);
   for (int t = 0; t < 3; ++t)
-    dataset::write_obj((folder / ("f" + std::to_string(t) + ".obj")).string(), seq_.body_at(t) / 10.f,
+    dataset::write_obj((folder / (std::to_string(t) + ".obj")).string(), seq_.body_at(t) / 10.f,
                        seq_.info.body_faces);
   SceneInputs in = inputs();
   in.body.obj_folder = folder.string();
