@@ -267,6 +267,31 @@ TEST_F(Simulate, YUpMetreFilesGiveTheSameScene) {
             1e-6f);
 }
 
+// The three body sources give the same body: OBJ frames, a PC2 with its topology OBJ, the body of
+// a D-LAYERS-H5 file (which also brings its root translation).
+TEST_F(Simulate, Pc2AndH5BodiesGiveTheBodyOfTheObjFrames) {
+  dataset::PointCache cache;
+  for (int t = 0; t < seq_.info.num_frames; ++t) cache.frames.push_back(seq_.body_at(t));
+  const std::string pc2 = (root_ / "body.pc2").string(), topology = (root_ / "body" / "frame_0000.obj").string();
+  dataset::write_pc2(pc2, cache);
+  const Scene from_obj = build_scene(inputs());
+  SceneInputs in = inputs();
+  in.body = {};
+  in.body.pc2 = pc2;
+  in.body.topology = topology;
+  const Scene from_pc2 = build_scene(in);
+  EXPECT_EQ(from_pc2.sequence.frames.body, from_obj.sequence.frames.body);
+  EXPECT_EQ(from_pc2.sequence.info.body_faces, from_obj.sequence.info.body_faces);
+  in.body = {};
+  in.body.h5 = (root_ / "data" / "s0000.h5").string();
+  in.max_frames = 5;
+  const Scene from_h5 = build_scene(in);
+  ASSERT_EQ(from_h5.body_frames, 5);
+  EXPECT_EQ(from_h5.sequence.body_at(kSceneRestFrames - 1 + 4), seq_.body_at(4));
+  EXPECT_EQ(from_h5.sequence.info.translation.row(kSceneRestFrames - 1 + 4), seq_.info.translation.row(4));
+  EXPECT_EQ(from_h5.sequence.info.translation.row(0), seq_.info.translation.row(0));  // the rest frames
+}
+
 TEST_F(Simulate, GarmentWithoutUvsIsRefusedNamingTheFile) {
   const fs::path obj = root_ / "no_uv.obj";
   dataset::write_obj(obj.string(), seq_.garment_at(0, 0), seq_.info.garments[0].faces);
