@@ -6,6 +6,7 @@
 // See eval/README.md.
 #include "autodiff/bf16_gemm.h"
 #include "cli/command_registry.h"
+#include "cli/exit_codes.h"
 #include "dataset/manifest.h"
 #include "dataset/stats.h"
 #include "eval/evaluate.h"
@@ -73,6 +74,16 @@ std::string default_name(const std::string& path, const Config& c) {
 }
 
 int run_eval(EvalCliOptions o) {
+  // Every model once per listed precision (a list shows the bf16 speed/accuracy trade in one table).
+  std::vector<ad::MatmulPrecision> precisions;
+  for (std::size_t a = 0, b; a <= o.precision.size(); a = b + 1) {
+    b = std::min(o.precision.find(',', a), o.precision.size());
+    try {
+      precisions.push_back(ad::parse_matmul_precision(o.precision.substr(a, b - a)));
+    } catch (const std::exception& e) {
+      throw cli::UsageError(std::string("--precision: ") + e.what());
+    }
+  }
   std::vector<std::string> from_runs;  // runs first, in order, then --checkpoint files
   for (const auto& run : o.runs) from_runs.push_back(run_checkpoint(run));
   o.checkpoints.insert(o.checkpoints.begin(), from_runs.begin(), from_runs.end());
@@ -92,12 +103,6 @@ int run_eval(EvalCliOptions o) {
   eo.start_after_ramp = o.start.empty() ? o.start_frame < 0 : o.start == "ramp";
   eo.max_sequences = o.max_sequences;
 
-  // Every model once per listed precision (a list shows the bf16 speed/accuracy trade in one table).
-  std::vector<ad::MatmulPrecision> precisions;
-  for (std::size_t a = 0, b; a <= o.precision.size(); a = b + 1) {
-    b = std::min(o.precision.find(',', a), o.precision.size());
-    precisions.push_back(ad::parse_matmul_precision(o.precision.substr(a, b - a)));
-  }
   const bool any_bf16 = std::count(precisions.begin(), precisions.end(), ad::MatmulPrecision::kBFloat16) > 0;
   std::vector<std::unique_ptr<eval::Predictor>> owned;
   std::vector<std::string> kinds, paths;
@@ -244,7 +249,7 @@ LAYERSNET_COMMAND(eval, "Roll out checkpoints and baselines over a split; error,
                     return [o] {
                       if (o->checkpoints.empty() && o->runs.empty() && o->dataset.empty()) {
                         std::fprintf(stderr, "layersnet eval: give --run or --checkpoint (or --dataset for baselines and replays only)\n");
-                        return 2;
+                        return cli::kExitUsage;
                       }
                       return run_eval(*o);  // errors: reported by cli/main.cpp
                     };

@@ -3,6 +3,7 @@
 // open in Blender or MeshLab, plus strip.png (prediction over ground truth, a few frames).
 // Without --checkpoint, --baseline chooses the predictor (constant-velocity | follow-body).
 #include "cli/command_registry.h"
+#include "cli/exit_codes.h"
 #include "dataset/manifest.h"
 #include "dataset/stats.h"
 #include "eval/evaluate.h"
@@ -94,7 +95,7 @@ LAYERSNET_COMMAND(export, "Write a rollout's predicted and ground-truth meshes (
                     return [o] {
                       if (o->checkpoint.empty() && o->dataset.empty()) {
                         std::fprintf(stderr, "layersnet export: give --checkpoint or --dataset\n");
-                        return 2;
+                        return cli::kExitUsage;
                       }
                       return run_export(*o);  // errors: reported by cli/main.cpp
                     };

@@ -4,6 +4,8 @@
 // the same checkpoint. Prints one table; exits 1 when any run breaks its distance bound or
 // strain limit.
 #include "cli/command_registry.h"
+#include "cli/exit_codes.h"
+#include "dataset/file_io.h"
 #include "dataset/manifest.h"
 #include "dataset/stats.h"
 #include "eval/stress.h"
@@ -221,14 +223,12 @@ int run_stress(const StressCliOptions& o) {
   j["first_frame"] = first;
   j["passed"] = ok;
   if (!o.json_path.empty()) {
-    std::ofstream out(o.json_path);
-    out << j.dump(1) << "\n";
-    if (!out) throw std::runtime_error(o.json_path + ": cannot write the JSON report; check the folder exists");
+    io::write_file_atomic(o.json_path, j.dump(1) + "\n");
     std::printf("wrote %s\n", o.json_path.c_str());
   }
   std::printf("stress: %s (distance bound, strain p99 <= %.3f)\n",
               ok ? "every run within its bounds" : "FAILED: a run broke a bound (see the table)", strain_limit);
-  return ok ? 0 : 1;
+  return ok ? cli::kExitOk : cli::kExitCheckFailed;
 }
 
 }  // namespace

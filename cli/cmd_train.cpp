@@ -1,5 +1,6 @@
 // `layersnet train --config F [--set k=v ...] [--run DIR]` and `layersnet train --resume DIR`.
 #include "cli/command_registry.h"
+#include "cli/exit_codes.h"
 #include "train/trainer.h"
 
 #include <filesystem>
@@ -22,11 +23,11 @@ int run_train(const TrainCliOptions& o) {
     if (!o.files.empty()) {
       std::cerr << "error: --resume " << o.resume << " continues with the run's own config.toml; drop --config "
                 << "(use --set key=value to change e.g. train.epochs)\n";
-      return 2;
+      return layersnet::cli::kExitUsage;
     }
     if (!o.run.empty() && std::filesystem::path(o.run) != std::filesystem::path(o.resume)) {
       std::cerr << "error: --run and --resume name different directories\n";
-      return 2;
+      return layersnet::cli::kExitUsage;
     }
     config = layersnet::run_config(o.resume, o.overrides);
     options.run_dir = o.resume;
@@ -34,7 +35,7 @@ int run_train(const TrainCliOptions& o) {
   } else {
     if (o.files.empty()) {
       std::cerr << "error: give --config FILE (e.g. configs/default.toml) or --resume DIR\n";
-      return 2;
+      return layersnet::cli::kExitUsage;
     }
     config = layersnet::load_config(o.files, o.overrides);
     options.run_dir = o.run.empty() ? "runs/" + std::filesystem::path(o.files.back()).stem().string() : o.run;
@@ -47,7 +48,7 @@ int run_train(const TrainCliOptions& o) {
     return 0;
   } catch (const layersnet::TrainingStopped& e) {
     std::cerr << "training stopped: " << e.what() << "\n";
-    return 3;
+    return layersnet::cli::kExitTrainingStopped;
   }
 }
 

@@ -1,7 +1,9 @@
 // `layersnet`: one program, one subcommand per job (generate, prepare, train, eval, bench, ...).
 #include "cli/command_registry.h"
+#include "cli/exit_codes.h"
 #include "layersnet_version.h"
 
+#include <signal.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -42,7 +44,11 @@ int main(int argc, char** argv) {
     setenv("OMP_WAIT_POLICY", "PASSIVE", 1);
     execv("/proc/self/exe", argv);  // returns only on failure: then run with the default policy
   }
+  // Past a file-size limit (ulimit -f) the kernel kills the writer with SIGXFSZ; ignored, the
+  // write fails with EFBIG and the program reports the file like any other failed write.
+  signal(SIGXFSZ, SIG_IGN);
   CLI::App app{"LayersNet: learned simulation of multi-layered garments (ICCV 2023), on CPUs", "layersnet"};
+  app.footer(kExitCodesHelp);
   app.set_version_flag("--version", std::string("layersnet ") + LAYERSNET_VERSION);
   app.require_subcommand(0, 1);
 
@@ -57,16 +63,20 @@ int main(int argc, char** argv) {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e);
+    const int code = app.exit(e);  // prints the help, the version or CLI11's message
+    return code == 0 ? kExitOk : kExitUsage;
   }
   for (auto& [sub, action] : actions) {
     if (sub->parsed()) {
       try {
         return action();
+      } catch (const UsageError& e) {
+        std::fprintf(stderr, "layersnet %s: %s\n", sub->get_name().c_str(), e.what());
+        return kExitUsage;
       } catch (const std::exception& e) {
         // The one error report of every subcommand: name the command, then the message.
         std::fprintf(stderr, "layersnet %s: error: %s\n", sub->get_name().c_str(), e.what());
-        return 1;
+        return kExitError;
       }
     }
   }

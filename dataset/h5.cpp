@@ -1,6 +1,9 @@
 // HDF5 C API wrappers: every call's return code is checked (see h5.h).
 #include "dataset/h5.h"
 
+#include "dataset/file_io.h"
+#include "dataset/h5_guard.h"
+
 #include <H5FDcore.h>
 
 #include <atomic>
@@ -204,6 +207,7 @@ std::string shape_string(const std::vector<uint64_t>& dims) {
 
 Handle open_file(const std::string& path) {
   silence_hdf5();
+  guard_file(path);
   Handle f;
   if (H5Fis_hdf5(path.c_str()) > 0)
     f = Handle(H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose);
@@ -224,11 +228,21 @@ Handle open_file_image(std::span<const uint8_t> bytes, const std::string& name) 
   return f;
 }
 
-Handle create_file(const std::string& path) {
+void write_file(const std::string& path, const std::function<void(hid_t file)>& fill) {
   silence_hdf5();
-  Handle f(H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT), H5Fclose);
-  if (!f.valid()) throw DatasetError(path, "/", "cannot be created (check the folder exists and is writable)");
-  return f;
+  Handle fapl(H5Pcreate(H5P_FILE_ACCESS), H5Pclose);
+  H5Pset_fapl_core(fapl.get(), 1 << 20, /*backing_store=*/0);
+  Handle f(H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, fapl.get()), H5Fclose);
+  if (!f.valid()) throw DatasetError(path, "/", "cannot be created in memory");
+  fill(f.get());
+  if (H5Fflush(f.get(), H5F_SCOPE_GLOBAL) < 0) throw DatasetError(path, "/", "cannot be assembled in memory");
+  const ssize_t size = H5Fget_file_image(f.get(), nullptr, 0);
+  if (size <= 0) throw DatasetError(path, "/", "cannot be assembled in memory");
+  std::string bytes(static_cast<std::size_t>(size), '\0');
+  if (H5Fget_file_image(f.get(), bytes.data(), bytes.size()) != size)
+    throw DatasetError(path, "/", "cannot be assembled in memory");
+  f.reset();
+  io::write_file_atomic(path, bytes);
 }
 
 bool has_link(hid_t loc, const std::string& name) {

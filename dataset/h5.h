@@ -8,6 +8,7 @@
 #include <hdf5.h>
 
 #include <cstdint>
+#include <functional>
 #include <optional>
 #include <span>
 #include <string>
@@ -81,7 +82,11 @@ std::string shape_string(const std::vector<uint64_t>& dims);
 Handle open_file(const std::string& path);  // read-only; throws "cannot be opened as HDF5"
 // Opens an in-memory file image (the fuzz target; no disk access).
 Handle open_file_image(std::span<const uint8_t> bytes, const std::string& name);
-Handle create_file(const std::string& path);  // truncates
+// Builds an HDF5 file in memory with `fill(file)`, then writes its bytes to `path` through
+// io::write_file_atomic. libhdf5 never touches the disk: a full disk is one error naming the
+// path (a failed flush inside libhdf5 crashed the program at exit), and nothing half-written
+// is left behind.
+void write_file(const std::string& path, const std::function<void(hid_t file)>& fill);
 bool has_link(hid_t loc, const std::string& name);
 enum class ObjectType { kGroup, kDataset, kOther };
 // Opens a child object; throws when it cannot be opened (e.g. a dangling link).

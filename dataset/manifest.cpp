@@ -3,6 +3,7 @@
 #include "dataset/manifest.h"
 
 #include "dataset/error.h"
+#include "dataset/file_io.h"
 
 #include <nlohmann/json.hpp>
 
@@ -104,9 +105,7 @@ void write_manifest(const DatasetManifest& m) {
   // Round-trip through the parser: the same checks as on read.
   parse_manifest(j.dump(), m.manifest_path());
   fs::create_directories(m.root);
-  std::ofstream out(m.manifest_path());
-  out << j.dump(2) << "\n";
-  if (!out) throw DatasetError(m.manifest_path(), "/", "cannot be written");
+  io::write_file_atomic(m.manifest_path(), j.dump(2) + "\n");
 }
 
 }  // namespace layersnet::dataset

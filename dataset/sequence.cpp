@@ -2,6 +2,8 @@
 // checked here, in the order of the format's validator check_dlayers_h5.py, and the first violation is thrown.
 #include "dataset/sequence.h"
 
+#include "dataset/h5_guard.h"
+
 #include <algorithm>
 #include <cmath>
 #include <set>
@@ -284,12 +286,14 @@ int64_t FrameWindow::bytes() const {
 }
 
 SequenceFile::SequenceFile(const std::string& path) {
+  h5::guard_file(path, [&] { SequenceFile(path).read_all(); });  // every read this program makes of it
   info_.path = path;
   file_ = h5::open_file(path);
   load();
 }
 
 SequenceFile::SequenceFile(std::span<const uint8_t> image, const std::string& name) {
+  h5::guard_image(image, name, [&] { SequenceFile(image, name).read_all(); });
   info_.path = name;
   file_ = h5::open_file_image(image, name);
   load();

@@ -136,16 +136,7 @@ void write_sequence_contents(hid_t r, const Sequence& seq, const SequenceWriteOp
 
 void write_sequence(const std::string& path, const Sequence& seq, const SequenceWriteOptions& options) {
   validate_sequence(seq, path);
-  // Write to a temporary name, then rename: a crash never leaves a half-written sequence.
-  const std::string tmp = path + ".tmp";
-  {
-    h5::Handle f = h5::create_file(tmp);
-    write_sequence_contents(f.get(), seq, options, path);
-    if (H5Fflush(f.get(), H5F_SCOPE_GLOBAL) < 0) throw DatasetError(tmp, "/", "cannot flush to disk");
-  }
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) throw DatasetError(path, "/", "cannot rename the temporary file into place: " + ec.message());
+  h5::write_file(path, [&](hid_t f) { write_sequence_contents(f, seq, options, path); });
 }
 
 }  // namespace layersnet::dataset

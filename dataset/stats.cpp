@@ -93,19 +93,17 @@ NormalisationStats compute_stats(const DatasetManifest& m, const StatsOptions& o
 }
 
 void write_stats(const std::string& path, const NormalisationStats& s) {
-  const std::string tmp = path + ".tmp";
-  {
-    h5::Handle f = h5::create_file(tmp);
-    h5::write_string_attr(f.get(), "format", "dlayers-h5-stats");
-    h5::write_int_attr(f.get(), "version", 1);
-    h5::write_string_array_attr(f.get(), "sequences", s.sequences);
-    h5::write_string_attr(f.get(), "units",
+  h5::write_file(path, [&](hid_t f) {
+    h5::write_string_attr(f, "format", "dlayers-h5-stats");
+    h5::write_int_attr(f, "version", 1);
+    h5::write_string_array_attr(f, "sequences", s.sequences);
+    h5::write_string_attr(f, "units",
                           "scene units relative to the body root translation; velocity per frame, "
                           "acceleration per frame^2 (dt = 1 frame)");
     NormalisationStats copy = s;
     for (int i = 0; i < 6; ++i) {
       const MeanStd& q = *field(copy, i);
-      h5::Handle g = h5::create_group(f.get(), kQuantities[i], h5::Where{path, std::string("/") + kQuantities[i]});
+      h5::Handle g = h5::create_group(f, kQuantities[i], h5::Where{path, std::string("/") + kQuantities[i]});
       Eigen::Vector3d sd = q.std;
       for (int k = 0; k < 3; ++k)
         if (!(sd[k] != 0)) sd[k] = 1.0;
@@ -113,8 +111,7 @@ void write_stats(const std::string& path, const NormalisationStats& s) {
       h5::write_doubles(g.get(), "std", sd.data(), {3});
       h5::write_int64_scalar(g.get(), "count", q.count);
     }
-  }
-  std::filesystem::rename(tmp, path);
+  });
 }
 
 NormalisationStats read_stats(const std::string& path) {

@@ -1,6 +1,8 @@
 // Software renderer and PNG writer (see render.h).
 #include "eval/render.h"
 
+#include "dataset/file_io.h"
+
 #include <zlib.h>
 
 #include <algorithm>
@@ -61,9 +63,7 @@ void write_png(const std::string& path, const Image& im) {
   chunk(out, "IHDR", ihdr);
   chunk(out, "IDAT", packed);
   chunk(out, "IEND", {});
-  std::ofstream f(path, std::ios::binary);
-  f.write(reinterpret_cast<const char*>(out.data()), static_cast<std::streamsize>(out.size()));
-  if (!f) throw std::runtime_error(path + ": cannot be written (check the output folder)");
+  io::write_file_atomic(path, std::string_view(reinterpret_cast<const char*>(out.data()), out.size()));
 }
 
 namespace {

@@ -1,6 +1,8 @@
 // Evaluation reports (see report.h).
 #include "eval/report.h"
 
+#include "dataset/file_io.h"
+
 #include <nlohmann/json.hpp>
 
 #include <cstdio>
@@ -9,6 +11,7 @@
 #include <fstream>
 #include <set>
 #include <sstream>
+#include <string_view>
 
 namespace layersnet::eval {
 namespace {
@@ -29,10 +32,19 @@ json ms_json(const MeanStd& m) { return {{"mean", m.mean}, {"std", m.std}, {"seq
 // Blender seconds per frame / model seconds per frame: how many times faster the rollout is.
 double speedup(double blender_s, double ms) { return blender_s > 0 && ms > 0 ? blender_s * 1000.0 / ms : -1; }
 
-void write_text(const std::filesystem::path& p, const std::string& text) {
-  std::ofstream out(p);
-  out << text;
-  if (!out) throw std::runtime_error(p.string() + ": cannot be written (check the --out folder's permissions)");
+void write_text(const std::filesystem::path& p, const std::string& text) { io::write_file_atomic(p.string(), text); }
+
+// gnuplot exits 0 even when its PNG could not be written in full (a full disk): a plot counts
+// only when the file ends with PNG's IEND chunk.
+bool complete_png(const std::filesystem::path& p) {
+  std::ifstream in(p, std::ios::binary | std::ios::ate);
+  if (!in) return false;
+  const std::streamoff size = in.tellg();
+  if (size < 20) return false;
+  char tail[8];
+  in.seekg(size - 8);
+  in.read(tail, 8);
+  return in && std::string_view(tail, 4) == "IEND";
 }
 
 // A per-rollout-frame curve of the summaries (curve_mm, strain_p99_curve_percent).
@@ -301,18 +313,30 @@ std::vector<std::string> write_report(const std::string& dir_name, const std::ve
   std::vector<std::string> written;
   write_text(dir / "eval.json", report_json(methods, c));
   written.push_back((dir / "eval.json").string());
-  const bool plots = run_gnuplot(dir, methods);
+  const bool ran = run_gnuplot(dir, methods);
+  std::vector<std::string> plots, broken;
+  for (const char* name : {"curve.png", "speed.png", "strain.png"}) {
+    const std::filesystem::path png = dir / name;
+    if (ran && complete_png(png)) {
+      plots.push_back(png.string());
+    } else if (std::filesystem::exists(png)) {
+      broken.push_back(name);
+      std::error_code ec;
+      std::filesystem::remove(png, ec);  // a truncated picture would pass for a result
+    }
+  }
   std::string md = report_markdown(methods, c);
-  if (!plots)
+  if (!ran)
     md += "\n(No plots: gnuplot is missing or failed — install `gnuplot-nox` (scripts/debian-packages.txt); "
           "see gnuplot.log.)\n";
+  for (const auto& name : broken)
+    md += "\n(" + name + " was not written in full — the disk may be full; see gnuplot.log.)\n";
   write_text(dir / "eval.md", md);
   written.push_back((dir / "eval.md").string());
-  if (plots) {
-    written.push_back((dir / "curve.png").string());
-    written.push_back((dir / "speed.png").string());
-    written.push_back((dir / "strain.png").string());
-  }
+  written.insert(written.end(), plots.begin(), plots.end());
+  if (ran && plots.size() < 3)
+    std::fprintf(stderr, "warning: %s: %zu of 3 plots were written in full (is the disk full?)\n", dir_name.c_str(),
+                 plots.size());
   return written;
 }
 

@@ -182,58 +182,41 @@ void check_plausible(const std::string& path, const ad::ParamStore<float>& param
     }
 }
 
-void fsync_path(const std::string& path) {
-  const int fd = ::open(path.c_str(), O_RDONLY);
-  if (fd >= 0) {
-    ::fsync(fd);
-    ::close(fd);
-  }
-}
-
 }  // namespace
 
 void write_checkpoint(const std::string& path, const ad::ParamStore<float>& params, const Checkpoint& cp) {
-  const std::string tmp = path + ".tmp";
-  {
-    h5::Handle file = h5::create_file(tmp);
-    const hid_t f = file.get();
+  h5::write_file(path, [&](hid_t f) {
     h5::write_string_attr(f, "format", kCheckpointFormat);
     h5::write_int_attr(f, "version", kCheckpointVersion);
     h5::write_string_attr(f, "program", std::string("layersnet ") + LAYERSNET_VERSION);
     h5::write_string_attr(f, "checksum", content_checksum(params, cp));
     {
-      h5::Handle g = h5::create_group(f, "config", {tmp, "/config"});
+      h5::Handle g = h5::create_group(f, "config", {path, "/config"});
       h5::write_string_attr(g.get(), "toml", cp.config_toml);
     }
     write_tensor_group(f, "weights", params, params.values());
     if (cp.has_optimizer) {
-      h5::Handle adam = h5::create_group(f, "adam", {tmp, "/adam"});
+      h5::Handle adam = h5::create_group(f, "adam", {path, "/adam"});
       h5::write_int_attr(adam.get(), "step", cp.state.global_step);
       write_tensor_group(adam.get(), "m", params, params.moment1());
       write_tensor_group(adam.get(), "v", params, params.moment2());
     }
     {
-      h5::Handle st = h5::create_group(f, "state", {tmp, "/state"});
+      h5::Handle st = h5::create_group(f, "state", {path, "/state"});
       h5::write_int_attr(st.get(), "epoch", cp.state.epoch);
       h5::write_int_attr(st.get(), "position", cp.state.position);
       h5::write_int_attr(st.get(), "global_step", cp.state.global_step);
       h5::write_float_attr(st.get(), "best_val_error", cp.state.best_val_error);
       h5::write_int_attr(st.get(), "nonfinite_in_row", cp.state.nonfinite_in_row);
-      h5::Handle rng = h5::create_group(st.get(), "rng", {tmp, "/state/rng"});
+      h5::Handle rng = h5::create_group(st.get(), "rng", {path, "/state/rng"});
       for (const auto& [name, bytes] : cp.state.rng) write_bytes(rng.get(), name, bytes);
     }
     {
-      h5::Handle stats = h5::create_group(f, "stats", {tmp, "/stats"});
+      h5::Handle stats = h5::create_group(f, "stats", {path, "/stats"});
       for (const auto& [name, values] : cp.stats)
         h5::write_doubles(stats.get(), name, values.data(), {static_cast<uint64_t>(values.size())});
     }
-    if (H5Fflush(f, H5F_SCOPE_GLOBAL) < 0) fail(tmp, "cannot flush");
-  }
-  fsync_path(tmp);
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) fail(path, "cannot rename " + tmp + " into place: " + ec.message());
-  fsync_path(std::filesystem::path(path).parent_path().empty() ? "." : std::filesystem::path(path).parent_path().string());
+  });
 }
 
 namespace {

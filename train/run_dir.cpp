@@ -11,7 +11,6 @@
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>
-#include <fstream>
 #include <stdexcept>
 
 namespace layersnet {
@@ -49,27 +48,6 @@ bool holds_run(const std::string& run_dir) {
   const fs::path d(run_dir);
   return fs::exists(d / "config.toml") || fs::exists(d / "metrics.jsonl") || !list_checkpoints(run_dir).empty() ||
          fs::exists(d / "best.h5");
-}
-
-void write_text_atomic(const std::string& path, const std::string& text) {
-  const std::string tmp = path + ".tmp";
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    out << text;
-    out.flush();
-    if (!out) throw std::runtime_error(tmp + ": cannot write (disk full or no permission?)");
-  }
-  if (const int fd = ::open(tmp.c_str(), O_RDONLY); fd >= 0) {
-    ::fsync(fd);
-    ::close(fd);
-  }
-  fs::rename(tmp, path);
-}
-
-void append_line(const std::string& path, const std::string& line) {
-  std::ofstream out(path, std::ios::app);
-  out << line << "\n";
-  if (!out) throw std::runtime_error(path + ": cannot append (disk full or no permission?)");
 }
 
 RunLock::RunLock(const std::string& run_dir) {

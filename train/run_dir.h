@@ -18,9 +18,6 @@ std::vector<std::string> list_checkpoints(const std::string& run_dir);
 void prune_checkpoints(const std::string& run_dir, int keep);
 // True when run_dir has a config.toml, metrics or checkpoints (a run was started there).
 bool holds_run(const std::string& run_dir);
-// Writes text to path via path.tmp + fsync + rename.
-void write_text_atomic(const std::string& path, const std::string& text);
-void append_line(const std::string& path, const std::string& line);
 
 // Exclusive hold of a run directory for one training process: an flock on <run>/lock, which
 // the kernel releases when the process ends however it ends (kill -9 included), so a stale

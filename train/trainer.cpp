@@ -2,6 +2,7 @@
 
 #include "autodiff/optim.h"
 #include "autodiff/tape.h"
+#include "dataset/file_io.h"
 #include "dataset/manifest.h"
 #include "dataset/stats.h"
 #include "model/params_layout.h"
@@ -129,7 +130,7 @@ class Run {
   void save(const std::string& path);
   void save_step_checkpoint();
   void log_progress(int epoch);
-  void metric(const std::string& json) { append_line(metrics_path_, json); }
+  void metric(const std::string& json) { io::append_line(metrics_path_, json); }
 
   Config config_;
   TrainOptions options_;
@@ -260,7 +261,7 @@ TrainSummary Run::execute() {
                              options_.run_dir + "` or choose another --run directory");
   // Refuses to start without stats.h5 and says that `layersnet prepare DATASET` makes it.
   stats_ = dataset::load_stats_or_explain(dataset::read_manifest(config_.data.dataset));
-  write_text_atomic((fs::path(options_.run_dir) / "config.toml").string(), to_toml(config_));
+  io::write_file_atomic((fs::path(options_.run_dir) / "config.toml").string(), to_toml(config_));
   for (const auto& w : config_warnings(config_)) out_ << "warning: " << w << "\n";
 
   model::register_params(params_, config_.model);
