@@ -19,6 +19,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -76,6 +77,26 @@ class Reliability : public ::testing::Test {
   static void data_with_first_sequence(const fs::path& dir, const std::string& bytes) {
     fs::copy(root_ / "data", dir / "data", fs::copy_options::recursive);
     std::ofstream(dir / "data" / "s0000.h5", std::ios::binary | std::ios::trunc) << bytes;
+  }
+  // A copy of the data set whose s0000.h5 `edit` changed in place (HDF5 opened read-write).
+  static void data_with_edited_sequence(const fs::path& dir, const std::function<void(hid_t file)>& edit) {
+    fs::copy(root_ / "data", dir / "data", fs::copy_options::recursive);
+    const hid_t f = H5Fopen((dir / "data" / "s0000.h5").c_str(), H5F_ACC_RDWR, H5P_DEFAULT);
+    ASSERT_GE(f, 0);
+    edit(f);
+    H5Fclose(f);
+  }
+  // Sets element 0 of a float dataset.
+  static void set_first_value(hid_t f, const char* path, float value) {
+    const hid_t ds = H5Dopen2(f, path, H5P_DEFAULT);
+    ASSERT_GE(ds, 0) << path;
+    const hid_t space = H5Dget_space(ds);
+    std::vector<float> v(static_cast<std::size_t>(H5Sget_simple_extent_npoints(space)));
+    H5Dread(ds, H5T_NATIVE_FLOAT, H5S_ALL, H5S_ALL, H5P_DEFAULT, v.data());
+    v[0] = value;
+    H5Dwrite(ds, H5T_NATIVE_FLOAT, H5S_ALL, H5S_ALL, H5P_DEFAULT, v.data());
+    H5Sclose(space);
+    H5Dclose(ds);
   }
   // A file kept in fuzz/known_hdf5_issues/: byte 0 selects the fuzzer's mode, the rest is the HDF5 image.
   static std::string known_issue(const std::string& name) {
@@ -149,6 +170,39 @@ TEST_F(Reliability, BadArgumentsExitWithTheUsageStatus) {
   for (const auto& c : cases) expect_case(c);
 }
 
+TEST_F(Reliability, ConfigsTheModelCannotBuildAreRefusedAtLoadNamingTheKey) {
+  const std::string tiny = "config --config " + std::string(LAYERSNET_SOURCE_DIR) + "/configs/tiny.toml --set ";
+  const std::vector<Case> cases = {
+      {"width_not_multiple_of_heads", tiny + "model.width=18 --set model.heads=4", 1,
+       "model.width = 18 .*not a multiple of model.heads = 4"},
+      {"odd_heads", tiny + "model.heads=3", 1, "model.heads = 3 .*must be even"},
+      {"ret_channels_beyond_width", tiny + "model.decoder_ret_channels=100", 1, "model.decoder_ret_channels = 100"},
+      {"huge_batch", tiny + "train.batch_size=1000000000", 1, "train.batch_size.*out of range"},
+      {"no_body_neighbours", tiny + "model.body_neighbors=0", 1, "model.body_neighbors.*out of range"},
+      {"negative_learning_rate", tiny + "train.learning_rate=-1", 1, "train.learning_rate.*out of range"},
+      {"zero_epochs", tiny + "train.epochs=0", 1, "train.epochs.*out of range"},
+      {"zero_patch_size", tiny + "model.patch_size=0", 1, "model.patch_size.*out of range"},
+      {"nan_margin", tiny + "loss.collision_eps=nan", 1, "loss.collision_eps.*must be finite"},
+      {"unknown_key", tiny + "nosuch.key=1", 1, "unknown key 'nosuch.key'"},
+      {"text_for_integer", tiny + "train.seed=abc", 1, "train.seed"},
+      {"include_of_a_folder", "config --config {case}/c.toml", 1, "is a directory, not a config file",
+       [](const fs::path& d) { std::ofstream(d / "c.toml") << "include = \"" << d.string() << "\"\n"; }},
+      {"missing_config", "config --config {case}/none.toml", 1, "none.toml"},
+      {"toml_syntax_error", "config --config {case}/c.toml", 1, "c.toml",
+       [](const fs::path& d) { std::ofstream(d / "c.toml") << "[model\nwidth = 3\n"; }},
+  };
+  for (const auto& c : cases) expect_case(c);
+}
+
+TEST_F(Reliability, StressArgumentsAreRefusedBeforeAnyWork) {
+  const std::vector<Case> cases = {
+      {"stress_nan_wind", "stress --checkpoint {ckpt} --dataset {data} --winds nan", 2, "winds"},
+      {"stress_negative_tether", "stress --checkpoint {ckpt} --dataset {data} --tether -1", 2, "tether"},
+      {"stress_missing_checkpoint", "stress --checkpoint {case}/none.h5 --dataset {data}", 1, "none.h5"},
+  };
+  for (const auto& c : cases) expect_case(c);
+}
+
 TEST_F(Reliability, CorruptHdf5IsRefusedNamingTheFileNotCrashed) {
   const std::vector<Case> cases = {
       {"segv_inspect", "inspect --check {case}/data", 1, "s0000.h5.*libhdf5 crashed reading this file.*corrupt",
@@ -187,6 +241,46 @@ TEST_F(Reliability, CorruptHdf5IsRefusedNamingTheFileNotCrashed) {
   fs::create_directories(root_ / "tiny.toml.dir");
   std::ofstream(root_ / "tiny.toml.dir" / "tiny.toml")
       << "include = \"" << LAYERSNET_SOURCE_DIR << "/configs/tiny.toml\"\n";
+  for (const auto& c : cases) expect_case(c);
+}
+
+TEST_F(Reliability, AbsurdValuesAreRefusedNamingTheFileAndTheObject) {
+  const auto edited = [](std::function<void(hid_t)> edit) {
+    return [edit](const fs::path& d) { data_with_edited_sequence(d, edit); };
+  };
+  const std::vector<Case> cases = {
+      {"garment_vertex_3e38", "inspect --check {case}/data", 1, "s0000.h5.*/garments/g0_tee/vertices",
+       edited([](hid_t f) { set_first_value(f, "/garments/g0_tee/vertices", 3e38f); })},
+      {"body_vertex_nan", "inspect --check {case}/data", 1, "s0000.h5.*/body/vertices",
+       edited([](hid_t f) { set_first_value(f, "/body/vertices", std::nanf("")); })},
+      {"body_vertex_3e38_prepare", "prepare {case}/data", 1, "s0000.h5.*/body/vertices",
+       edited([](hid_t f) { set_first_value(f, "/body/vertices", 3e38f); })},
+      {"mass_1e300", "inspect {case}/data", 1, "s0000.h5.*mass",
+       edited([](hid_t f) {
+         const hid_t g = H5Gopen2(f, "/garments/g0_tee", H5P_DEFAULT);
+         dataset::h5::write_float_attr(g, "mass", 1e300);
+         H5Gclose(g);
+       })},
+      {"negative_mass", "inspect {case}/data", 1, "s0000.h5.*mass",
+       edited([](hid_t f) {
+         const hid_t g = H5Gopen2(f, "/garments/g0_tee", H5P_DEFAULT);
+         dataset::h5::write_float_attr(g, "mass", -1.0);
+         H5Gclose(g);
+       })},
+      {"wrong_format_name", "inspect {case}/data", 1, "s0000.h5.*format",
+       edited([](hid_t f) { dataset::h5::write_string_attr(f, "format", "not-dlayers"); })},
+  };
+  for (const auto& c : cases) expect_case(c);
+}
+
+TEST_F(Reliability, MissingThingsAreNamed) {
+  const std::vector<Case> cases = {
+      {"resume_missing_run", "train --resume {case}/none", 1, "none"},
+      {"eval_missing_run", "eval --run {case}/none", 1, "none"},
+      {"prepare_missing_folder", "prepare {case}/none", 1, "none/dataset.json"},
+      {"export_unknown_sequence", "export --checkpoint {ckpt} --dataset {data} --sequence nosuch --out {case}/x", 1,
+       "nosuch"},
+  };
   for (const auto& c : cases) expect_case(c);
 }
 
