@@ -80,6 +80,7 @@ TrainData::TrainData(const dataset::DatasetManifest& manifest, const std::string
     first_t_.push_back(ts.empty() ? 0 : ts.front());
     const int after_ramp = f.info().settled_frame() - 1;
     rollout_start_.push_back(std::find(ts.begin(), ts.end(), after_ramp) != ts.end() ? after_ramp : first_t_.back());
+    garment_vertices_.push_back(static_cast<int>(f.info().total_garment_vertices()));
     for (int t : ts) samples_.push_back({s, t});
   }
 }

@@ -67,6 +67,9 @@ class TrainData {
   // pose and ramp (SequenceInfo::settled_frame; `layersnet eval` starts there too) when that is a
   // sample frame, else first_t: the ramp into the motion is set-up, not motion to predict.
   int rollout_start(int sequence) const { return rollout_start_.at(static_cast<std::size_t>(sequence)); }
+  // Garment vertices of a sequence, known without reading its frames (a rank draws the input
+  // noise of samples other ranks read).
+  int garment_vertices(int sequence) const { return garment_vertices_.at(static_cast<std::size_t>(sequence)); }
 
   // Frames [t_first - 2, t_last + 1] of a sequence (calling thread only).
   Window read_window(int sequence, int t_first, int t_last);
@@ -92,6 +95,7 @@ class TrainData {
   std::vector<std::string> ids_;
   std::vector<int> first_t_;
   std::vector<int> rollout_start_;
+  std::vector<int> garment_vertices_;
   std::vector<SampleRef> samples_;
   std::list<OpenFile> files_;  // LRU, front = most recent
   dataset::StructureCache structures_;

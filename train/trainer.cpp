@@ -7,6 +7,7 @@
 #include "dataset/stats.h"
 #include "model/params_layout.h"
 #include "train/checkpoint.h"
+#include "train/distributed.h"
 #include "train/gsl_random.h"
 #include "train/run_dir.h"
 #include "train/sample_step.h"
@@ -110,6 +111,30 @@ bool all_finite(std::span<const float> values) {
   return true;
 }
 
+// The outcomes of all n samples of a batch on every rank, in sample order (local: this rank's).
+std::vector<SampleOutcome> gather_outcomes(const Ranks& ranks, const std::vector<SampleOutcome>& local, int n) {
+  constexpr int kWidth = 12;
+  std::vector<double> packed;
+  for (const auto& o : local) {
+    const LossParts& l = o.loss;
+    packed.insert(packed.end(), {l.total, l.vertex, l.patch, l.normal, l.collision_body, l.collision_layer,
+                                 l.orthogonality, l.edge_strain, o.loss_finite ? 1.0 : 0.0, o.grad_finite ? 1.0 : 0.0,
+                                 o.build_seconds, o.model_seconds});
+  }
+  const std::vector<double> all = ranks.gather_items(packed, n, kWidth);
+  std::vector<SampleOutcome> out(static_cast<std::size_t>(n));
+  for (int i = 0; i < n; ++i) {
+    const double* v = all.data() + static_cast<std::ptrdiff_t>(i) * kWidth;
+    SampleOutcome& o = out[static_cast<std::size_t>(i)];
+    o.loss = {v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7]};
+    o.loss_finite = v[8] != 0;
+    o.grad_finite = v[9] != 0;
+    o.build_seconds = v[10];
+    o.model_seconds = v[11];
+  }
+  return out;
+}
+
 // Everything of one run that lives across epochs.
 class Run {
  public:
@@ -130,10 +155,16 @@ class Run {
   void save(const std::string& path);
   void save_step_checkpoint();
   void log_progress(int epoch);
-  void metric(const std::string& json) { io::append_line(metrics_path_, json); }
+  // One writer: only rank 0 prints, logs metrics and writes files.
+  void metric(const std::string& json) {
+    if (ranks_.rank() == 0) io::append_line(metrics_path_, json);
+  }
+  bool writer() const { return ranks_.rank() == 0; }
 
   Config config_;
   TrainOptions options_;
+  const Ranks& ranks_;
+  std::ostream null_out_{nullptr};  // the other ranks' progress lines go nowhere
   std::ostream& out_;
   std::string metrics_path_;
   int threads_ = 1;
@@ -141,7 +172,7 @@ class Run {
   std::unique_ptr<TrainData> train_, val_;
   ad::ParamStore<float> params_;
   std::unique_ptr<ad::Adam<float>> adam_;
-  std::vector<std::unique_ptr<ad::ParamStore<float>>> slots_;  // one gradient buffer per batch slot
+  std::vector<std::unique_ptr<ad::ParamStore<float>>> slots_;  // one gradient buffer per local batch slot
   std::vector<std::unique_ptr<ad::Tape<float>>> tapes_;        // one per thread
   GslRandom shuffle_rng_, rollout_rng_;
   std::vector<uint8_t> shuffle_at_epoch_start_;
@@ -153,7 +184,9 @@ class Run {
   LossParts window_loss_;
   int64_t window_batches_ = 0, window_samples_ = 0;
   double window_grad_norm_ = 0;
-  double window_data_s_ = 0, window_build_s_ = 0, window_model_s_ = 0, window_optim_s_ = 0, window_wall_s_ = 0;
+  double window_data_s_ = 0, window_build_s_ = 0, window_model_s_ = 0, window_optim_s_ = 0, window_wall_s_ = 0,
+         window_reduce_s_ = 0;
+  int64_t window_sent_bytes_ = 0;
   double total_wall_s_ = 0;
   int64_t total_samples_ = 0;
   Clock::time_point window_start_ = Clock::now();
@@ -162,7 +195,8 @@ class Run {
 Run::Run(const Config& config, const TrainOptions& options)
     : config_(config),
       options_(options),
-      out_(options.log ? *options.log : std::cout),
+      ranks_(Ranks::world()),
+      out_(ranks_.rank() != 0 ? null_out_ : options.log ? *options.log : std::cout),
       metrics_path_((fs::path(options.run_dir) / "metrics.jsonl").string()),
       shuffle_rng_(static_cast<uint64_t>(config.train.seed) * 2 + 1),
       rollout_rng_(static_cast<uint64_t>(config.train.seed) * 2 + 2) {}
@@ -238,30 +272,33 @@ void Run::save(const std::string& path) {
   cp.state.rng["shuffle"] = state_.position == 0 ? shuffle_rng_.state() : shuffle_at_epoch_start_;
   cp.state.rng["rollout"] = rollout_rng_.state();
   cp.stats = stats_to_arrays(stats_);
-  write_checkpoint(path, params_, cp);
+  if (writer()) write_checkpoint(path, params_, cp);
   summary_.last_checkpoint = path;
 }
 
 void Run::save_step_checkpoint() {
-  fs::create_directories(fs::path(options_.run_dir) / "checkpoints");
+  if (writer()) fs::create_directories(fs::path(options_.run_dir) / "checkpoints");
   const int64_t batches = state_.epoch * batches_per_epoch_ +
                           (state_.position + config_.train.batch_size - 1) / config_.train.batch_size;
   save(checkpoint_path(options_.run_dir, batches));
-  prune_checkpoints(options_.run_dir, config_.train.keep_checkpoints);
+  if (writer()) prune_checkpoints(options_.run_dir, config_.train.keep_checkpoints);
 }
 
 TrainSummary Run::execute() {
   const TrainConfig& tc = config_.train;
   if (tc.threads > 0) omp_set_num_threads(tc.threads);
   threads_ = std::max(1, omp_get_max_threads());
-  fs::create_directories(options_.run_dir);
-  const RunLock lock(options_.run_dir);  // before anything is read or written there
-  if (!options_.resume && holds_run(options_.run_dir))
-    throw std::runtime_error(options_.run_dir + " already holds a run; continue it with `layersnet train --resume " +
-                             options_.run_dir + "` or choose another --run directory");
+  std::optional<RunLock> lock;
+  if (writer()) {
+    fs::create_directories(options_.run_dir);
+    lock.emplace(options_.run_dir);  // before anything is read or written there
+    if (!options_.resume && holds_run(options_.run_dir))
+      throw std::runtime_error(options_.run_dir + " already holds a run; continue it with `layersnet train --resume " +
+                               options_.run_dir + "` or choose another --run directory");
+  }
   // Refuses to start without stats.h5 and says that `layersnet prepare DATASET` makes it.
   stats_ = dataset::load_stats_or_explain(dataset::read_manifest(config_.data.dataset));
-  io::write_file_atomic((fs::path(options_.run_dir) / "config.toml").string(), to_toml(config_));
+  if (writer()) io::write_file_atomic((fs::path(options_.run_dir) / "config.toml").string(), to_toml(config_));
   for (const auto& w : config_warnings(config_)) out_ << "warning: " << w << "\n";
 
   model::register_params(params_, config_.model);
@@ -270,7 +307,12 @@ TrainSummary Run::execute() {
       params_, ad::AdamOptions{tc.learning_rate, tc.adam_beta1, tc.adam_beta2, tc.adam_eps, 0.0});
   std::string resumed_from;
   if (!options_.resume && !tc.init_from.empty()) start_from(tc.init_from);
-  if (options_.resume) {
+  if (options_.resume && !writer()) {
+    // Rank 0 picks the checkpoint (setting damaged ones aside); the others read the same one.
+    resumed_from = ranks_.broadcast("");
+    if (!resumed_from.empty()) restore(resumed_from);
+    else if (!tc.init_from.empty()) start_from(tc.init_from);
+  } else if (options_.resume) {
     const auto checkpoints = list_checkpoints(options_.run_dir);
     if (checkpoints.empty()) {
       out_ << options_.run_dir << ": no checkpoint yet; the run starts from its beginning\n";
@@ -297,6 +339,7 @@ TrainSummary Run::execute() {
         throw CheckpointError(options_.run_dir + ": no intact checkpoint to resume from:" + reasons +
                               "\nstart a new run with another --run directory");
     }
+    ranks_.broadcast(resumed_from);
   }
   open_data();  // after restore: samples are built with the run's own statistics
   batches_per_epoch_ = (train_->num_samples() + tc.batch_size - 1) / tc.batch_size;
@@ -309,14 +352,15 @@ TrainSummary Run::execute() {
     metric("{\"event\":\"resume\",\"checkpoint\":" + json_string(resumed_from) + ",\"epoch\":" +
            std::to_string(state_.epoch + 1) + ",\"position\":" + std::to_string(state_.position) + "}");
   }
-  for (int s = 0; s < tc.batch_size; ++s) {
+  for (int s = 0; s < ranks_.local_count(tc.batch_size); ++s) {
     slots_.push_back(std::make_unique<ad::ParamStore<float>>());
     model::register_params(*slots_.back(), config_.model);
   }
   for (int t = 0; t < threads_; ++t) tapes_.push_back(std::make_unique<ad::Tape<float>>());
   out_ << "training " << train_->num_samples() << " samples/epoch (" << train_->ids().size() << " sequences), "
        << batches_per_epoch_ << " batches of " << tc.batch_size << ", " << tc.epochs << " epochs, " << threads_
-       << " threads, " << params_.total_size() << " parameter slots -> " << options_.run_dir << "\n";
+       << " threads" << (ranks_.distributed() ? " per rank, " + std::to_string(ranks_.size()) + " ranks" : std::string())
+       << ", " << params_.total_size() << " parameter slots -> " << options_.run_dir << "\n";
 
   // max_steps counts every batch of the run, those before a resume too.
   batches_before_ = state_.epoch * batches_per_epoch_ + (state_.position + tc.batch_size - 1) / tc.batch_size;
@@ -383,54 +427,64 @@ bool Run::run_batch(int epoch, int ngs, const std::vector<int64_t>& order) {
   const auto t0 = Clock::now();
   const int64_t begin = state_.position;
   const int nb = static_cast<int>(std::min<int64_t>(tc.batch_size, train_->num_samples() - begin));
-  // Draws and file reads on this thread, in sample order (deterministic, HDF5 not thread-safe).
+  const int nl = ranks_.local_count(nb);  // this rank's samples: i = rank, rank + R, ...
+  // Draws on this thread in sample order, for the whole batch on every rank (the generators
+  // stay in step); file reads only of this rank's samples (HDF5 is not thread-safe).
   std::vector<SampleRef> refs(static_cast<std::size_t>(nb));
   std::vector<int> self_fed(static_cast<std::size_t>(nb));
   std::vector<Window> windows;
-  windows.reserve(static_cast<std::size_t>(nb));
+  windows.reserve(static_cast<std::size_t>(nl));
   for (int i = 0; i < nb; ++i) {
     const SampleRef r = train_->samples()[static_cast<std::size_t>(order[static_cast<std::size_t>(begin + i)])];
     refs[static_cast<std::size_t>(i)] = r;
     const int drawn = rollout_rng_.uniform_int_inclusive(ngs);
     const int n = std::min(drawn, r.t - train_->first_t(r.sequence));  // no rollout before the first sample frame
     self_fed[static_cast<std::size_t>(i)] = n;
-    windows.push_back(train_->read_window(r.sequence, r.t - n, r.t));
-    if (tc.input_noise > 0) {  // drawn here, in sample order: the same numbers for any thread count
-      Window& w = windows.back();
-      w.input_noise.resize(static_cast<std::size_t>(w.info->total_garment_vertices()) * 3);
-      for (float& e : w.input_noise) e = static_cast<float>(gsl_ran_gaussian(rollout_rng_.get(), tc.input_noise));
+    std::vector<float> noise;
+    if (tc.input_noise > 0) {  // drawn here, in sample order: the same numbers for any thread or rank count
+      noise.resize(static_cast<std::size_t>(train_->garment_vertices(r.sequence)) * 3);
+      for (float& e : noise) e = static_cast<float>(gsl_ran_gaussian(rollout_rng_.get(), tc.input_noise));
     }
+    if (!ranks_.owns(i)) continue;
+    windows.push_back(train_->read_window(r.sequence, r.t - n, r.t));
+    windows.back().input_noise = std::move(noise);
   }
-  for (int i = 0; i < nb; ++i) {
-    auto dst = slots_[static_cast<std::size_t>(i)]->values();
+  for (int j = 0; j < nl; ++j) {
+    auto dst = slots_[static_cast<std::size_t>(j)]->values();
     std::copy(params_.values().begin(), params_.values().end(), dst.begin());
   }
   const auto t1 = Clock::now();
-  std::vector<SampleOutcome> outcomes(static_cast<std::size_t>(nb));
-  std::vector<std::string> errors(static_cast<std::size_t>(nb));
+  std::vector<SampleOutcome> local(static_cast<std::size_t>(nl));
+  std::vector<std::string> errors(static_cast<std::size_t>(nl));
   // One sample per iteration; kernels inside run single-threaded (no nested parallelism),
   // a lone sample keeps the threads for its kernels.
-#pragma omp parallel for schedule(dynamic, 1) if (nb > 1)
-  for (int i = 0; i < nb; ++i) {
+#pragma omp parallel for schedule(dynamic, 1) if (nl > 1)
+  for (int j = 0; j < nl; ++j) {
     try {
-      const auto k = static_cast<std::size_t>(i);
-      outcomes[k] = train_sample(*train_, windows[k], refs[k].t, self_fed[k], config_,
-                                 *tapes_[static_cast<std::size_t>(omp_get_thread_num())], *slots_[k]);
+      const auto k = static_cast<std::size_t>(j);
+      const int i = ranks_.rank() + j * ranks_.size();
+      local[k] = train_sample(*train_, windows[k], refs[static_cast<std::size_t>(i)].t,
+                              self_fed[static_cast<std::size_t>(i)], config_,
+                              *tapes_[static_cast<std::size_t>(omp_get_thread_num())], *slots_[k]);
     } catch (const std::exception& e) {
-      errors[static_cast<std::size_t>(i)] = e.what();
+      errors[static_cast<std::size_t>(j)] = e.what();
     }
   }
   for (const auto& e : errors)
     if (!e.empty()) throw std::runtime_error(e);
   const auto t2 = Clock::now();
-  // Mean gradient, summed in sample order.
+  // Mean gradient, summed in sample order (across ranks too: bit-identical to one process),
+  // and every sample's outcome.
+  std::vector<std::span<const float>> grads;
+  for (int j = 0; j < nl; ++j) grads.push_back(slots_[static_cast<std::size_t>(j)]->grads());
   auto g = params_.grads();
-  std::fill(g.begin(), g.end(), 0.0f);
-  const float inv = 1.0f / static_cast<float>(nb);
-  for (int i = 0; i < nb; ++i) {
-    const auto src = slots_[static_cast<std::size_t>(i)]->grads();
-    for (std::size_t k = 0; k < g.size(); ++k) g[k] += src[k] * inv;
-  }
+  const int64_t sent = ranks_.mean_in_sample_order(g, grads, nb);
+  const std::vector<SampleOutcome> outcomes = gather_outcomes(ranks_, local, nb);
+  const auto t3r = Clock::now();
+  window_reduce_s_ += seconds(t2, t3r);
+  summary_.reduce_seconds += seconds(t2, t3r);
+  window_sent_bytes_ += sent;
+  summary_.sent_bytes += sent;
   if (options_.after_gradients) options_.after_gradients(summary_.batches, params_);
   LossParts mean;
   bool finite = true;
@@ -482,14 +536,14 @@ bool Run::run_batch(int epoch, int ngs, const std::vector<int64_t>& order) {
   const auto t3 = Clock::now();
   window_samples_ += nb;
   window_data_s_ += seconds(t0, t1);
-  window_optim_s_ += seconds(t2, t3);
+  window_optim_s_ += seconds(t3r, t3);
   window_wall_s_ += seconds(t0, t3);
   for (const auto& o : outcomes) window_build_s_ += o.build_seconds, window_model_s_ += o.model_seconds;
   total_wall_s_ += seconds(t0, t3);
   total_samples_ += nb;
   summary_.wall_seconds += seconds(t0, t3);
   summary_.read_seconds += seconds(t0, t1);
-  summary_.optimizer_seconds += seconds(t2, t3);
+  summary_.optimizer_seconds += seconds(t3r, t3);
   for (const auto& o : outcomes) summary_.build_seconds += o.build_seconds, summary_.model_seconds += o.model_seconds;
   if (summary_.batches % tc.log_every == 0 || state_.position >= train_->num_samples()) log_progress(epoch);
   return true;
@@ -508,7 +562,7 @@ void Run::log_progress(int epoch) {
   const double orth_floor = config_.loss.orthogonality != 0 ? model::orthogonality_floor(config_.model) : 0.0;
   const double orth_excess = window_batches_ > 0 ? loss.orthogonality - orth_floor : 0.0;
   // Thread-seconds outside the model (reading, sample building, optimizer) over all.
-  const double outside = window_data_s_ + window_build_s_ + window_optim_s_;
+  const double outside = window_data_s_ + window_build_s_ + window_optim_s_ + window_reduce_s_;
   const double share = outside + window_model_s_ > 0 ? outside / (outside + window_model_s_) : 0;
   char line[512];
   std::snprintf(line, sizeof line,
@@ -529,31 +583,38 @@ void Run::log_progress(int epoch) {
          std::to_string(threads_) + ",\"seconds\":{\"wall\":" + json_number(window_wall_s_) + ",\"read\":" +
          json_number(window_data_s_) + ",\"build\":" + json_number(window_build_s_) + ",\"model\":" +
          json_number(window_model_s_) + ",\"optimizer\":" + json_number(window_optim_s_) +
-         "},\"share_outside_model\":" + json_number(share) + "}");
+         ",\"reduce\":" + json_number(window_reduce_s_) + "},\"share_outside_model\":" + json_number(share) +
+         ",\"ranks\":" + std::to_string(ranks_.size()) + ",\"sent_bytes\":" + std::to_string(window_sent_bytes_) + "}");
   window_loss_ = {};
   window_batches_ = window_samples_ = 0;
   window_grad_norm_ = window_data_s_ = window_build_s_ = window_model_s_ = window_optim_s_ = window_wall_s_ = 0;
+  window_reduce_s_ = 0;
+  window_sent_bytes_ = 0;
 }
 
-// sum + score(0, tape) + ... + score(m − 1, tape), the scores computed on the OpenMP threads,
-// each on its own tape (tapes[thread]); the additions run in index order after the loop, and
-// the first error (by index) is rethrown there.
-template <class Score>
-double sum_in_parallel(double sum, int m, const std::vector<std::unique_ptr<ad::Tape<float>>>& tapes, Score&& score) {
-  std::vector<double> values(static_cast<std::size_t>(m));
-  std::vector<std::string> errors(static_cast<std::size_t>(m));
-#pragma omp parallel for schedule(dynamic, 1) if (m > 1)
-  for (int i = 0; i < m; ++i) {
-    const auto k = static_cast<std::size_t>(i);
+// sum + score(0, tape) + ... + score(m − 1, tape). This rank scores its items k (k mod R =
+// rank, each read first by read(k) on this thread) on the OpenMP threads, each on its own tape
+// (tapes[thread]); the scores of all ranks are gathered and added in index order, so the sum
+// does not depend on the thread or rank count. The first error (by index) is rethrown.
+template <class Read, class Score>
+double sum_in_parallel(double sum, int m, const Ranks& ranks, const std::vector<std::unique_ptr<ad::Tape<float>>>& tapes,
+                       Read&& read, Score&& score) {
+  const int ml = ranks.local_count(m);
+  for (int j = 0; j < ml; ++j) read(static_cast<std::size_t>(ranks.rank() + j * ranks.size()));
+  std::vector<double> values(static_cast<std::size_t>(ml));
+  std::vector<std::string> errors(static_cast<std::size_t>(ml));
+#pragma omp parallel for schedule(dynamic, 1) if (ml > 1)
+  for (int j = 0; j < ml; ++j) {
     try {
-      values[k] = score(k, *tapes[static_cast<std::size_t>(omp_get_thread_num())]);
+      values[static_cast<std::size_t>(j)] = score(static_cast<std::size_t>(ranks.rank() + j * ranks.size()),
+                                                  *tapes[static_cast<std::size_t>(omp_get_thread_num())]);
     } catch (const std::exception& e) {
-      errors[k] = e.what();
+      errors[static_cast<std::size_t>(j)] = e.what();
     }
   }
   for (const auto& e : errors)
     if (!e.empty()) throw std::runtime_error(e);
-  for (double v : values) sum += v;
+  for (double v : ranks.gather_items(values, m, 1)) sum += v;
   return sum;
 }
 
@@ -570,14 +631,14 @@ double Run::validate() {
   const int64_t chunk = 4 * threads_;
   for (int64_t b = 0; b < n; b += chunk) {
     const int m = static_cast<int>(std::min(chunk, n - b));
-    std::vector<Window> windows;
-    std::vector<int> ts;
-    for (int i = 0; i < m; ++i) {
-      const SampleRef r = val_->samples()[static_cast<std::size_t>(picks[static_cast<std::size_t>(b + i)])];
-      windows.push_back(val_->read_window(r.sequence, r.t, r.t));
-      ts.push_back(r.t);
-    }
-    sum = sum_in_parallel(sum, m, tapes_, [&](std::size_t k, ad::Tape<float>& tape) {
+    std::vector<Window> windows(static_cast<std::size_t>(m));
+    std::vector<int> ts(static_cast<std::size_t>(m));
+    auto read = [&](std::size_t k) {
+      const SampleRef r = val_->samples()[static_cast<std::size_t>(picks[static_cast<std::size_t>(b) + k])];
+      windows[k] = val_->read_window(r.sequence, r.t, r.t);
+      ts[k] = r.t;
+    };
+    sum = sum_in_parallel(sum, m, ranks_, tapes_, read, [&](std::size_t k, ad::Tape<float>& tape) {
       return one_step_error(*val_, windows[k], ts[k], config_, tape, params_);
     });
   }
@@ -591,18 +652,18 @@ double Run::validate_rollouts() {
   std::vector<int> last_t(static_cast<std::size_t>(count), -1);
   for (const SampleRef& r : val_->samples())
     last_t[static_cast<std::size_t>(r.sequence)] = std::max(last_t[static_cast<std::size_t>(r.sequence)], r.t);
-  std::vector<Window> windows;
-  std::vector<int> t0, steps;
+  std::vector<int> sequences, t0, steps;
   for (int i = 0; i < count; ++i) {
     if (last_t[static_cast<std::size_t>(i)] < 0) continue;
     const int first = val_->rollout_start(i);
-    const int n = std::min(config_.train.val_rollout_frames, last_t[static_cast<std::size_t>(i)] - first + 1);
-    windows.push_back(val_->read_window(i, first, first + n - 1));
+    sequences.push_back(i);
     t0.push_back(first);
-    steps.push_back(n);
+    steps.push_back(std::min(config_.train.val_rollout_frames, last_t[static_cast<std::size_t>(i)] - first + 1));
   }
-  const int m = static_cast<int>(windows.size());
-  const double sum = sum_in_parallel(0.0, m, tapes_, [&](std::size_t k, ad::Tape<float>& tape) {
+  const int m = static_cast<int>(sequences.size());
+  std::vector<Window> windows(static_cast<std::size_t>(m));
+  auto read = [&](std::size_t k) { windows[k] = val_->read_window(sequences[k], t0[k], t0[k] + steps[k] - 1); };
+  const double sum = sum_in_parallel(0.0, m, ranks_, tapes_, read, [&](std::size_t k, ad::Tape<float>& tape) {
     return rollout_error(*val_, windows[k], t0[k], steps[k], config_, tape, params_);
   });
   out_ << "validation: rollouts of up to " << config_.train.val_rollout_frames << " frames on " << m
@@ -615,8 +676,18 @@ double Run::validate_rollouts() {
 TrainSummary train(const Config& config, const TrainOptions& options) {
   aligned_new_anchor = 1;
   if (options.run_dir.empty()) throw std::runtime_error("train: no run directory given (--run DIR)");
+  const Ranks& ranks = Ranks::world();
   Run run(config, options);
-  return run.execute();
+  if (!ranks.distributed()) return run.execute();
+  try {
+    return run.execute();
+  } catch (const TrainingStopped&) {
+    throw;  // decided on gathered values: every rank stops at the same update, rank 0 reports
+  } catch (const std::exception& e) {
+    // A failure of one rank (a bad file, a write error) would leave the others waiting in the
+    // next collective: end the whole job.
+    ranks.abort_job(e.what(), 1);
+  }
 }
 
 }  // namespace layersnet

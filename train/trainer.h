@@ -21,6 +21,15 @@
 // Exact resume: a checkpoint holds weights, Adam moments and step, epoch, position, and the
 // generator states (the shuffle generator as of the start of the epoch, so the order is
 // regenerated), so resuming gives bit-identical parameters for the same thread count.
+//
+// Data parallelism (`mpirun -np R layersnet train`, train/distributed.h): every rank holds the
+// model, draws the whole batch's T_n and noise (the generators stay in step) and reads and runs
+// only its samples i mod R = rank. Each sample's gradient is summed into the mean in sample
+// order across ranks, so R ranks give the bits of one process at the same global batch (when
+// each sample's kernels run on the same thread count: 1 per sample when a rank or process has
+// more than one sample). Every rank applies the same Adam step. Only rank 0 prints, writes
+// metrics and checkpoints; a failure on any rank ends the whole job (MPI_Abort) after printing
+// it. A checkpoint resumes under any rank count: its state is that of the global batch.
 #include "autodiff/params.h"
 #include "train/config.h"
 
@@ -57,6 +66,10 @@ struct TrainSummary {
   // Seconds of this process's training batches: wall, and per phase (read and optimizer are
   // wall time on the main thread; build and model are summed over the threads).
   double wall_seconds = 0, read_seconds = 0, build_seconds = 0, model_seconds = 0, optimizer_seconds = 0;
+  // Summing the batch gradient (wall, main thread): with R > 1 ranks the all-to-all and
+  // all-gather of gradient slices (waits for slower ranks included) and the outcome exchange.
+  double reduce_seconds = 0;
+  int64_t sent_bytes = 0;  // bytes this rank sent to other ranks (0 with one rank)
   std::string last_checkpoint;
 };
 
