@@ -42,10 +42,10 @@ int as_count(int64_t n) {
   if (n > INT_MAX) throw std::runtime_error("MPI: a message of " + std::to_string(n) + " elements exceeds MPI's int count");
   return static_cast<int>(n);
 }
-#endif
 
-// The entries [begin, end) of P that rank q sums.
+// Rank q sums the entries [slice_begin(P, q, R), slice_begin(P, q + 1, R)).
 int64_t slice_begin(int64_t p, int q, int ranks) { return p * q / ranks; }
+#endif
 
 }  // namespace
 
