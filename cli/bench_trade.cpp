@@ -14,6 +14,7 @@
 // Resumable: a variant with variant.json and eval/eval.json is reused; a half-trained run
 // continues with `layersnet train --resume`. See eval/README.md "Speed against accuracy".
 #include "cli/command_registry.h"
+#include "cli/program_files.h"
 #include "eval/pareto.h"
 #include "model/params_layout.h"
 #include "train/config.h"
@@ -746,5 +747,8 @@ LAYERSNET_BENCH(trade, "Train and evaluate model variants (patch, width, layers,
                                  "after the sweep, measure the speed of all variants back to back this many times and keep "
                                  "each one's fastest (0 = each variant's own eval figure)");
                   sub.add_flag("--list", o->list, "list the variants and exit");
-                  return [o] { return run_trade(*o); };
+                  return [o] {
+                    o->config = layersnet::cli::resolve_user_file(o->config);  // the default too
+                    return run_trade(*o);
+                  };
                 });

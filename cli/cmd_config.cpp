@@ -1,5 +1,6 @@
 // `layersnet config`: prints the fully resolved configuration, or every valid key.
 #include "cli/command_registry.h"
+#include "cli/program_files.h"
 #include "train/config.h"
 
 #include <cstdio>
@@ -29,7 +30,8 @@ int run_config(const ConfigOptions& o) {
 
 LAYERSNET_COMMAND(config, "Print the resolved configuration (defaults < --config files < --set)", [](CLI::App& sub) {
   auto o = std::make_shared<ConfigOptions>();
-  sub.add_option("--config,-c", o->files, "TOML config file(s), applied in order");
+  sub.add_option("--config,-c", o->files, "TOML config file(s), applied in order (configs/NAME.toml: the program's own when not in the working directory)")
+      ->transform([](std::string f) { return layersnet::cli::resolve_user_file(f); });
   sub.add_option("--set", o->overrides, "override one key: --set train.epochs=2");
   sub.add_flag("--keys", o->keys, "list every valid key with its type, default and meaning");
   return [o] { return run_config(*o); };

@@ -114,7 +114,9 @@ long long sequence_seed(long long seed, int index, int attempt) {
 fs::path find_script(const std::string& given) {
   if (!given.empty()) return given;
   const fs::path found = layersnet::cli::find_program_file("generate/make_sequence.py");
-  if (found.empty()) throw GenerateError("generate/make_sequence.py not found next to the program; pass --script PATH");
+  if (found.empty())
+    throw GenerateError("generate/make_sequence.py not found in " + layersnet::cli::program_files_dir().string() +
+                        " (where the program's files are installed) or the working directory; pass --script PATH");
   return found;
 }
 
@@ -221,10 +223,7 @@ int run_generate(const GenerateOptions& opt) {
     gates.max_p99_edge_stretch = g.value("max_p99_edge_stretch", gates.max_p99_edge_stretch);
   }
   std::string checker = opt.checker;
-  if (checker.empty()) {
-    const fs::path beside = find_script("").parent_path() / "../dataset/check_dlayers_h5.py";
-    if (fs::exists(beside)) checker = fs::weakly_canonical(beside).string();
-  }
+  if (checker.empty()) checker = layersnet::cli::find_program_file("dataset/check_dlayers_h5.py").string();
 
   const fs::path out = opt.out;
   fs::create_directories(out / "reports");

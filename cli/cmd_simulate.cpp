@@ -49,8 +49,8 @@ int run_simulate(SimulateCliOptions& o) {
   if (checkpoint.empty()) {
     checkpoint = cli::find_program_file(kShippedModel).string();
     if (checkpoint.empty())
-      throw std::runtime_error(std::string(kShippedModel) +
-                               " not found next to the program or in the working directory; pass --checkpoint");
+      throw std::runtime_error(std::string(kShippedModel) + " not found in " + cli::program_files_dir().string() +
+                               " (where the program's files are installed) or the working directory; pass --checkpoint");
   }
   eval::Scene scene = eval::build_scene(o.scene);  // every input checked before the model loads
   Eigen::setNbThreads(1);  // the model's ops own the threads; nested GEMM threads only contend
