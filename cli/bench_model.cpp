@@ -1,7 +1,7 @@
 // `layersnet bench model`: our training step (forward + losses + backward + Adam) and inference
-// step against the PyTorch reference (layersnet_torch.py, optional: --reference, or beside the
-// repository in shared/bench) on a synthetic scene
-// of the same sizes and neighbour counts, in the same run, at each thread count.
+// step against the PyTorch reference (layersnet_torch.py, an outside file given by --reference;
+// without it only ours is timed) on a synthetic scene of the same sizes and neighbour counts,
+// in the same run, at each thread count.
 //
 // Neither side filters iterations by foreign load (see run_reference).
 // Interleaving: for each pass and thread count we time our steps, then run the reference as a
@@ -12,6 +12,7 @@
 #include "autodiff/optim.h"
 #include "cli/bench_util.h"
 #include "cli/command_registry.h"
+#include "cli/exit_codes.h"
 #include "losses/losses.h"
 #include "model/input_builder.h"
 #include "model/layersnet.h"
@@ -44,7 +45,7 @@ struct BenchModelOptions {
   int passes = 2;
   int iters = 5;
   int warmup = 2;
-  std::string reference;  // default: shared/bench/layersnet_torch.py beside the repository, if there
+  std::string reference;  // layersnet_torch.py; empty: time ours only
   std::string python = "/usr/bin/python3";
   double max_wait = 5;    // reference's quiet-machine wait per timing block, s
   bool no_reference = false;
@@ -108,11 +109,11 @@ std::vector<int> parse_threads(const std::string& list) {
   }
   return out;
 }
-fs::path default_reference() {
-  // build/bin/layersnet -> a shared/bench folder beside the repository
-  const fs::path exe = fs::read_symlink("/proc/self/exe");
-  return exe.parent_path().parent_path().parent_path().parent_path() / "shared" / "bench" / "layersnet_torch.py";
-}
+// What the reference is and where it comes from, for the one-line messages about it.
+constexpr const char* kReferenceOrigin =
+    "layersnet_torch.py is the PyTorch port of the official LayersNet (github.com/ftbabi/LayersNet_ICCV2023) "
+    "that the speed ratios compare with, an outside reference distributed beside this repository, not in it "
+    "(model/README.md, \"Speed against the PyTorch reference\")";
 
 struct Ours {
   std::vector<double> train_ms, infer_ms, gemm_gflops;
@@ -175,6 +176,14 @@ int run_bench_model(const BenchModelOptions& o) {
   // the heap instead of being munmap'd and page-faulted in again every step (perf: ~17 % of
   // a small-scene training step was page faults, clear_page and munmap without it).
   if (o.malloc_heap) mallopt(M_MMAP_MAX, 0), mallopt(M_TRIM_THRESHOLD, -1), mallopt(M_ARENA_MAX, 1);
+  // Checked before any work: a wrong path should not cost a benchmark run.
+  const bool with_ref = !o.no_reference && !o.reference.empty();
+  if (with_ref && !fs::is_regular_file(o.reference))
+    throw cli::UsageError("bench model: --reference " + o.reference + " is missing: " + kReferenceOrigin +
+                          "; pass the path of your copy, or --no-reference");
+  if (!o.no_reference && !with_ref)
+    std::printf("bench model: timing ours only (no --reference; %s)\n", kReferenceOrigin);
+  const fs::path script = o.reference;
   const auto scene = model::make_synthetic_scene(reference_scene(o.size));
   ModelConfig mc;  // official sizes
   mc.body_query = "first";  // the reference's ball query: first K body vertices in index order
@@ -208,16 +217,6 @@ int run_bench_model(const BenchModelOptions& o) {
                                {"E_mesh", static_cast<int64_t>(in.mesh_senders.size()) + in.P},
                                {"E_inter", static_cast<int64_t>(in.body_tokens.size()) + tokens_extra * in.P},
                                {"cand_valid_mean", static_cast<double>(in.cand_patches.size()) / in.N}};
-  const fs::path script = o.reference.empty() ? default_reference() : fs::path(o.reference);
-  // The PyTorch reference is optional: without --reference and without a copy beside the
-  // repository, only our side is timed.
-  const bool with_ref = !o.no_reference && (fs::exists(script) || !o.reference.empty());
-  if (!o.no_reference && !with_ref)
-    std::printf("bench model: no PyTorch reference at %s (pass --reference PATH to compare); timing ours only\n",
-                script.string().c_str());
-  if (with_ref && !fs::exists(script))
-    throw std::runtime_error("bench model: reference script " + script.string() +
-                             " not found; pass --reference <path to layersnet_torch.py> or --no-reference");
 
   auto train_step = [&] {
     tape.reset();
@@ -353,7 +352,7 @@ LAYERSNET_BENCH(model, "Training and inference step vs the PyTorch reference", [
   sub.add_option("--passes", o->passes, "interleaved passes (best-of-pass medians)")->capture_default_str();
   sub.add_option("--iters", o->iters, "timed iterations per pass and side")->capture_default_str();
   sub.add_option("--warmup", o->warmup, "warm-up iterations per pass and side")->capture_default_str();
-  sub.add_option("--reference", o->reference, "PyTorch reference layersnet_torch.py (optional; default: shared/bench/ beside the repository)");
+  sub.add_option("--reference", o->reference, "the PyTorch reference layersnet_torch.py (not in this repository; without it only ours is timed)");
   sub.add_option("--python", o->python, "python with torch")->capture_default_str();
   sub.add_option("--max-wait", o->max_wait, "reference's quiet-machine wait per block, s")->capture_default_str();
   sub.add_flag("--no-reference", o->no_reference, "time ours only");

@@ -1,6 +1,16 @@
 #!/usr/bin/env bash
-# The whole test suite: set up (install + build), then every CTest test.
+# The whole test suite: set up (install + build), then every CTest test. Among them the build is
+# installed into a prefix and run from there (tests/install), and the repository is checked to
+# need nothing beside it (tests/repository). A skipped test fails the run: setup installs every
+# dependency, so a skip means something is missing.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 bash scripts/setup.sh
-ctest --test-dir build --output-on-failure -j "$(nproc 2>/dev/null || echo 2)" "$@"
+log=$(mktemp)
+trap 'rm -f "$log"' EXIT
+ctest --test-dir build --output-on-failure -j "$(nproc 2>/dev/null || echo 2)" "$@" 2>&1 | tee "$log"
+if grep -q '\*\*\*Skipped' "$log"; then
+  echo "test.sh: skipped tests (a dependency is missing; scripts/setup.sh installs them):" >&2
+  grep '\*\*\*Skipped' "$log" >&2
+  exit 1
+fi

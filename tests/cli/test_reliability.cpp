@@ -280,6 +280,20 @@ TEST_F(Reliability, MissingThingsAreNamed) {
       {"prepare_missing_folder", "prepare {case}/none", 1, "none/dataset.json"},
       {"export_unknown_sequence", "export --checkpoint {ckpt} --dataset {data} --sequence nosuch --out {case}/x", 1,
        "nosuch"},
+      // One line: the path, what the file is, that it is not in the repository, the way out.
+      {"bench_model_missing_reference", "bench model --reference {case}/layersnet_torch.py", 2,
+       "^[^\n]*--reference [^\n]*/layersnet_torch.py is missing: [^\n]*PyTorch port[^\n]*not in it[^\n]*"
+       "--no-reference\n$"},
+  };
+  for (const auto& c : cases) expect_case(c);
+}
+
+// Each case runs in its own folder outside the sources: relative config paths the user's
+// folder lacks are the program's own (configs/ beside the program); a missing one is named as typed.
+TEST_F(Reliability, ConfigsAreFoundFromAnyFolder) {
+  const std::vector<Case> cases = {
+      {"shipped_config_by_relative_path", "config --config configs/tiny.toml", 0, "width = 16"},
+      {"missing_config_named_as_typed", "config --config configs/none.toml", 1, "configs/none.toml"},
   };
   for (const auto& c : cases) expect_case(c);
 }
