@@ -14,6 +14,7 @@
 #include "train/train_data.h"
 
 #include <gsl/gsl_randist.h>
+#include <nlohmann/json.hpp>
 #include <omp.h>
 
 #include <algorithm>
@@ -71,29 +72,19 @@ std::string divergence_advice(const std::string& run_dir) {
 
 double seconds(Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double>(b - a).count(); }
 
-std::string json_number(double x) {
-  if (!std::isfinite(x)) return "null";
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.9g", x);
-  return buf;
-}
+// Non-finite values become null, as JSON has no NaN.
+nlohmann::ordered_json json_number(double x) { return std::isfinite(x) ? nlohmann::ordered_json(x) : nlohmann::ordered_json(nullptr); }
 
-std::string json_string(const std::string& s) {
-  std::string out = "\"";
-  for (char c : s) {
-    if (c == '"' || c == '\\') out += '\\';
-    if (static_cast<unsigned char>(c) < 0x20) continue;
-    out += c;
-  }
-  return out + "\"";
-}
-
-std::string json_parts(const LossParts& p, double orthogonality_excess) {
-  return "{\"total\":" + json_number(p.total) + ",\"vertex\":" + json_number(p.vertex) + ",\"patch\":" +
-         json_number(p.patch) + ",\"normal\":" + json_number(p.normal) + ",\"collision_body\":" +
-         json_number(p.collision_body) + ",\"collision_layer\":" + json_number(p.collision_layer) +
-         ",\"orthogonality\":" + json_number(p.orthogonality) + ",\"orthogonality_excess\":" +
-         json_number(orthogonality_excess) + ",\"edge_strain\":" + json_number(p.edge_strain) + "}";
+nlohmann::ordered_json json_parts(const LossParts& p, double orthogonality_excess) {
+  return {{"total", json_number(p.total)},
+          {"vertex", json_number(p.vertex)},
+          {"patch", json_number(p.patch)},
+          {"normal", json_number(p.normal)},
+          {"collision_body", json_number(p.collision_body)},
+          {"collision_layer", json_number(p.collision_layer)},
+          {"orthogonality", json_number(p.orthogonality)},
+          {"orthogonality_excess", json_number(orthogonality_excess)},
+          {"edge_strain", json_number(p.edge_strain)}};
 }
 
 std::string duration_text(double s) {
@@ -156,8 +147,8 @@ class Run {
   void save_step_checkpoint();
   void log_progress(int epoch);
   // One writer: only rank 0 prints, logs metrics and writes files.
-  void metric(const std::string& json) {
-    if (ranks_.rank() == 0) io::append_line(metrics_path_, json);
+  void metric(const nlohmann::ordered_json& record) {
+    if (ranks_.rank() == 0) io::append_line(metrics_path_, record.dump());
   }
   bool writer() const { return ranks_.rank() == 0; }
 
@@ -255,8 +246,7 @@ void Run::start_from(const std::string& path) {
   // The weights expect inputs normalised as they were trained.
   stats_ = stats_from_arrays(cp.stats, path);
   out_ << "starting from the weights of " << path << " (" << cp.state.global_step << " updates)\n";
-  metric("{\"event\":\"init_from\",\"checkpoint\":" + json_string(path) + ",\"updates\":" +
-         std::to_string(cp.state.global_step) + "}");
+  metric({{"event", "init_from"}, {"checkpoint", path}, {"updates", cp.state.global_step}});
 }
 
 void Run::save(const std::string& path) {
@@ -317,7 +307,7 @@ TrainSummary Run::execute() {
     if (checkpoints.empty()) {
       out_ << options_.run_dir << ": no checkpoint yet; the run starts from its beginning\n";
       if (!tc.init_from.empty()) start_from(tc.init_from);
-      metric("{\"event\":\"resume\",\"checkpoint\":null}");
+      metric({{"event", "resume"}, {"checkpoint", nullptr}});
     } else {
       // A damaged newest checkpoint (torn by a full disk, a changed byte) costs only the work
       // since the one before: it is set aside as <name>.damaged, the evidence kept.
@@ -332,7 +322,7 @@ TrainSummary Run::execute() {
           fs::rename(*it, *it + ".damaged", ec);
           out_ << "warning: cannot resume from " << *it << ": " << e.what() << "\n  set aside as " << *it
                << ".damaged; trying the checkpoint before it\n";
-          metric("{\"event\":\"damaged_checkpoint\",\"checkpoint\":" + json_string(*it) + "}");
+          metric({{"event", "damaged_checkpoint"}, {"checkpoint", *it}});
         }
       }
       if (resumed_from.empty())
@@ -349,8 +339,7 @@ TrainSummary Run::execute() {
                             std::to_string(train_->num_samples()) + " samples of the train split (data set changed?)");
     out_ << "resuming " << resumed_from << ": epoch " << state_.epoch + 1 << ", sample " << state_.position << " of "
          << train_->num_samples() << ", " << state_.global_step << " updates\n";
-    metric("{\"event\":\"resume\",\"checkpoint\":" + json_string(resumed_from) + ",\"epoch\":" +
-           std::to_string(state_.epoch + 1) + ",\"position\":" + std::to_string(state_.position) + "}");
+    metric({{"event", "resume"}, {"checkpoint", resumed_from}, {"epoch", state_.epoch + 1}, {"position", state_.position}});
   }
   for (int s = 0; s < ranks_.local_count(tc.batch_size); ++s) {
     slots_.push_back(std::make_unique<ad::ParamStore<float>>());
@@ -377,8 +366,10 @@ TrainSummary Run::execute() {
   }
   summary_.updates = adam_->step_count();
   summary_.samples_per_second = total_wall_s_ > 0 ? static_cast<double>(total_samples_) / total_wall_s_ : 0;
-  metric("{\"event\":\"stop\",\"updates\":" + std::to_string(summary_.updates) + ",\"epoch\":" +
-         std::to_string(state_.epoch) + ",\"samples_per_s\":" + json_number(summary_.samples_per_second) + "}");
+  metric({{"event", "stop"},
+          {"updates", summary_.updates},
+          {"epoch", state_.epoch},
+          {"samples_per_s", json_number(summary_.samples_per_second)}});
   return summary_;
 }
 
@@ -410,10 +401,11 @@ void Run::run_epoch(int epoch) {
     const bool by_rollout = config_.train.val_rollout_frames > 0;
     out_ << "epoch " << epoch + 1 << " validation: " << (by_rollout ? "rollout" : "one-step") << " error " << val
          << " (best " << state_.best_val_error << ")\n";
-    metric("{\"event\":\"val\",\"epoch\":" + std::to_string(epoch + 1) + ",\"step\":" +
-           std::to_string(adam_->step_count()) + (by_rollout ? ",\"rollout_error\":" : ",\"one_step_error\":") +
-           json_number(val) + ",\"best\":" +
-           (best ? "true" : "false") + "}");
+    metric({{"event", "val"},
+            {"epoch", epoch + 1},
+            {"step", adam_->step_count()},
+            {by_rollout ? "rollout_error" : "one_step_error", json_number(val)},
+            {"best", best}});
   }
   // best.h5 first: a kill between the two writes resumes from the previous checkpoint and
   // writes both again.
@@ -499,21 +491,26 @@ bool Run::run_batch(int epoch, int ngs, const std::vector<int64_t>& order) {
   if (!finite) {
     ++summary_.skipped;
     ++state_.nonfinite_in_row;
-    std::ostringstream samples, json;
+    std::ostringstream samples;
+    nlohmann::ordered_json records = nlohmann::ordered_json::array();
     for (int i = 0; i < nb; ++i) {
       const auto k = static_cast<std::size_t>(i);
       const auto& id = train_->ids()[static_cast<std::size_t>(refs[k].sequence)];
       samples << (i ? ", " : "") << id << " t=" << refs[k].t << " self-fed " << self_fed[k] << " loss "
               << outcomes[k].loss.total << (outcomes[k].grad_finite ? "" : " (non-finite gradient)");
-      json << (i ? "," : "") << "{\"sequence\":" << json_string(id) << ",\"t\":" << refs[k].t << ",\"self_fed\":"
-           << self_fed[k] << ",\"loss\":" << json_number(outcomes[k].loss.total)
-           << ",\"grad_finite\":" << (outcomes[k].grad_finite ? "true" : "false") << "}";
+      records.push_back({{"sequence", id},
+                         {"t", refs[k].t},
+                         {"self_fed", self_fed[k]},
+                         {"loss", json_number(outcomes[k].loss.total)},
+                         {"grad_finite", outcomes[k].grad_finite}});
     }
     out_ << "epoch " << epoch + 1 << " batch " << summary_.batches << ": non-finite loss or gradient, update skipped ("
          << state_.nonfinite_in_row << " in a row); samples: " << samples.str() << "\n";
-    metric("{\"event\":\"nonfinite\",\"epoch\":" + std::to_string(epoch + 1) + ",\"in_row\":" +
-           std::to_string(state_.nonfinite_in_row) + ",\"grad_norm\":" + json_number(norm) + ",\"samples\":[" +
-           json.str() + "]}");
+    metric({{"event", "nonfinite"},
+            {"epoch", epoch + 1},
+            {"in_row", state_.nonfinite_in_row},
+            {"grad_norm", json_number(norm)},
+            {"samples", records}});
     if (state_.nonfinite_in_row >= tc.max_nonfinite_in_row) {
       throw TrainingStopped(std::to_string(state_.nonfinite_in_row) +
                             " updates in a row had a non-finite loss or gradient (train.max_nonfinite_in_row = " +
@@ -573,18 +570,29 @@ void Run::log_progress(int epoch) {
                 learning_rate_at(tc, epoch), loss.total - config_.loss.orthogonality * orth_floor, loss.vertex, loss.patch, loss.normal, loss.collision_body,
                 loss.collision_layer, orth_excess, loss.edge_strain, 100 * share);
   out_ << line << std::endl;
-  metric("{\"event\":\"train\",\"epoch\":" + std::to_string(epoch + 1) + ",\"step\":" +
-         std::to_string(adam_->step_count()) + ",\"batch\":" + std::to_string(summary_.batches) + ",\"position\":" +
-         std::to_string(state_.position) + ",\"lr\":" + json_number(learning_rate_at(tc, epoch)) +
-         ",\"rollout_max\":" + std::to_string(rollout_steps_at(tc, epoch)) + ",\"loss\":" + json_parts(loss, orth_excess) +
-         ",\"loss_weighted\":" + json_parts(weighted, config_.loss.orthogonality * orth_excess) +
-         ",\"grad_norm\":" + json_number(window_batches_ > 0 ? window_grad_norm_ / static_cast<double>(window_batches_) : 0) +
-         ",\"samples_per_s\":" + json_number(rate) + ",\"eta_s\":" + json_number(eta) + ",\"threads\":" +
-         std::to_string(threads_) + ",\"seconds\":{\"wall\":" + json_number(window_wall_s_) + ",\"read\":" +
-         json_number(window_data_s_) + ",\"build\":" + json_number(window_build_s_) + ",\"model\":" +
-         json_number(window_model_s_) + ",\"optimizer\":" + json_number(window_optim_s_) +
-         ",\"reduce\":" + json_number(window_reduce_s_) + "},\"share_outside_model\":" + json_number(share) +
-         ",\"ranks\":" + std::to_string(ranks_.size()) + ",\"sent_bytes\":" + std::to_string(window_sent_bytes_) + "}");
+  metric({{"event", "train"},
+          {"epoch", epoch + 1},
+          {"step", adam_->step_count()},
+          {"batch", summary_.batches},
+          {"position", state_.position},
+          {"lr", json_number(learning_rate_at(tc, epoch))},
+          {"rollout_max", rollout_steps_at(tc, epoch)},
+          {"loss", json_parts(loss, orth_excess)},
+          {"loss_weighted", json_parts(weighted, config_.loss.orthogonality * orth_excess)},
+          {"grad_norm", json_number(window_batches_ > 0 ? window_grad_norm_ / static_cast<double>(window_batches_) : 0)},
+          {"samples_per_s", json_number(rate)},
+          {"eta_s", json_number(eta)},
+          {"threads", threads_},
+          {"seconds",
+           {{"wall", json_number(window_wall_s_)},
+            {"read", json_number(window_data_s_)},
+            {"build", json_number(window_build_s_)},
+            {"model", json_number(window_model_s_)},
+            {"optimizer", json_number(window_optim_s_)},
+            {"reduce", json_number(window_reduce_s_)}}},
+          {"share_outside_model", json_number(share)},
+          {"ranks", ranks_.size()},
+          {"sent_bytes", window_sent_bytes_}});
   window_loss_ = {};
   window_batches_ = window_samples_ = 0;
   window_grad_norm_ = window_data_s_ = window_build_s_ = window_model_s_ = window_optim_s_ = window_wall_s_ = 0;
