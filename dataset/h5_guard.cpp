@@ -35,8 +35,11 @@ void read_through(hid_t ftype, hid_t space, Read read) {
   if (n <= 0) return;
   hid_t mtype = -1;
   if (H5Tis_variable_str(ftype) > 0) {
+    // The file's character set: with another one there is no conversion path, the read fails
+    // at once and never reaches the global heap a real read goes through.
     mtype = H5Tcopy(H5T_C_S1);
     H5Tset_size(mtype, H5T_VARIABLE);
+    H5Tset_cset(mtype, H5Tget_cset(ftype) == H5T_CSET_UTF8 ? H5T_CSET_UTF8 : H5T_CSET_ASCII);
   } else {
     mtype = H5Tget_native_type(ftype, H5T_DIR_DEFAULT);
   }

@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
-# Fuzz the data layer's readers with libFuzzer (clang from Debian; see fuzz/fuzz_reader.cpp).
-# Not part of the test suite. Usage: scripts/fuzz.sh [SECONDS=120] [JOBS=1]
-# Builds into build-fuzz/ with ASan + UBSan (rebuilt only when dataset/ or fuzz/ changed),
-# seeds a corpus from valid synthetic files, runs for SECONDS in libFuzzer's fork mode,
+# Fuzz every reader of untrusted files with libFuzzer (clang from Debian): the sequence reader
+# (fuzz/fuzz_reader.cpp) and checkpoint loading (fuzz/fuzz_checkpoint.cpp).
+# Not part of the test suite. Usage: scripts/fuzz.sh [SECONDS=120] [JOBS=1] [TARGETS="reader checkpoint"]
+# Builds into build-fuzz/ with ASan + UBSan (rebuilt only when their sources changed), seeds
+# each corpus from valid files, runs each target for SECONDS in libFuzzer's fork mode,
 # prints the executions run, and exits non-zero on any crash, hang (10 s) or sanitizer report
 # (each input is left in build-fuzz/ as crash-*, timeout-*, leak-*). The readers go through
 # the program's guard (dataset/h5_guard.h): libhdf5 1.10.8 crashes or loops forever on some
@@ -21,14 +22,30 @@ HDF5_CFLAGS=$(pkg-config --cflags hdf5 2>/dev/null || echo "-I/usr/include/hdf5/
 HDF5_LIBS=$(pkg-config --libs hdf5 2>/dev/null || echo "-L/usr/lib/x86_64-linux-gnu/hdf5/serial -lhdf5")
 CXXFLAGS=(-std=c++20 -O1 -g -fno-omit-frame-pointer -I. -I/usr/include/eigen3 $HDF5_CFLAGS -fopenmp=libgomp
           -Wno-unknown-pragmas)
-SOURCES=(dataset/*.cpp)
+TARGETS="${3:-reader checkpoint}"
+# A version header as the CMake build generates it (checkpoints record the program).
+mkdir -p "$OUT/generated"
+version=$(sed -n 's/^project(layersnet VERSION \([0-9.]*\).*/\1/p' CMakeLists.txt)
+sed "s/@PROJECT_VERSION@/${version:-0.0.0}/" cli/version.h.in > "$OUT/generated/layersnet_version.h"
+CXXFLAGS+=(-I"$OUT/generated")
+READER_SOURCES=(dataset/*.cpp)
+CHECKPOINT_SOURCES=(dataset/*.cpp autodiff/params.cpp autodiff/arena.cpp model/params_layout.cpp train/checkpoint.cpp train/config.cpp)
+SAN=(-fsanitize=fuzzer,address,undefined -fno-sanitize-recover=undefined)
 if [[ ! -x "$OUT/fuzz_reader" || -n "$(find dataset fuzz -newer "$OUT/fuzz_reader" -type f | head -1)" ]]; then
   echo "building $OUT/fuzz_reader (clang++, -fsanitize=fuzzer,address,undefined)"
-  clang++ "${CXXFLAGS[@]}" -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=undefined \
-    fuzz/fuzz_reader.cpp "${SOURCES[@]}" $HDF5_LIBS -lgomp -o "$OUT/fuzz_reader"
-  clang++ "${CXXFLAGS[@]}" fuzz/make_seeds.cpp "${SOURCES[@]}" $HDF5_LIBS -lgomp -o "$OUT/make_seeds"
+  clang++ "${CXXFLAGS[@]}" "${SAN[@]}" fuzz/fuzz_reader.cpp "${READER_SOURCES[@]}" $HDF5_LIBS -lgomp -o "$OUT/fuzz_reader"
+  clang++ "${CXXFLAGS[@]}" fuzz/make_seeds.cpp "${READER_SOURCES[@]}" $HDF5_LIBS -lgomp -o "$OUT/make_seeds"
+fi
+if [[ " $TARGETS " == *" checkpoint "* ]] &&
+   [[ ! -x "$OUT/fuzz_checkpoint" || -n "$(find dataset autodiff model train fuzz -newer "$OUT/fuzz_checkpoint" -type f | head -1)" ]]; then
+  echo "building $OUT/fuzz_checkpoint (clang++, -fsanitize=fuzzer,address,undefined)"
+  clang++ "${CXXFLAGS[@]}" "${SAN[@]}" fuzz/fuzz_checkpoint.cpp "${CHECKPOINT_SOURCES[@]}" $HDF5_LIBS -lgomp \
+    -o "$OUT/fuzz_checkpoint"
+  clang++ "${CXXFLAGS[@]}" fuzz/make_checkpoint_seeds.cpp "${CHECKPOINT_SOURCES[@]}" $HDF5_LIBS -lgomp \
+    -o "$OUT/make_checkpoint_seeds"
 fi
 "$OUT/make_seeds" "$OUT/seeds"
+[[ " $TARGETS " != *" checkpoint "* ]] || "$OUT/make_checkpoint_seeds" "$OUT/seeds_checkpoint" configs/tiny.toml
 cd "$OUT"
 export LSAN_OPTIONS="suppressions=$(pwd)/../fuzz/lsan.supp:print_suppressions=0"
 # libhdf5 asks malloc for absurd sizes when a corrupt object header claims them (input
@@ -36,38 +53,52 @@ export LSAN_OPTIONS="suppressions=$(pwd)/../fuzz/lsan.supp:print_suppressions=0"
 # malloc returns NULL and HDF5 fails cleanly, so let ASan's malloc do the same.
 export ASAN_OPTIONS="allocator_may_return_null=1"
 export LAYERSNET_HDF5_GUARD_SECONDS=3
-echo "fuzzing for ${SECONDS_TO_RUN} s"
-rm -f crash-* leak-* timeout-* oom-*
-set +e
-# Crashes do not stop the run (-ignore_crashes=1): each one is classified afterwards by the
-# first stack frame that is not a sanitizer runtime frame; a finding inside libhdf5 (corrupt
-# file structures, e.g. its global heap) is counted as "libhdf5", anything else fails.
-./fuzz_reader -fork="$JOBS" -ignore_timeouts=1 -ignore_ooms=0 -ignore_crashes=1 \
-  -max_total_time="$SECONDS_TO_RUN" -rss_limit_mb=2048 -max_len=65536 -timeout=10 \
-  corpus seeds > fuzz.log 2>&1
-grep -E "^#[0-9]+: cov" fuzz.log | tail -1
-grep -E "INFO: fuzzed for" fuzz.log | tail -1
-set -e
-ours=0 hdf5=0 contained=0
-for f in crash-* leak-*; do
-  [[ -e "$f" ]] || continue
-  # The guard's child inherits libFuzzer's death callback, so a sanitizer report inside the
-  # child (libhdf5 reading a corrupt file) leaves a crash-* file although the program refused
-  # the file cleanly: an input that runs clean again counts as contained, not as a finding.
-  if ./fuzz_reader "$f" > /dev/null 2>&1; then
-    contained=$((contained + 1))
-    continue
-  fi
-  frame=$(./fuzz_reader "$f" 2>&1 | grep -E "^ +#[0-9]+ 0x" |
-          grep -v -E "__interceptor|__asan|__sanitizer|__lsan|in malloc|in calloc|in realloc|in free|operator new|fuzzer::" |
-          head -1 || true)
-  if [[ "$frame" == *libhdf5* ]]; then
-    hdf5=$((hdf5 + 1))
-  else
-    ours=$((ours + 1))
-    echo "FINDING in our code: $OUT/$f: $frame"
-  fi
-done
-hangs=$(ls timeout-* 2>/dev/null | wc -l)
-echo "findings: $ours in our code, $hdf5 inside libhdf5, $hangs hangs; $contained inputs contained by the guard (refused, no crash); log: $OUT/fuzz.log"
-[[ $ours -eq 0 && $hdf5 -eq 0 && $hangs -eq 0 ]]
+failed=0
+# run_target NAME MAX_LEN: fuzz build-fuzz/fuzz_NAME for SECONDS, then classify its findings.
+run_target() {
+  local name=$1 max_len=$2 corpus=corpus_$1 seeds=seeds
+  [[ $name == reader ]] && corpus=corpus
+  [[ $name == checkpoint ]] && seeds=seeds_checkpoint
+  mkdir -p "$corpus" "findings_$name"
+  echo "fuzzing $name for ${SECONDS_TO_RUN} s"
+  rm -f crash-* leak-* timeout-* oom-*
+  set +e
+  # Crashes do not stop the run (-ignore_crashes=1): each one is classified afterwards by the
+  # first stack frame that is not a sanitizer runtime frame (our code or libhdf5).
+  "./fuzz_$name" -fork="$JOBS" -ignore_timeouts=1 -ignore_ooms=0 -ignore_crashes=1 \
+    -max_total_time="$SECONDS_TO_RUN" -rss_limit_mb=2048 -max_len="$max_len" -timeout=10 \
+    "$corpus" "$seeds" > "fuzz_$name.log" 2>&1
+  grep -E "^#[0-9]+: cov" "fuzz_$name.log" | tail -1
+  grep -E "INFO: fuzzed for" "fuzz_$name.log" | tail -1
+  set -e
+  local ours=0 hdf5=0 contained=0 f frame
+  for f in crash-* leak-* oom-*; do
+    [[ -e "$f" ]] || continue
+    # The guard's child inherits libFuzzer's death callback, so a sanitizer report inside the
+    # child (libhdf5 reading a corrupt file) leaves a crash-* file although the program refused
+    # the file cleanly: an input that runs clean again counts as contained, not as a finding.
+    if "./fuzz_$name" "$f" > /dev/null 2>&1; then
+      contained=$((contained + 1))
+      rm -f "$f"
+      continue
+    fi
+    frame=$("./fuzz_$name" "$f" 2>&1 | grep -E "^ +#[0-9]+ 0x" |
+            grep -v -E "__interceptor|__asan|__sanitizer|__lsan|in malloc|in calloc|in realloc|in free|operator new|fuzzer::" |
+            head -1 || true)
+    if [[ "$frame" == *libhdf5* ]]; then
+      hdf5=$((hdf5 + 1))
+    else
+      ours=$((ours + 1))
+      echo "FINDING in our code: $OUT/findings_$name/$f: $frame"
+    fi
+    mv "$f" "findings_$name/"
+  done
+  local hangs
+  hangs=$(ls timeout-* 2>/dev/null | wc -l)
+  mv timeout-* "findings_$name/" 2>/dev/null || true
+  echo "$name findings: $ours in our code, $hdf5 inside libhdf5, $hangs hangs; $contained inputs contained by the guard (refused, no crash); log: $OUT/fuzz_$name.log"
+  [[ $ours -eq 0 && $hdf5 -eq 0 && $hangs -eq 0 ]] || failed=1
+}
+[[ " $TARGETS " != *" reader "* ]] || run_target reader 65536
+[[ " $TARGETS " != *" checkpoint "* ]] || run_target checkpoint 262144
+exit $failed

@@ -1,6 +1,7 @@
 #include "train/checkpoint.h"
 
 #include "dataset/h5.h"
+#include "dataset/h5_guard.h"
 #include "model/params_layout.h"
 #include "layersnet_version.h"
 
@@ -223,6 +224,7 @@ namespace {
 
 h5::Handle open_checked(const std::string& path) {
   if (!std::filesystem::exists(path)) fail(path, "checkpoint not found");
+  h5::guard_file(path, [&] { (void)load_model(path); });  // every read a command makes of it
   h5::Handle file;
   try {
     file = h5::open_file(path);

@@ -328,6 +328,10 @@ TEST_F(Reliability, DamagedCheckpointsAreRefused) {
        damaged(0, "not a checkpoint")},
       {"flipped_byte_checkpoint", "eval --checkpoint {case}/c.h5 --dataset {data} --out {case}/ev", 1,
        "c.h5.*(checksum|corrupt)", flipped},
+      {"hanging_checkpoint",
+       "eval --checkpoint " + std::string(LAYERSNET_SOURCE_DIR) +
+           "/fuzz/known_hdf5_issues/checkpoint_vlen_global_heap_hang.h5 --dataset {data} --out {case}/ev",
+       1, "checkpoint_vlen_global_heap_hang.h5.*did not finish within 2 s", nullptr, "LAYERSNET_HDF5_GUARD_SECONDS=2 "},
       {"sequence_as_checkpoint", "eval --checkpoint {data}/s0000.h5 --dataset {data} --out {case}/ev", 1,
        "s0000.h5: format is 'dlayers-h5', expected 'layersnet-checkpoint'"},
   };
