@@ -13,8 +13,10 @@
 #include "autodiff/bf16_gemm.h"
 #include "autodiff/ops_dense.h"
 #include "cli/command_registry.h"
+#include "dataset/file_io.h"
 
 #include <Eigen/Core>
+#include <nlohmann/json.hpp>
 #include <omp.h>
 
 #include <algorithm>
@@ -235,27 +237,36 @@ int run_bench(const LinearBenchOptions& o) {
                   r.threads, r.relu_separate_ms, r.relu_fused_ms, r.relu_separate_ms / r.relu_fused_ms);
   }
   if (!o.json.empty()) {
-    std::ofstream f(o.json);
-    if (!f) throw std::runtime_error("bench linear: cannot write --json file '" + o.json + "'");
-    f << "{\n  \"bench\": \"linear\",\n  \"reps\": " << o.reps << ",\n  \"bf16_kernel\": \"" << bf16_kernel_name()
-      << "\",\n  \"results\": [\n";
-    for (std::size_t k = 0; k < results.size(); ++k) {
-      const Result& r = results[k];
-      f << "    {\"n\": " << r.shape.n << ", \"cin\": " << r.shape.cin << ", \"cout\": " << r.shape.cout
-        << ", \"threads\": " << r.threads << ", \"gemm_ms\": " << r.gemm_ms << ", \"forward_ms\": " << r.fwd_ms
-        << ", \"forward_norecord_ms\": " << r.fwd_norecord_ms << ", \"backward_ms\": " << r.bwd_ms
-        << ", \"forward_rate_vs_gemm\": " << r.gemm_ms / r.fwd_ms
-        << ", \"forward_norecord_rate_vs_gemm\": " << r.gemm_ms / r.fwd_norecord_ms
-        << ", \"backward_over_forward\": " << r.bwd_ms / r.fwd_ms << ", \"min_forward_rate_vs_gemm\": " << r.min_fwd_rate
-        << ", \"min_backward_over_forward\": " << r.min_bwd_over_fwd << ", \"bf16_ms\": " << r.bf16_ms
-        << ", \"bf16_speedup_vs_forward_norecord\": " << r.fwd_norecord_ms / r.bf16_ms
-        << ", \"min_bf16_speedup\": " << r.min_bf16_speedup << ", \"bf16_max_rel_error\": " << r.bf16_rel_err
-        << ", \"cpu_forward_norecord_ms\": " << r.cpu_fwd0_ms << ", \"cpu_bf16_ms\": " << r.cpu_bf16_ms;
-      if (o.relu) f << ", \"relu_separate_ms\": " << r.relu_separate_ms << ", \"relu_fused_ms\": " << r.relu_fused_ms;
-      f << "}" << (k + 1 < results.size() ? "," : "")
-        << "\n";
+    nlohmann::ordered_json rows = nlohmann::ordered_json::array();
+    for (const Result& r : results) {
+      nlohmann::ordered_json row = {{"n", r.shape.n},
+                                    {"cin", r.shape.cin},
+                                    {"cout", r.shape.cout},
+                                    {"threads", r.threads},
+                                    {"gemm_ms", r.gemm_ms},
+                                    {"forward_ms", r.fwd_ms},
+                                    {"forward_norecord_ms", r.fwd_norecord_ms},
+                                    {"backward_ms", r.bwd_ms},
+                                    {"forward_rate_vs_gemm", r.gemm_ms / r.fwd_ms},
+                                    {"forward_norecord_rate_vs_gemm", r.gemm_ms / r.fwd_norecord_ms},
+                                    {"backward_over_forward", r.bwd_ms / r.fwd_ms},
+                                    {"min_forward_rate_vs_gemm", r.min_fwd_rate},
+                                    {"min_backward_over_forward", r.min_bwd_over_fwd},
+                                    {"bf16_ms", r.bf16_ms},
+                                    {"bf16_speedup_vs_forward_norecord", r.fwd_norecord_ms / r.bf16_ms},
+                                    {"min_bf16_speedup", r.min_bf16_speedup},
+                                    {"bf16_max_rel_error", r.bf16_rel_err},
+                                    {"cpu_forward_norecord_ms", r.cpu_fwd0_ms},
+                                    {"cpu_bf16_ms", r.cpu_bf16_ms}};
+      if (o.relu) {
+        row["relu_separate_ms"] = r.relu_separate_ms;
+        row["relu_fused_ms"] = r.relu_fused_ms;
+      }
+      rows.push_back(row);
     }
-    f << "  ]\n}\n";
+    const nlohmann::ordered_json out = {
+        {"bench", "linear"}, {"reps", o.reps}, {"bf16_kernel", bf16_kernel_name()}, {"results", rows}};
+    layersnet::io::write_file_atomic(o.json, out.dump(2) + "\n");
   }
   return 0;
 }

@@ -12,6 +12,7 @@
 #include "autodiff/optim.h"
 #include "cli/bench_util.h"
 #include "cli/command_registry.h"
+#include "dataset/file_io.h"
 #include "cli/exit_codes.h"
 #include "losses/losses.h"
 #include "model/input_builder.h"
@@ -336,9 +337,7 @@ int run_bench_model(const BenchModelOptions& o) {
   std::printf("ratio = torch time / our time (> 1: we are faster); best-of-pass medians; GFLOP/s from the "
               "reference's FLOP count (train = 3 x forward); peak_MiB = our VmHWM (whole run)\n");
   if (!o.json.empty()) {
-    std::ofstream f(o.json);
-    if (!f) throw std::runtime_error("bench model: cannot write --json " + o.json + "; check the folder exists");
-    f << out.dump(1) << "\n";
+    layersnet::io::write_file_atomic(o.json, out.dump(1) + "\n");
   }
   return 0;
 }

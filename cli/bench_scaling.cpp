@@ -20,6 +20,7 @@
 #include "autodiff/optim.h"
 #include "cli/bench_util.h"
 #include "cli/command_registry.h"
+#include "dataset/file_io.h"
 #include "dataset/neighbours.h"
 #include "losses/losses.h"
 #include "model/input_builder.h"
@@ -464,9 +465,7 @@ int run_bench_scaling(const ScalingOptions& o) {
                         {"omp_wait_policy", wait ? wait : ""}, {"load_end", uptime_load()}, {"rows", nlohmann::json::array()}};
     for (const auto& [key, rows] : blocks)
       for (const auto& r : rows) j["rows"].push_back(row_json(r));
-    std::ofstream f(o.json);
-    if (!f) throw std::runtime_error("bench scaling: cannot write --json " + o.json + "; check the folder exists");
-    f << j.dump(1) << "\n";
+    layersnet::io::write_file_atomic(o.json, j.dump(1) + "\n");
   }
   if (!o.png.empty()) write_png(o.png, blocks, !o.no_train);
   return 0;

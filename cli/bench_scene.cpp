@@ -19,6 +19,7 @@
 #include "autodiff/optim.h"
 #include "cli/bench_util.h"
 #include "cli/command_registry.h"
+#include "dataset/file_io.h"
 #include "eval/metrics.h"
 #include "losses/losses.h"
 #include "model/input_builder.h"
@@ -241,9 +242,7 @@ int run_bench_scene(const SceneBenchOptions& o) {
               uptime_load().c_str());
   out["load_end"] = uptime_load();
   if (!o.json.empty()) {
-    std::ofstream fo(o.json);
-    if (!fo) throw std::runtime_error("bench scene: cannot write --json " + o.json + "; check the folder exists");
-    fo << out.dump(1) << "\n";
+    layersnet::io::write_file_atomic(o.json, out.dump(1) + "\n");
   }
   return 0;
 }

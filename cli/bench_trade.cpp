@@ -14,6 +14,7 @@
 // Resumable: a variant with variant.json and eval/eval.json is reused; a half-trained run
 // continues with `layersnet train --resume`. See eval/README.md "Speed against accuracy".
 #include "cli/command_registry.h"
+#include "dataset/file_io.h"
 #include "cli/program_files.h"
 #include "eval/pareto.h"
 #include "model/params_layout.h"
@@ -113,11 +114,6 @@ std::string slurp(const fs::path& p) {
   return s.str();
 }
 
-void write_text(const fs::path& p, const std::string& text) {
-  std::ofstream out(p, std::ios::binary);
-  out << text;
-  if (!out) throw std::runtime_error(p.string() + ": cannot be written (check the --out folder's permissions)");
-}
 
 // The last non-empty line of a log (progress of a running child).
 std::string last_line(const fs::path& p) {
@@ -321,7 +317,7 @@ json run_variant(const Variant& v, const TradeOptions& o, const fs::path& out, b
       rec["status"] = "failed";
       rec["message"] = "training exited with " + std::to_string(c.exit_code) + "; see " + (dir / "train.log").string();
       std::printf("      FAILED: %s\n", rec["message"].get<std::string>().c_str());
-      write_text(record_path, rec.dump(2));  // no "train" key: the next run retries (resumes)
+      layersnet::io::write_file_atomic(record_path, rec.dump(2));  // no "train" key: the next run retries (resumes)
       return rec;
     }
     if (rec.contains("train_before")) {  // the whole training: earlier part + this one
@@ -331,7 +327,7 @@ json run_variant(const Variant& v, const TradeOptions& o, const fs::path& out, b
       train["note"] = "continued from a smaller budget; samples_per_s of the continued part";
     }
     rec["train"] = train;
-    write_text(record_path, rec.dump(2));
+    layersnet::io::write_file_atomic(record_path, rec.dump(2));
     std::printf("      trained in %.0f s, %.3g samples/s, peak %.0f MB\n", c.wall_s, num(train, "samples_per_s"),
                 c.peak_mb);
   }
@@ -349,12 +345,12 @@ json run_variant(const Variant& v, const TradeOptions& o, const fs::path& out, b
     rec["message"] = "eval exited with " + std::to_string(c.exit_code) + "; see " + (dir / "eval.log").string();
     rec.erase("eval");
     std::printf("      FAILED: %s\n", rec["message"].get<std::string>().c_str());
-    write_text(record_path, rec.dump(2));
+    layersnet::io::write_file_atomic(record_path, rec.dump(2));
     return rec;
   }
   rec["status"] = "ok";
   rec.erase("message");
-  write_text(record_path, rec.dump(2));
+  layersnet::io::write_file_atomic(record_path, rec.dump(2));
   rec["result"] = read_eval(dir / "eval" / "eval.json");
   std::printf("      error %.1f mm, %.3g ms/frame (1 thread), eval %.0f s, peak %.0f MB\n",
               num(rec["result"], "error_mm"), num(rec["result"], "ms_per_frame_1thread"), c.wall_s, c.peak_mb);
@@ -391,8 +387,8 @@ std::string plot_trade(const fs::path& out, const std::vector<layersnet::eval::T
       lo = std::min(lo, p.ms), hi = std::max(hi, p.ms);
     }
   for (std::size_t i : front) fr << fmt("%.6g", pts[i].ms) << "\t" << fmt("%.6g", pts[i].error) << "\n";
-  write_text(out / "trade_points.dat", all.str());
-  write_text(out / "trade_front.dat", fr.str());
+  layersnet::io::write_file_atomic(out / "trade_points.dat", all.str());
+  layersnet::io::write_file_atomic(out / "trade_front.dat", fr.str());
   std::ostringstream gp;
   gp << "set terminal png size 1000,620\nset output '" << (out / "trade.png").string() << "'\n"
      << "set termoption noenhanced\nset title '" << title << "'\nset ylabel 'rollout error (mm)'\nset grid\nset key top right\n"
@@ -413,7 +409,7 @@ std::string plot_trade(const fs::path& out, const std::vector<layersnet::eval::T
      << "title 'Pareto front', '" << (out / "trade_points.dat").string()
      << "' using 1:2 with points pt 7 ps 1.2 lc rgb '#1f77b4' title 'variant', '' using 1:2:3 with labels offset 0.8,0.8 "
         "left font ',9' notitle\n";
-  write_text(out / "trade.gp", gp.str());
+  layersnet::io::write_file_atomic(out / "trade.gp", gp.str());
   if (std::system("command -v gnuplot >/dev/null 2>&1") != 0) return "gnuplot not found: no trade.png (apt-get install gnuplot-nox)";
   const std::string cmd = "gnuplot '" + (out / "trade.gp").string() + "' > '" + (out / "gnuplot.log").string() + "' 2>&1";
   if (std::system(cmd.c_str()) != 0) return "gnuplot failed: see " + (out / "gnuplot.log").string();
@@ -553,7 +549,7 @@ void write_reports(json& t, const TradeOptions& o, const fs::path& out, int budg
     t["presets"][name] = {{"variant", p.name}, {"why", why}, {"keys", keys_of(rec)}, {"sets", rec["sets"]}};
     const std::string measured = why + "\n# Measured " + now_utc() + ", " + std::to_string(budget) + " epoch(s) per variant: `" +
                                  t["command"].get<std::string>() + "`";
-    write_text(presets_dir / (std::string(name) + ".toml"), preset_toml(name, rec, base_name, measured));
+    layersnet::io::write_file_atomic(presets_dir / (std::string(name) + ".toml"), preset_toml(name, rec, base_name, measured));
   }
   t["finished"] = now_utc();
   t["wall_s"] = std::chrono::duration<double>(Clock::now() - t0).count();
@@ -561,10 +557,10 @@ void write_reports(json& t, const TradeOptions& o, const fs::path& out, int budg
   const std::string plot_msg = plot_trade(out, pts, front,
                                           "Rollout error against speed, " + std::to_string(budget) + " epoch(s) per variant",
                                           t.value("baselines", json::object()));
-  write_text(out / "trade.json", t.dump(2));
+  layersnet::io::write_file_atomic(out / "trade.json", t.dump(2));
   std::string md = trade_markdown(t);
   if (!plot_msg.empty()) md += "\n" + plot_msg + "\n";
-  write_text(out / "trade.md", md);
+  layersnet::io::write_file_atomic(out / "trade.md", md);
   if (!final) return;
   std::printf("\n%s\n", md.c_str());
   std::printf("recommended presets (written to %s; copy them to configs/ to ship):\n", presets_dir.string().c_str());
@@ -631,7 +627,7 @@ void speed_passes(json& t, const TradeOptions& o, const fs::path& out, int budge
       }
     }
     cache["load_average_end"] = load_average();
-    write_text(dir / "speed.json", cache.dump(2));
+    layersnet::io::write_file_atomic(dir / "speed.json", cache.dump(2));
   } else {
     std::printf("speed: reused %s\n", (dir / "speed.json").string().c_str());
   }

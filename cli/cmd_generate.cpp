@@ -9,6 +9,7 @@
 //
 // Recipe (JSON; command-line flags override it): see generate/recipes/default.json.
 #include "cli/command_registry.h"
+#include "dataset/file_io.h"
 #include "cli/program_files.h"
 
 #include <nlohmann/json.hpp>
@@ -82,15 +83,6 @@ void check_keys(const json& obj, const std::vector<std::string>& known, const st
   }
 }
 
-void write_text(const fs::path& path, const std::string& text) {
-  const fs::path tmp = path.string() + ".tmp";
-  {
-    std::ofstream out(tmp);
-    if (!out) throw GenerateError(tmp.string() + ": cannot write (check permissions / disk space)");
-    out << text;
-  }
-  fs::rename(tmp, path);
-}
 
 std::string quote(const std::string& s) {
   std::string q = "'";
@@ -229,7 +221,7 @@ int run_generate(const GenerateOptions& opt) {
   fs::create_directories(out / "reports");
   fs::create_directories(out / "logs");
   const fs::path scene_json = out / "scene.json";
-  write_text(scene_json, scene.dump(1));
+  layersnet::io::write_file_atomic(scene_json, scene.dump(1));
   const auto splits = split_names(count, recipe.value("val_fraction", 0.125), recipe.value("test_fraction", 0.125));
 
   json sequences = json::array();
@@ -291,10 +283,10 @@ int run_generate(const GenerateOptions& opt) {
       rep["dataset_scene"] = scene;
       rep["accepted"] = failed.empty();
       rep["failed_gates"] = failed;
-      write_text(rep_path, rep.dump(1));
+      layersnet::io::write_file_atomic(rep_path, rep.dump(1));
       if (failed.empty()) {
         ok = true;
-        write_text(final_report, rep.dump(1));
+        layersnet::io::write_file_atomic(final_report, rep.dump(1));
         entry.update({{"attempts", attempt + 1}, {"status", attempt ? "regenerated" : "generated"}, {"report", rep}});
         s_per_frame_sum += rep.at("timing").at("blender_s_per_frame").get<double>();
         regenerated += attempt > 0;
@@ -341,7 +333,7 @@ int run_generate(const GenerateOptions& opt) {
                    {"tags", tags}, {"subsets", subsets},
                    {"subset_rule", "T/L: tight (pants) / loose (skirt, dress) inner layer; +W: max wind strength > 250; "
                                    "without +W: max wind strength <= 50"}};
-  write_text(out / "dataset.json", manifest.dump(1));
+  layersnet::io::write_file_atomic(out / "dataset.json", manifest.dump(1));
   const double run_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_run).count();
   json report = {{"source", source.str()},
                  {"gates", {{"max_inside_body_share", gates.max_inside_body_share},
@@ -353,8 +345,8 @@ int run_generate(const GenerateOptions& opt) {
                               {"run_seconds", run_s},
                               {"mean_blender_s_per_frame", accepted ? s_per_frame_sum / accepted : 0.0}}},
                  {"sequences", sequences}};
-  write_text(out / "generate_report.json", report.dump(1));
-  write_text(out / "generate_report.md", markdown_report(report));
+  layersnet::io::write_file_atomic(out / "generate_report.json", report.dump(1));
+  layersnet::io::write_file_atomic(out / "generate_report.md", markdown_report(report));
   std::printf("generate: %d accepted, %d dropped, %d regenerated in %s; report %s\n", accepted, dropped, regenerated,
               fmt_duration(run_s).c_str(), (out / "generate_report.md").string().c_str());
   return accepted > 0 ? 0 : 1;

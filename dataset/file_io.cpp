@@ -57,7 +57,8 @@ std::string write_failure_hint(int err) {
   }
 }
 
-void write_file_atomic(const std::string& path, std::string_view bytes) {
+void write_file_atomic(const std::filesystem::path& file, std::string_view bytes) {
+  const std::string path = file.string();
   const std::string tmp = path + ".tmp";
   const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
   if (fd < 0) fail(path, "written", errno);

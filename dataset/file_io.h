@@ -3,6 +3,7 @@
 // limit or a missing folder is one clear error naming the file and the cause (the operating
 // system's own words, e.g. "No space left on device"), and a failed write never leaves a
 // truncated file or a stray temporary behind.
+#include <filesystem>
 #include <string>
 #include <string_view>
 
@@ -11,7 +12,7 @@ namespace layersnet::io {
 // Writes `bytes` to `path` atomically: PATH.tmp in the same folder, write, fsync, rename, fsync
 // of the folder. On failure PATH.tmp is removed and an existing file at `path` is untouched.
 // Throws std::runtime_error "PATH: cannot be written: CAUSE (HINT)".
-void write_file_atomic(const std::string& path, std::string_view bytes);
+void write_file_atomic(const std::filesystem::path& path, std::string_view bytes);
 
 // Appends `line` and a newline to `path` (created if missing) with one write(2), so a line
 // is never interleaved or half-written unless the disk fills in the middle of it.

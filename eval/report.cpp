@@ -32,7 +32,6 @@ json ms_json(const MeanStd& m) { return {{"mean", m.mean}, {"std", m.std}, {"seq
 // Blender seconds per frame / model seconds per frame: how many times faster the rollout is.
 double speedup(double blender_s, double ms) { return blender_s > 0 && ms > 0 ? blender_s * 1000.0 / ms : -1; }
 
-void write_text(const std::filesystem::path& p, const std::string& text) { io::write_file_atomic(p.string(), text); }
 
 // gnuplot exits 0 even when its PNG could not be written in full (a full disk): a plot counts
 // only when the file ends with PNG's IEND chunk.
@@ -72,8 +71,8 @@ std::string curve_data(const std::vector<MethodResult>& methods, SummaryCurve cu
 
 bool run_gnuplot(const std::filesystem::path& dir, const std::vector<MethodResult>& methods) {
   if (std::system("command -v gnuplot >/dev/null 2>&1") != 0) return false;
-  write_text(dir / "curve.dat", curve_data(methods, &Summary::curve_mm));
-  write_text(dir / "strain.dat", curve_data(methods, &Summary::strain_p99_curve_percent));
+  io::write_file_atomic(dir / "curve.dat", curve_data(methods, &Summary::curve_mm));
+  io::write_file_atomic(dir / "strain.dat", curve_data(methods, &Summary::strain_p99_curve_percent));
   std::ostringstream gp;
   gp << "set terminal png size 900,520\nset output '" << (dir / "curve.png").string() << "'\n"
      << "set title 'Euclidean error over the rollout'\nset xlabel 'predicted frame'\nset ylabel 'error (mm)'\n"
@@ -100,12 +99,12 @@ bool run_gnuplot(const std::filesystem::path& dir, const std::vector<MethodResul
     sp << fmt("%.6g", m.ms_per_frame_1thread) << "\t" << fmt("%.6g", summarise(m).error_mm.mean) << "\t\"" << m.name
        << "\"\n";
   }
-  write_text(dir / "speed.dat", sp.str());
+  io::write_file_atomic(dir / "speed.dat", sp.str());
   gp << "set output '" << (dir / "speed.png").string() << "'\nset title 'Error against speed (1 thread)'\n"
      << "set xlabel 'ms per frame (median, log scale)'\nset ylabel 'error (mm)'\nset logscale x\nunset key\n"
      << "plot '" << (dir / "speed.dat").string() << "' using 1:2 with points pt 7 ps 1.5, '' using 1:2:3 with labels "
      << "offset 1,1 left\n";
-  write_text(dir / "plots.gp", gp.str());
+  io::write_file_atomic(dir / "plots.gp", gp.str());
   const std::string cmd = "gnuplot '" + (dir / "plots.gp").string() + "' > '" + (dir / "gnuplot.log").string() + "' 2>&1";
   return std::system(cmd.c_str()) == 0;
 }
@@ -311,7 +310,7 @@ std::vector<std::string> write_report(const std::string& dir_name, const std::ve
   const std::filesystem::path dir(dir_name);
   std::filesystem::create_directories(dir);
   std::vector<std::string> written;
-  write_text(dir / "eval.json", report_json(methods, c));
+  io::write_file_atomic(dir / "eval.json", report_json(methods, c));
   written.push_back((dir / "eval.json").string());
   const bool ran = run_gnuplot(dir, methods);
   std::vector<std::string> plots, broken;
@@ -331,7 +330,7 @@ std::vector<std::string> write_report(const std::string& dir_name, const std::ve
           "see gnuplot.log.)\n";
   for (const auto& name : broken)
     md += "\n(" + name + " was not written in full — the disk may be full; see gnuplot.log.)\n";
-  write_text(dir / "eval.md", md);
+  io::write_file_atomic(dir / "eval.md", md);
   written.push_back((dir / "eval.md").string());
   written.insert(written.end(), plots.begin(), plots.end());
   if (ran && plots.size() < 3)
