@@ -94,7 +94,7 @@ run_target() {
     mv "$f" "findings_$name/"
   done
   local hangs
-  hangs=$(ls timeout-* 2>/dev/null | wc -l)
+  hangs=$(find . -maxdepth 1 -name "timeout-*" | wc -l)
   mv timeout-* "findings_$name/" 2>/dev/null || true
   echo "$name findings: $ours in our code, $hdf5 inside libhdf5, $hangs hangs; $contained inputs contained by the guard (refused, no crash); log: $OUT/fuzz_$name.log"
   [[ $ours -eq 0 && $hdf5 -eq 0 && $hangs -eq 0 ]] || failed=1
