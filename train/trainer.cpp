@@ -13,6 +13,7 @@
 #include "train/sample_step.h"
 #include "train/train_data.h"
 
+#include <Eigen/Core>
 #include <gsl/gsl_randist.h>
 #include <nlohmann/json.hpp>
 #include <omp.h>
@@ -277,6 +278,9 @@ void Run::save_step_checkpoint() {
 TrainSummary Run::execute() {
   const TrainConfig& tc = config_.train;
   if (tc.threads > 0) omp_set_num_threads(tc.threads);
+  // The ops own the threads; Eigen's own GEMM threads, which it starts when a step runs outside
+  // the per-sample parallel loop (batch 1), contended with them and halved the speed.
+  Eigen::setNbThreads(1);
   threads_ = std::max(1, omp_get_max_threads());
   std::optional<RunLock> lock;
   if (writer()) {
