@@ -48,25 +48,7 @@ class Reliability : public ::testing::Test {
   static void SetUpTestSuite() {
     root_ = fs::temp_directory_path() / ("layersnet_reliability_" + std::to_string(::getpid()));
     fs::remove_all(root_);
-    dataset::SyntheticOptions o;
-    o.garments = 2;
-    o.frames = 9;
-    o.rings = 4;
-    o.segments = 8;
-    o.body_rings = 4;
-    o.body_segments = 8;
-    const auto m = dataset::write_synthetic_dataset((root_ / "data").string(), 2, 0, 2, o);
-    const auto stats = dataset::compute_stats(m);
-    dataset::write_stats(m.stats_path(), stats);
-    Config c = load_config({std::string(LAYERSNET_SOURCE_DIR) + "/configs/tiny.toml"});
-    c.data.dataset = (root_ / "data").string();
-    ad::ParamStore<float> ps;
-    model::register_params(ps, c.model);
-    model::init_params(ps, c.model, 7);
-    Checkpoint cp;
-    cp.config_toml = to_toml(c);
-    cp.stats = eval::stats_to_checkpoint(stats);
-    write_checkpoint((root_ / "tiny.h5").string(), ps, cp);
+    eval::cli_test::write_tiny_data_and_checkpoint(root_, 2, 0, 2, /*wind=*/false);
   }
   static void TearDownTestSuite() {
     for (const auto& m : mounts_) std::system(("umount '" + m + "' 2>/dev/null").c_str());

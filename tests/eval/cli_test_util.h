@@ -1,5 +1,13 @@
 #pragma once
-// Helpers of the eval suite's end-to-end tests: run the `layersnet` binary, read a file.
+// Helpers of the end-to-end tests: run the `layersnet` binary, read a file, make the tiny data
+// set and checkpoint most of them start from.
+#include "dataset/stats.h"
+#include "dataset/synthetic.h"
+#include "eval/rollout.h"
+#include "model/params_layout.h"
+#include "train/checkpoint.h"
+#include "train/config.h"
+
 #include <sys/wait.h>
 
 #include <array>
@@ -28,6 +36,35 @@ inline std::string slurp(const std::filesystem::path& p) {
   std::stringstream s;
   s << in.rdbuf();
   return s.str();
+}
+
+// At root/data: a synthetic data set (n_train / n_val / n_test sequences of two tube garments,
+// 9 frames, on a coarse body) with its stats.h5. At root/tiny.h5: a freshly initialised
+// configs/tiny.toml model (seed 7) whose config names that data set and which carries its
+// statistics. Returns the statistics.
+inline dataset::NormalisationStats write_tiny_data_and_checkpoint(const std::filesystem::path& root, int n_train,
+                                                                  int n_val, int n_test, bool wind) {
+  dataset::SyntheticOptions o;
+  o.garments = 2;
+  o.frames = 9;
+  o.rings = 4;
+  o.segments = 8;
+  o.body_rings = 4;
+  o.body_segments = 8;
+  o.wind = wind;
+  const auto m = dataset::write_synthetic_dataset((root / "data").string(), n_train, n_val, n_test, o);
+  const auto stats = dataset::compute_stats(m);
+  dataset::write_stats(m.stats_path(), stats);
+  Config c = load_config({std::string(LAYERSNET_SOURCE_DIR) + "/configs/tiny.toml"});
+  c.data.dataset = (root / "data").string();
+  ad::ParamStore<float> ps;
+  model::register_params(ps, c.model);
+  model::init_params(ps, c.model, 7);
+  Checkpoint cp;
+  cp.config_toml = to_toml(c);
+  cp.stats = stats_to_checkpoint(stats);
+  write_checkpoint((root / "tiny.h5").string(), ps, cp);
+  return stats;
 }
 
 }  // namespace layersnet::eval::cli_test
