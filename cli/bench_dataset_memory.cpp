@@ -1,10 +1,16 @@
-// `layersnet bench dataset_memory DIR`: peak resident memory of one training epoch over a
-// data set much larger than the loader's caches (goal: a 2 GB data set must
+// `layersnet bench dataset_memory DIR`: peak resident memory of one training epoch read the way
+// the trainer reads it (TrainData: a frame window per sample, a bounded LRU of open sequences
+// and their structures) over a data set much larger than that bound (goal: a 2 GB data set must
 // iterate in under 1 GB). `--make-gb 2` first writes a synthetic data set of that size.
 #include "cli/command_registry.h"
-#include "dataset/loader.h"
+#include "cli/program_files.h"
 #include "dataset/stats.h"
 #include "dataset/synthetic.h"
+#include "train/config.h"
+#include "train/gsl_random.h"
+#include "train/train_data.h"
+
+#include <sys/resource.h>
 
 #include <chrono>
 #include <cstdio>
@@ -18,8 +24,8 @@ struct MemoryOptions {
   std::string root;
   double make_gb = 0;
   int stride = 4;
-  int64_t cache_mb = 256;
-  int chunk_frames = 32;
+  std::string config;  // patch size, radii, frame selection; the defaults without it
+  int cache_sequences = 0;  // 0: the config's data.cache_sequences
 };
 
 int64_t folder_bytes(const std::string& root) {
@@ -30,6 +36,12 @@ int64_t folder_bytes(const std::string& root) {
 }
 
 double mib(int64_t b) { return static_cast<double>(b) / (1 << 20); }
+
+int64_t peak_rss_bytes() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return static_cast<int64_t>(u.ru_maxrss) * 1024;  // Linux: kilobytes
+}
 
 int make(const MemoryOptions& o) {
   SyntheticOptions so;
@@ -65,27 +77,28 @@ int run_memory(const MemoryOptions& o) {
   if (!fs::exists(m.stats_path())) write_stats(m.stats_path(), compute_stats(m));
   const NormalisationStats stats = load_stats_or_explain(m);
   const int64_t rss_after_stats = peak_rss_bytes();
-  LoaderOptions lo;
-  lo.frame_stride = o.stride;
-  lo.cache_bytes = o.cache_mb << 20;
-  lo.chunk_frames = o.chunk_frames;
-  SampleLoader loader(m, "train", stats, lo);
-  int64_t samples = 0, vertices = 0;
-  while (auto s = loader.next()) {
-    ++samples;
-    vertices += s->num_vertices();
+  layersnet::Config config =
+      o.config.empty() ? layersnet::Config{} : layersnet::load_config({layersnet::cli::resolve_user_file(o.config)});
+  if (o.cache_sequences > 0) config.data.cache_sequences = o.cache_sequences;
+  layersnet::TrainData data(m, "train", stats, config);
+  // Every stride-th sample frame of each sequence, in a shuffled order as the trainer's epoch.
+  std::vector<layersnet::SampleRef> order;
+  for (std::size_t i = 0; i < data.samples().size(); ++i) {
+    const layersnet::SampleRef r = data.samples()[i];
+    if ((r.t - data.first_t(r.sequence)) % std::max(o.stride, 1) == 0) order.push_back(r);
   }
+  layersnet::GslRandom(0).shuffle(order);
+  for (const layersnet::SampleRef& r : order) (void)data.build(data.read_window(r.sequence, r.t, r.t), r.t);
   const double sec = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  const auto& c = loader.counters();
+  const auto& c = data.reads();
   std::printf("data set %s: %.1f MiB of sequence files, %zu training sequences\n", o.root.c_str(),
               mib(folder_bytes(o.root)), m.train.size());
-  std::printf("epoch: %ld samples (every %d-th frame), %.1f s; read %.1f MiB of positions in %ld chunks "
-              "(%ld cache hits), files opened %ld\n",
-              static_cast<long>(samples), o.stride, sec, mib(c.bytes_read), static_cast<long>(c.chunks_read),
-              static_cast<long>(c.chunk_hits), static_cast<long>(c.files_opened));
-  std::printf("cache budget %ld MiB, peak cached %.1f MiB; peak RSS after stats %.1f MiB, after the epoch %.1f MiB\n",
-              static_cast<long>(o.cache_mb), mib(c.peak_cached_bytes), mib(rss_after_stats), mib(peak_rss_bytes()));
-  (void)vertices;
+  std::printf("epoch: %zu samples (every %d-th frame), %.1f s; read %.1f MiB of positions in %ld windows, "
+              "files opened %ld\n",
+              order.size(), o.stride, sec, mib(c.bytes), static_cast<long>(c.windows),
+              static_cast<long>(c.files_opened));
+  std::printf("open sequences at most %d; peak RSS after stats %.1f MiB, after the epoch %.1f MiB\n",
+              config.data.cache_sequences, mib(rss_after_stats), mib(peak_rss_bytes()));
   return 0;
 }
 
@@ -96,8 +109,9 @@ LAYERSNET_BENCH(dataset_memory, "Peak memory of one lazy training epoch (use --m
                   auto opts = std::make_shared<MemoryOptions>();
                   sub.add_option("dataset", opts->root, "data-set folder")->required();
                   sub.add_option("--make-gb", opts->make_gb, "write a synthetic data set of about this many GiB and exit");
-                  sub.add_option("--stride", opts->stride, "use every k-th sample frame (all frames are still read)");
-                  sub.add_option("--cache-mb", opts->cache_mb, "loader cache budget in MiB");
-                  sub.add_option("--chunk-frames", opts->chunk_frames, "sample frames per lazily read chunk");
+                  sub.add_option("--stride", opts->stride, "use every k-th sample frame (at 4 every frame is read once)");
+                  sub.add_option("-c,--config", opts->config, "config file: patch size, radii, frames used (default: the defaults)");
+                  sub.add_option("--cache-sequences", opts->cache_sequences,
+                                 "sequences kept open with their structures (data.cache_sequences)");
                   return [opts] { return run_memory(*opts); };
                 });

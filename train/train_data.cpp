@@ -92,6 +92,7 @@ TrainData::OpenFile& TrainData::open(int sequence) {
       return files_.front();
     }
   auto file = std::make_shared<dataset::SequenceFile>(manifest_.sequence_path(ids_.at(static_cast<std::size_t>(sequence))));
+  ++reads_.files_opened;
   auto info = std::make_shared<const dataset::SequenceInfo>(file->info());
   std::shared_ptr<const ClothConstraints> constraints;
   if (constraint_settings_) {
@@ -111,6 +112,8 @@ Window TrainData::read_window(int sequence, int t_first, int t_last) {
   w.constraints = f.constraints;
   w.structure = structures_.get(w.sequence_id, *f.info);
   w.frames = f.file->read_frames(t_first - 2, t_last - t_first + 4);
+  ++reads_.windows;
+  reads_.bytes += w.frames.bytes();
   return w;
 }
 

@@ -77,6 +77,14 @@ class TrainData {
   dataset::TrainingSample build(const Window& window, int t) const;
   const dataset::NormalisationStats& stats() const { return stats_; }
 
+  // What read_window has read so far: the bound on memory and I/O (bench dataset_memory).
+  struct Reads {
+    int64_t windows = 0;
+    int64_t bytes = 0;  // positions, as float32 in memory
+    int64_t files_opened = 0;
+  };
+  const Reads& reads() const { return reads_; }
+
  private:
   struct OpenFile {
     int sequence;
@@ -99,6 +107,7 @@ class TrainData {
   std::vector<SampleRef> samples_;
   std::list<OpenFile> files_;  // LRU, front = most recent
   dataset::StructureCache structures_;
+  Reads reads_;
 };
 
 // Sample options matching the model config (patch size, radii, body query).
