@@ -57,6 +57,8 @@ DatasetManifest parse_manifest(std::string_view text, const std::string& name) {
   if (!m.contains("splits") || !m["splits"].is_object()) fail("/splits", "missing or not an object");
   DatasetManifest out;
   out.source = m["source"].get<std::string>();
+  for (const auto& [key, value] : m.items())
+    if (key != "format" && key != "version" && key != "source" && key != "splits") out.extra[key] = value;
   std::map<std::string, std::string> seen;  // id -> split
   for (const auto& [split, list] : m["splits"].items()) {
     const std::string where = "/splits/" + split;
@@ -96,7 +98,7 @@ DatasetManifest read_manifest(const std::string& root) {
 }
 
 void write_manifest(const DatasetManifest& m) {
-  nlohmann::json j;
+  nlohmann::json j = m.extra.is_object() ? m.extra : nlohmann::json::object();
   j["format"] = "dlayers-h5";
   j["version"] = 1;
   j["source"] = m.source;

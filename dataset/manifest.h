@@ -1,6 +1,8 @@
 #pragma once
 // A data-set folder (spec "Layout of a data set"): <root>/dataset.json lists the sequence
 // ids per split; <root>/<id>.h5 are the sequences; <root>/stats.h5 the statistics.
+#include <nlohmann/json.hpp>
+
 #include <string>
 #include <string_view>
 #include <vector>
@@ -11,6 +13,9 @@ struct DatasetManifest {
   std::string root;    // folder holding dataset.json
   std::string source;  // free text: who wrote the data and how
   std::vector<std::string> train, val, test;  // sequence ids; each id in at most one split
+  // Other top-level keys, kept as written (e.g. the tags and Table-1 subsets of `layersnet
+  // generate`); an object.
+  nlohmann::json extra = nlohmann::json::object();
 
   // "train" | "val" | "test"; throws DatasetError for any other name.
   const std::vector<std::string>& split(const std::string& name) const;
@@ -25,7 +30,7 @@ struct DatasetManifest {
 DatasetManifest parse_manifest(std::string_view json_text, const std::string& name);
 // Reads <root>/dataset.json and checks that every listed sequence file exists.
 DatasetManifest read_manifest(const std::string& root);
-// Writes <root>/dataset.json (creating root if needed). Checks ids first.
+// Writes <root>/dataset.json (creating root if needed) with the extra keys. Checks ids first.
 void write_manifest(const DatasetManifest& manifest);
 
 // A sequence id is a non-empty file-name stem without '/', not "." or "..".

@@ -1,0 +1,304 @@
+// The driver of `layersnet generate` (see generate.h).
+#include "dataset/generate.h"
+
+#include "dataset/file_io.h"
+#include "dataset/manifest.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+namespace layersnet::dataset {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace {
+
+json read_json(const fs::path& path) {
+  std::ifstream in(path);
+  if (!in) throw GenerateError(path.string() + ": cannot open (check the path)");
+  try {
+    return json::parse(in);
+  } catch (const json::exception& e) {
+    throw GenerateError(path.string() + ": invalid JSON: " + e.what());
+  }
+}
+
+// Unknown recipe keys are errors (a misspelt key would silently keep a default).
+void check_keys(const json& obj, const std::vector<std::string>& known, const std::string& where) {
+  if (!obj.is_object()) throw GenerateError(where + ": must be a JSON object");
+  for (const auto& [key, value] : obj.items()) {
+    if (std::find(known.begin(), known.end(), key) == known.end()) {
+      std::string list;
+      for (const auto& k : known) list += (list.empty() ? "" : ", ") + k;
+      throw GenerateError(where + ": unknown key '" + key + "' (known: " + list + ")");
+    }
+  }
+}
+
+// Single-quoted for /bin/sh.
+std::string quote(const std::string& s) {
+  std::string q = "'";
+  for (char c : s) q += (c == '\'') ? std::string("'\\''") : std::string(1, c);
+  return q + "'";
+}
+
+// splitmix64: well-spread per-sequence seeds from (data set seed, index, attempt).
+std::uint64_t mix(std::uint64_t x) {
+  x += 0x9E3779B97F4A7C15ull;
+  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ull;
+  x = (x ^ (x >> 27)) * 0x94D049BB133111EBull;
+  return x ^ (x >> 31);
+}
+
+std::string fmt_duration(double s) {
+  char buf[32];
+  const int m = static_cast<int>(s) / 60;
+  std::snprintf(buf, sizeof(buf), "%d:%02d", m, static_cast<int>(s) - 60 * m);
+  return buf;
+}
+
+}  // namespace
+
+long long sequence_seed(long long seed, int index, int attempt) {
+  const std::uint64_t h = mix(mix(static_cast<std::uint64_t>(seed)) ^ mix(static_cast<std::uint64_t>(index) + 1000003ull * static_cast<std::uint64_t>(attempt)));
+  return static_cast<long long>(h & 0x7FFFFFFFull);
+}
+
+// Contiguous blocks; see generate.h.
+std::vector<std::string> split_names(int count, double val_fraction, double test_fraction) {
+  int n_test = static_cast<int>(std::lround(count * test_fraction));
+  int n_val = static_cast<int>(std::lround(count * val_fraction));
+  if (count >= 3) n_test = std::max(n_test, 1), n_val = std::max(n_val, 1);
+  if (count < 3) n_test = n_val = 0;
+  std::vector<std::string> out(count, "train");
+  for (int i = 0; i < n_test; ++i) out[count - 1 - i] = "test";
+  for (int i = 0; i < n_val; ++i) out[count - 1 - n_test - i] = "val";
+  return out;
+}
+
+std::vector<std::string> failed_gates(const json& report, const Gates& g) {
+  std::vector<std::string> failed;
+  if (!report.value("finite", false)) failed.push_back("non-finite positions");
+  const json& q = report.at("quality");
+  auto check = [&](const char* key, double limit) {
+    const double v = q.at(key).get<double>();
+    if (!(v <= limit)) {
+      std::ostringstream s;
+      s << key << " " << v << " > " << limit;
+      failed.push_back(s.str());
+    }
+  };
+  check("inside_body_share", g.max_inside_body_share);
+  check("outer_inside_inner_share", g.max_outer_inside_inner_share);
+  check("max_edge_stretch", g.max_edge_stretch);
+  check("p99_edge_stretch", g.max_p99_edge_stretch);
+  return failed;
+}
+
+std::string generate_report_markdown(const json& rep) {
+  std::ostringstream md;
+  const json& s = rep.at("summary");
+  md << "# Generation report\n\n" << rep.at("source").get<std::string>() << "\n\n";
+  md << "accepted " << s.at("accepted") << ", dropped " << s.at("dropped") << ", regenerated "
+     << s.at("regenerated") << "; Blender s/frame mean " << s.at("mean_blender_s_per_frame")
+     << "; wall time of this run " << s.at("run_seconds") << " s\n\n";
+  md << "| id | split | tags | attempts | inside body | outer in inner | max stretch | p99 stretch | "
+        "s/frame | body V | cloth V | status |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+  for (const json& e : rep.at("sequences")) {
+    md << "| " << e.at("id").get<std::string>() << " | " << e.at("split").get<std::string>() << " | ";
+    if (e.contains("report")) {
+      const json& r = e.at("report");
+      const json& q = r.at("quality");
+      char buf[256];
+      std::snprintf(buf, sizeof(buf), "%s/%s | %d | %.4f | %.4f | %.2f | %.2f | %.3f | %d | %d | ",
+                    r.at("tags").at("inner").get<std::string>().c_str(), r.at("tags").at("wind").get<std::string>().c_str(),
+                    e.at("attempts").get<int>(), q.at("inside_body_share").get<double>(),
+                    q.at("outer_inside_inner_share").get<double>(), q.at("max_edge_stretch").get<double>(),
+                    q.at("p99_edge_stretch").get<double>(), r.at("timing").at("blender_s_per_frame").get<double>(),
+                    r.at("body_vertices").get<int>(), r.at("cloth_vertices").get<int>());
+      md << buf;
+    } else {
+      md << " | " << e.at("attempts") << " | | | | | | | | ";
+    }
+    md << e.at("status").get<std::string>() << " |\n";
+  }
+  std::ostringstream failed;
+  for (const json& e : rep.at("sequences"))
+    for (const json& r : e.value("reasons", json::array())) failed << "- " << e.at("id").get<std::string>() << ": " << r.get<std::string>() << "\n";
+  md << "\n## Failed attempts (regenerated with the next seed, or dropped after max_attempts)\n\n"
+     << (failed.str().empty() ? std::string("none\n") : failed.str());
+  return md.str();
+}
+
+GenerateSummary generate_dataset(const GenerateOptions& opt) {
+  const auto t_run = std::chrono::steady_clock::now();
+  const fs::path script = opt.script;
+  const fs::path recipe_path = opt.recipe;
+  json recipe = read_json(recipe_path);
+  check_keys(recipe, {"comment", "count", "seed", "val_fraction", "test_fraction", "max_attempts", "gates", "scene"},
+             recipe_path.string());
+  if (recipe.contains("gates"))
+    check_keys(recipe["gates"], {"max_inside_body_share", "max_outer_inside_inner_share", "max_edge_stretch",
+                                 "max_p99_edge_stretch"}, recipe_path.string() + ": /gates");
+  const int count = opt.count >= 0 ? opt.count : recipe.value("count", 8);
+  const long long seed = opt.seed >= 0 ? opt.seed : recipe.value("seed", 1LL);
+  const int max_attempts = opt.max_attempts > 0 ? opt.max_attempts : recipe.value("max_attempts", 3);
+  json scene = recipe.value("scene", json::object());
+  if (opt.frames > 0) scene["frames"] = opt.frames;
+  Gates gates;
+  if (recipe.contains("gates")) {
+    const json& g = recipe["gates"];
+    gates.max_inside_body_share = g.value("max_inside_body_share", gates.max_inside_body_share);
+    gates.max_outer_inside_inner_share = g.value("max_outer_inside_inner_share", gates.max_outer_inside_inner_share);
+    gates.max_edge_stretch = g.value("max_edge_stretch", gates.max_edge_stretch);
+    gates.max_p99_edge_stretch = g.value("max_p99_edge_stretch", gates.max_p99_edge_stretch);
+  }
+  const std::string& checker = opt.checker;
+
+  const fs::path out = opt.out;
+  fs::create_directories(out / "reports");
+  fs::create_directories(out / "logs");
+  const fs::path scene_json = out / "scene.json";
+  io::write_file_atomic(scene_json, scene.dump(1));
+  const auto splits = split_names(count, recipe.value("val_fraction", 0.125), recipe.value("test_fraction", 0.125));
+
+  json sequences = json::array();
+  int accepted = 0, dropped = 0, regenerated = 0, generated_now = 0;
+  double spent = 0.0, s_per_frame_sum = 0.0;
+  for (int i = 0; i < count; ++i) {
+    char idbuf[16];
+    std::snprintf(idbuf, sizeof(idbuf), "%05d", i);
+    const std::string id = idbuf;
+    const fs::path h5 = out / (id + ".h5");
+    const fs::path final_report = out / "reports" / (id + ".json");
+    json entry = {{"id", id}, {"split", splits[i]}};
+    if (fs::exists(h5) && fs::exists(final_report)) {
+      json kept = read_json(final_report);
+      // Keep it only if it was made for the same data set seed, split and scene settings.
+      if (kept.value("accepted", false) && kept.value("dataset_seed", -1LL) == seed &&
+          kept.value("split", std::string()) == splits[i] && kept.value("dataset_scene", json()) == scene) {
+        entry.update({{"attempts", kept.value("attempts", 1)}, {"status", "kept"}, {"report", kept}});
+        s_per_frame_sum += kept.at("timing").at("blender_s_per_frame").get<double>();
+        ++accepted;
+        sequences.push_back(entry);
+        std::printf("[%d/%d] %s kept (resume)\n", i + 1, count, id.c_str());
+        continue;
+      }
+    }
+    std::vector<std::string> reasons;
+    bool ok = false;
+    int attempt = 0;
+    for (; attempt < max_attempts && !ok; ++attempt) {
+      const long long sseed = sequence_seed(seed, i, attempt);
+      const fs::path rep_path = out / "reports" / (id + ".attempt" + std::to_string(attempt) + ".json");
+      const fs::path log = out / "logs" / (id + ".log");
+      fs::remove(h5);
+      fs::remove(rep_path);
+      const std::string cmd = quote(opt.blender) + " -b --factory-startup -t " + std::to_string(opt.threads) +
+                              " --python " + quote(script.string()) + " -- --out " + quote(h5.string()) + " --report " +
+                              quote(rep_path.string()) + " --seed " + std::to_string(sseed) + " --split " + splits[i] +
+                              " --config " + quote(scene_json.string()) + " > " + quote(log.string()) + " 2>&1";
+      const auto t0 = std::chrono::steady_clock::now();
+      const int rc = std::system(cmd.c_str());
+      const double dt = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      spent += dt;
+      ++generated_now;
+      if (rc != 0 || !fs::exists(rep_path)) {
+        reasons.push_back("attempt " + std::to_string(attempt) + ": Blender failed (exit " + std::to_string(rc) +
+                          "), see " + log.string());
+        if (rc != 0 && attempt == 0 && !fs::exists(rep_path) && i == 0 && std::system((quote(opt.blender) + " --version > /dev/null 2>&1").c_str()) != 0)
+          throw GenerateError("cannot run '" + opt.blender + "': install Blender (scripts/setup.sh) or pass --blender PATH");
+        continue;
+      }
+      json rep = read_json(rep_path);
+      std::vector<std::string> failed = failed_gates(rep, gates);
+      if (failed.empty() && !checker.empty()) {
+        const std::string ccmd = "/usr/bin/python3 " + quote(checker) + " " + quote(h5.string()) + " >> " + quote(log.string()) + " 2>&1";
+        if (std::system(ccmd.c_str()) != 0) failed.push_back("check_dlayers_h5.py rejected the file (see " + log.string() + ")");
+      }
+      rep["attempts"] = attempt + 1;
+      rep["dataset_seed"] = seed;
+      rep["dataset_scene"] = scene;
+      rep["accepted"] = failed.empty();
+      rep["failed_gates"] = failed;
+      io::write_file_atomic(rep_path, rep.dump(1));
+      if (failed.empty()) {
+        ok = true;
+        io::write_file_atomic(final_report, rep.dump(1));
+        entry.update({{"attempts", attempt + 1}, {"status", attempt ? "regenerated" : "generated"}, {"report", rep}});
+        s_per_frame_sum += rep.at("timing").at("blender_s_per_frame").get<double>();
+        regenerated += attempt > 0;
+      } else {
+        std::string why;
+        for (const auto& f : failed) why += (why.empty() ? "" : "; ") + f;
+        reasons.push_back("attempt " + std::to_string(attempt) + " (seed " + std::to_string(sseed) + "): " + why);
+        fs::remove(h5);
+      }
+    }
+    if (!ok) {
+      entry.update({{"attempts", attempt}, {"status", "dropped"}});
+      ++dropped;
+    } else {
+      ++accepted;
+    }
+    entry["reasons"] = reasons;
+    sequences.push_back(entry);
+    const double mean = spent / std::max(1, generated_now);
+    const double eta = mean * (count - i - 1);
+    std::printf("[%d/%d] %s %s %s (%d attempt%s, %.1f s); ETA %s\n", i + 1, count, id.c_str(), splits[i].c_str(),
+                entry["status"].get<std::string>().c_str(), attempt, attempt == 1 ? "" : "s", spent, fmt_duration(eta).c_str());
+    std::fflush(stdout);
+  }
+
+  // dataset.json: splits of the accepted ids, tags and Table-1 subsets (T, T+W, L, L+W).
+  DatasetManifest manifest;
+  manifest.root = out.string();
+  json tags = json::object();
+  json subsets = {{"T", json::array()}, {"T+W", json::array()}, {"L", json::array()}, {"L+W", json::array()}};
+  for (const json& e : sequences) {
+    if (!e.contains("report")) continue;
+    const std::string id = e.at("id");
+    const std::string split = e.at("split");
+    (split == "train" ? manifest.train : split == "val" ? manifest.val : manifest.test).push_back(id);
+    const json& t = e.at("report").at("tags");
+    tags[id] = t;
+    const std::string base = t.at("inner") == "tight" ? "T" : "L";
+    if (t.at("wind") == "calm") subsets[base].push_back(id);
+    if (t.at("wind") == "windy") subsets[base + "+W"].push_back(id);
+  }
+  std::ostringstream source;
+  source << "layersnet generate: Blender cloth (generate/make_sequence.py), recipe " << recipe_path.string()
+         << ", seed " << seed << ", count " << count << ", scene " << scene.dump();
+  manifest.source = source.str();
+  manifest.extra = {{"tags", tags}, {"subsets", subsets},
+                    {"subset_rule", "T/L: tight (pants) / loose (skirt, dress) inner layer; +W: max wind strength > 250; "
+                                    "without +W: max wind strength <= 50"}};
+  write_manifest(manifest);
+  const double run_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_run).count();
+  json report = {{"source", source.str()},
+                 {"gates", {{"max_inside_body_share", gates.max_inside_body_share},
+                            {"max_outer_inside_inner_share", gates.max_outer_inside_inner_share},
+                            {"max_edge_stretch", gates.max_edge_stretch},
+                            {"max_p99_edge_stretch", gates.max_p99_edge_stretch}}},
+                 {"summary", {{"accepted", accepted}, {"dropped", dropped}, {"regenerated", regenerated},
+                              {"blender_runs_this_run", generated_now}, {"blender_seconds_this_run", spent},
+                              {"run_seconds", run_s},
+                              {"mean_blender_s_per_frame", accepted ? s_per_frame_sum / accepted : 0.0}}},
+                 {"sequences", sequences}};
+  io::write_file_atomic(out / "generate_report.json", report.dump(1));
+  io::write_file_atomic(out / "generate_report.md", generate_report_markdown(report));
+  std::printf("generate: %d accepted, %d dropped, %d regenerated in %s; report %s\n", accepted, dropped, regenerated,
+              fmt_duration(run_s).c_str(), (out / "generate_report.md").string().c_str());
+  return {accepted, dropped, regenerated};
+}
+
+
+}  // namespace layersnet::dataset
