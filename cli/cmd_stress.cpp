@@ -87,18 +87,17 @@ std::string verdict(const eval::StressResult& r) {
 int run_stress(const StressCliOptions& o) {
   if (o.threads > 0) omp_set_num_threads(o.threads);
   Eigen::setNbThreads(1);  // the ops own the threads (as bench model); nested GEMM threads only contend
-  LoadedModel m = load_model(o.checkpoint);
-  for (const auto& s : o.settings) apply_rollout_override(m.config, s);
-  if (o.tether >= 0) m.config.eval.patch_tether = o.tether;
-  const std::string root = o.dataset.empty() ? m.config.data.dataset : o.dataset;
+  // The data set (for statistics a checkpoint lacks) comes from the checkpoint's config.
+  const std::string root =
+      o.dataset.empty() ? parse_config_text(read_checkpoint_config(o.checkpoint), o.checkpoint).data.dataset : o.dataset;
   const dataset::DatasetManifest manifest = dataset::read_manifest(root);
-  dataset::NormalisationStats stats;
-  if (!eval::stats_from_checkpoint(m.checkpoint.stats, stats)) {
-    if (!std::filesystem::exists(manifest.stats_path()))
-      throw std::runtime_error(o.checkpoint + ": no statistics in the checkpoint and no " + manifest.stats_path() +
-                               "; run `layersnet prepare " + root + "`");
-    stats = dataset::read_stats(manifest.stats_path());
-  }
+  std::unique_ptr<dataset::NormalisationStats> fallback;
+  if (std::filesystem::exists(manifest.stats_path()))
+    fallback = std::make_unique<dataset::NormalisationStats>(dataset::read_stats(manifest.stats_path()));
+  const std::unique_ptr<eval::ModelPredictor> model = eval::load_model_predictor(o.checkpoint, "model", fallback.get());
+  model->apply_eval_settings(o.settings);
+  if (o.tether >= 0) model->set_patch_tether(o.tether);
+  const Config& config = model->config();
   std::string id = o.sequence;
   if (id.empty()) {
     for (const auto* split : {&manifest.test, &manifest.val, &manifest.train})
@@ -116,17 +115,17 @@ int run_stress(const StressCliOptions& o) {
               static_cast<long long>(source.info.total_garment_vertices()), o.frames, first, source.info.num_frames - 1,
               omp_get_max_threads());
 
-  const auto structure = dataset::build_structure(source.info, static_cast<float>(m.config.model.patch_size));
+  const auto structure = dataset::build_structure(source.info, static_cast<float>(config.model.patch_size));
   const double data_tether = eval::data_tether_ratio(source, *structure, first);
-  if (m.config.eval.patch_tether > 0)
+  if (config.eval.patch_tether > 0)
     std::printf("patch tether on: every vertex within %.2f rest patch radii of its patch mates' centre (eval/tether.h); "
                 "the data's own max over frames %d..%d: %.3f\n",
-                m.config.eval.patch_tether, first, source.info.num_frames - 1, data_tether);
+                config.eval.patch_tether, first, source.info.num_frames - 1, data_tether);
   else
     std::printf("patch tether off (eval.patch_tether = 0); the data's own max offset / rest patch radius: %.3f\n", data_tether);
-  if (m.config.eval.constraints)
+  if (config.eval.constraints)
     std::printf("cloth constraints on: edge strain <= %g, collision shell %g units, %d passes per frame (train/cloth_constraints.h)\n",
-                m.config.eval.strain_limit, m.config.eval.collision_shell, m.config.eval.constraint_iterations);
+                config.eval.strain_limit, config.eval.collision_shell, config.eval.constraint_iterations);
   else
     std::printf("cloth constraints off (eval.constraints = false)\n");
   // The strain limit comes from the whole data set's ground truth, not the one source: any
@@ -136,11 +135,10 @@ int run_stress(const StressCliOptions& o) {
   std::printf("strain limit: per-frame p99 of |edge length / rest length - 1| <= %.3f (%.1f x the data's own worst "
               "p99 %.3f over its %zu sequences after the ramp; the data's own max %.3f; eval/stress.h)\n",
               strain_limit, eval::kStrainAllowance, data_strain.p99, manifest.all_ids().size(), data_strain.max);
-  eval::ModelPredictor predictor("model", m.config, m.params, stats);
   std::vector<eval::StressResult> results;
   const auto run_one = [&](const eval::StressScene& s, const std::string& label) {
     const auto start = std::chrono::steady_clock::now();
-    results.push_back(eval::stress_rollout(predictor, source, s, label, strain_limit));
+    results.push_back(eval::stress_rollout(*model, source, s, label, strain_limit));
     std::printf("  %s: %d frames in %.0f s (%s)\n", label.c_str(), results.back().frames,
                 std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(),
                 verdict(results.back()).c_str());
@@ -195,13 +193,13 @@ int run_stress(const StressCliOptions& o) {
 
   json j = {{"checkpoint", o.checkpoint}, {"dataset", root},        {"sequence", id},
             {"runs", json::array()},     {"data_bound_ratio", data_ratio},
-            {"patch_tether", m.config.eval.patch_tether}, {"data_tether_ratio", data_tether},
-            {"constraints", m.config.eval.constraints},
+            {"patch_tether", config.eval.patch_tether}, {"data_tether_ratio", data_tether},
+            {"constraints", config.eval.constraints},
             {"strain_limit", strain_limit}, {"strain_allowance", eval::kStrainAllowance},
             {"data_strain_p99", data_strain.p99}, {"data_strain_max", data_strain.max}};
   for (const auto& r : results) j["runs"].push_back(result_json(r));
   if (o.precision_frames > 0) {
-    const eval::PrecisionResult p = eval::compare_precision(m.config, m.params, stats, source, o.precision_frames, first);
+    const eval::PrecisionResult p = eval::compare_precision(config, model->params(), model->stats(), source, o.precision_frames, first);
     std::printf("\nfloat32 vs float64 over %d frames: max divergence %.3g mm (per-vertex max), worst frame mean %.3g mm, "
                 "frame 1 mean %.3g mm, last frame mean %.3g mm; bound (model error on %s) %.3g mm; %s; ms/frame %.1f vs %.1f\n",
                 p.frames, p.worst_max() * p.mm_per_unit, p.worst_mean() * p.mm_per_unit,

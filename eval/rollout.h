@@ -94,6 +94,8 @@ class NetworkPredictor : public Predictor {
   Points step(const dataset::Sequence& seq, int t, const Points& x_prev2, const Points& x_prev,
               const Points& x_now) override;
   const Config& config() const { return config_; }
+  const ad::ParamStore<T>& params() const { return params_; }
+  const dataset::NormalisationStats& stats() const { return stats_; }
   // Patch tether factor of the following sequences (eval.patch_tether; 0 = off).
   void set_patch_tether(double factor) { config_.eval.patch_tether = factor; structure_.reset(); }
   // Cloth constraints on or off for the following sequences (eval.constraints).
