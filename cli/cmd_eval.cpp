@@ -12,6 +12,7 @@
 #include "eval/evaluate.h"
 #include "eval/report.h"
 #include "train/checkpoint.h"
+#include "train/run_dir.h"
 
 #include <Eigen/Core>
 
@@ -45,25 +46,6 @@ struct EvalCliOptions {
   std::vector<std::string> constraints;  // "on" / "off" (train/cloth_constraints.h); empty: each checkpoint's own
   std::vector<std::string> settings;     // "eval.KEY=VALUE" for every model
 };
-
-// The checkpoint of a run directory (train/trainer.h): best.h5, else the newest
-// checkpoints/step_*.h5.
-std::string run_checkpoint(const std::string& run) {
-  const std::filesystem::path best = std::filesystem::path(run) / "best.h5";
-  if (std::filesystem::exists(best)) return best.string();
-  std::string newest;
-  const std::filesystem::path dir = std::filesystem::path(run) / "checkpoints";
-  if (std::filesystem::is_directory(dir))
-    for (const auto& e : std::filesystem::directory_iterator(dir)) {
-      const std::string name = e.path().filename().string();
-      if (name.rfind("step_", 0) == 0 && e.path().extension() == ".h5" && e.path().string() > newest)
-        newest = e.path().string();
-    }
-  if (newest.empty())
-    throw std::runtime_error(run + ": no best.h5 and no checkpoints/step_*.h5 — is this a run directory of "
-                             "`layersnet train`? Give --checkpoint FILE instead");
-  return newest;
-}
 
 // "<folder>/<stem> (<attention>[+RET])": distinguishes ablation runs in one table.
 std::string default_name(const std::string& path, const Config& c) {

@@ -35,6 +35,17 @@ std::vector<std::string> list_checkpoints(const std::string& run_dir) {
   return out;
 }
 
+std::string best_checkpoint_path(const std::string& run_dir) { return (fs::path(run_dir) / "best.h5").string(); }
+
+std::string run_checkpoint(const std::string& run_dir) {
+  if (fs::exists(best_checkpoint_path(run_dir))) return best_checkpoint_path(run_dir);
+  const auto all = list_checkpoints(run_dir);
+  if (all.empty())
+    throw std::runtime_error(run_dir + ": no best.h5 and no checkpoints/step_*.h5 — is this a run directory of "
+                             "`layersnet train`? Give --checkpoint FILE instead");
+  return all.back();
+}
+
 void prune_checkpoints(const std::string& run_dir, int keep) {
   const auto all = list_checkpoints(run_dir);
   for (std::size_t i = 0; i + static_cast<std::size_t>(std::max(keep, 1)) < all.size(); ++i) fs::remove(all[i]);
@@ -47,7 +58,7 @@ void prune_checkpoints(const std::string& run_dir, int keep) {
 bool holds_run(const std::string& run_dir) {
   const fs::path d(run_dir);
   return fs::exists(d / "config.toml") || fs::exists(d / "metrics.jsonl") || !list_checkpoints(run_dir).empty() ||
-         fs::exists(d / "best.h5");
+         fs::exists(best_checkpoint_path(run_dir));
 }
 
 RunLock::RunLock(const std::string& run_dir) {

@@ -14,6 +14,11 @@ namespace layersnet {
 std::string checkpoint_path(const std::string& run_dir, int64_t batches);
 // Existing checkpoints, oldest first (ignores *.tmp left by a kill).
 std::vector<std::string> list_checkpoints(const std::string& run_dir);
+// <run>/best.h5: the checkpoint of the best validation error so far.
+std::string best_checkpoint_path(const std::string& run_dir);
+// The checkpoint that stands for a run: best.h5, else the newest checkpoint. Throws
+// std::runtime_error when the folder has neither.
+std::string run_checkpoint(const std::string& run_dir);
 // Deletes all but the newest `keep`, and stale *.tmp files.
 void prune_checkpoints(const std::string& run_dir, int keep);
 // True when run_dir has a config.toml, metrics or checkpoints (a run was started there).
