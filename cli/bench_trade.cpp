@@ -29,8 +29,8 @@ int list_variants() {
 
 LAYERSNET_BENCH(trade, "Train and evaluate model variants (patch, width, layers, K, candidates, bf16): error vs speed, Pareto front, presets",
                 [](CLI::App& sub) {
-                  auto cli = std::make_shared<TradeCli>();
-                  layersnet::eval::TradeOptions* o = &cli->options;
+                  auto args = std::make_shared<TradeCli>();
+                  layersnet::eval::TradeOptions* o = &args->options;
                   sub.add_option("--config,-c", o->config, "base config (default configs/quick.toml)");
                   sub.add_option("--out", o->out, "output folder (default runs/trade); rerunning reuses finished variants");
                   sub.add_option("--variants", o->variants, "variants to run, comma separated (default: all; --list shows them)")
@@ -45,10 +45,10 @@ LAYERSNET_BENCH(trade, "Train and evaluate model variants (patch, width, layers,
                   sub.add_option("--speed-passes", o->speed_passes,
                                  "after the sweep, measure the speed of all variants back to back this many times and keep "
                                  "each one's fastest (0 = each variant's own eval figure)");
-                  sub.add_flag("--list", cli->list, "list the variants and exit");
-                  return [cli] {
-                    if (cli->list) return list_variants();
-                    layersnet::eval::TradeOptions* o = &cli->options;
+                  sub.add_flag("--list", args->list, "list the variants and exit");
+                  return [args] {
+                    if (args->list) return list_variants();
+                    layersnet::eval::TradeOptions* o = &args->options;
                     o->config = layersnet::cli::resolve_user_file(o->config);  // the default too
                     // /proc/<pid>/exe: still this program when its file is rebuilt during a sweep.
                     o->program = "/proc/" + std::to_string(::getpid()) + "/exe";

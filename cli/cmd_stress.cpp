@@ -29,8 +29,8 @@ int run_stress(const StressCli& c) {
 
 LAYERSNET_COMMAND(stress, "Long rollouts at extreme wind and body speed, and float32 vs float64, with bounds",
                   [](CLI::App& sub) {
-                    auto cli = std::make_shared<StressCli>();
-                    layersnet::eval::StressOptions* o = &cli->options;
+                    auto args = std::make_shared<StressCli>();
+                    layersnet::eval::StressOptions* o = &args->options;
                     sub.add_option("--checkpoint", o->checkpoint, "checkpoint to test")->required();
                     sub.add_option("--dataset", o->dataset, "data set folder (default: the checkpoint's data.dataset)");
                     sub.add_option("--sequence", o->sequence, "sequence id (default: the first test sequence)");
@@ -49,12 +49,12 @@ LAYERSNET_COMMAND(stress, "Long rollouts at extreme wind and body speed, and flo
                     sub.add_flag("--speed-factor", o->speed_factor,
                                  "--speed is the time factor s (every body velocity x s) instead");
                     sub.add_option("--precision-frames", o->precision_frames, "frames of the float32/float64 comparison (0 = skip)");
-                    sub.add_option("--threads", cli->threads, "OpenMP threads (0 = all)");
+                    sub.add_option("--threads", args->threads, "OpenMP threads (0 = all)");
                     sub.add_option("--tether", o->tether,
                                    "patch tether factor for these rollouts (0 = off; default: the checkpoint's eval.patch_tether)")
                         ->check(layersnet::cli::kFiniteNonNegative);
                     sub.add_option("--set", o->settings,
                                    "rollout setting, e.g. --set eval.constraints=false (eval.* keys; default: the checkpoint's)");
                     sub.add_option("--json", o->json_path, "write the results as JSON to this file");
-                    return [cli] { return run_stress(*cli); };
+                    return [args] { return run_stress(*args); };
                   });

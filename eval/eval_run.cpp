@@ -1,0 +1,147 @@
+// The whole `layersnet eval` (see eval_run.h).
+#include "eval/eval_run.h"
+
+#include "autodiff/bf16_gemm.h"
+#include "dataset/manifest.h"
+#include "dataset/stats.h"
+#include "eval/evaluate.h"
+#include "eval/report.h"
+#include "train/checkpoint.h"
+#include "train/run_dir.h"
+
+#include <omp.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+
+namespace layersnet::eval {
+
+namespace {
+
+// "<folder>/<stem> (<attention>[+RET])": distinguishes ablation runs in one table.
+std::string default_name(const std::string& path, const Config& c) {
+  const std::filesystem::path p(path);
+  std::string folder = p.parent_path().filename().string();
+  std::string name = (folder.empty() ? "" : folder + "/") + p.stem().string();
+  return name + " (" + c.model.attention + (c.model.rotation_equivalent ? "+RET" : ", vanilla") + ")";
+}
+
+}  // namespace
+
+void run_evaluation(EvalRunOptions o) {
+  std::vector<std::string> from_runs;  // runs first, in order, then --checkpoint files
+  for (const auto& run : o.runs) from_runs.push_back(run_checkpoint(run));
+  o.checkpoints.insert(o.checkpoints.begin(), from_runs.begin(), from_runs.end());
+  // Settings: the first checkpoint's config supplies the defaults.
+  Config base;
+  if (!o.checkpoints.empty()) base = parse_config_text(read_checkpoint_config(o.checkpoints[0]), o.checkpoints[0]);
+  const std::string root = o.dataset.empty() ? base.data.dataset : o.dataset;
+  const dataset::DatasetManifest manifest = dataset::read_manifest(root);
+  std::unique_ptr<dataset::NormalisationStats> fallback;
+  if (std::filesystem::exists(manifest.stats_path()))
+    fallback = std::make_unique<dataset::NormalisationStats>(dataset::read_stats(manifest.stats_path()));
+
+  EvalOptions eo;
+  eo.split = o.split.empty() ? base.eval.split : o.split;
+  eo.frames = o.frames > 0 ? o.frames : base.eval.frames;
+  eo.start_frame = o.start_frame >= 2 ? o.start_frame : std::max(2, base.data.first_frame);
+  eo.start_after_ramp = o.start.empty() ? o.start_frame < 0 : o.start == "ramp";
+  eo.max_sequences = o.max_sequences;
+
+  const bool any_bf16 = std::count(o.precisions.begin(), o.precisions.end(), ad::MatmulPrecision::kBFloat16) > 0;
+  std::vector<std::unique_ptr<Predictor>> owned;
+  std::vector<std::string> kinds, paths;
+  for (size_t i = 0; i < o.checkpoints.size(); ++i) {
+    const Config c = parse_config_text(read_checkpoint_config(o.checkpoints[i]), o.checkpoints[i]);
+    const std::string name = i < o.names.size() ? o.names[i] : default_name(o.checkpoints[i], c);
+    const std::vector<double> tethers = o.tethers.empty() ? std::vector<double>{c.eval.patch_tether} : o.tethers;
+    std::vector<bool> constrained;
+    for (const auto& setting : o.constraints) constrained.push_back(setting == "on");
+    if (constrained.empty()) constrained.push_back(c.eval.constraints);
+    for (const bool constrain : constrained)
+      for (const double tether : tethers)
+        for (const ad::MatmulPrecision precision : o.precisions) {
+          std::string prefix;  // in front: tables cut long names
+          if (o.constraints.size() > 1 && constrain) prefix += "[constrained] ";
+          if (o.tethers.size() > 1) {
+            char tag[48];
+            std::snprintf(tag, sizeof tag, "[t%g] ", tether);
+            prefix += tag;
+          }
+          auto model = load_model_predictor(o.checkpoints[i], prefix + name, fallback.get());
+          model->set_matmul_precision(precision);  // bf16: the name gets "[bf16] " in front
+          model->apply_eval_settings(o.settings);
+          model->set_patch_tether(tether);
+          model->set_constraints(constrain);
+          owned.push_back(std::move(model));
+          kinds.push_back("model");
+          paths.push_back(o.checkpoints[i]);
+        }
+  }
+  const size_t model_count = owned.size();
+  for (size_t r = 0; r < o.replays.size(); ++r) {
+    const size_t n = o.checkpoints.size() + r;
+    const std::string name = n < o.names.size() ? o.names[n] : "replay " + o.replays[r];
+    owned.push_back(std::make_unique<Replay>(name, o.replays[r]));
+    kinds.push_back("replay");
+    paths.push_back(o.replays[r]);
+  }
+  owned.push_back(std::make_unique<ConstantVelocity>());
+  owned.push_back(std::make_unique<FollowBody>());
+  owned.push_back(std::make_unique<GroundTruth>());
+  for (const char* k : {"baseline", "baseline", "ground truth"}) {
+    kinds.push_back(k);
+    paths.push_back("");
+  }
+  std::vector<Predictor*> predictors;
+  for (auto& p : owned) predictors.push_back(p.get());
+
+  std::printf("eval: %s split '%s', %zu model(s), %zu replay(s) + 2 baselines, up to %d frames from %s, %d thread(s), "
+              "products %s%s%s\n",
+              root.c_str(), eo.split.c_str(), model_count, o.replays.size(), eo.frames, start_description(eo).c_str(),
+              omp_get_max_threads(), o.precision_label.c_str(), any_bf16 ? ", bf16 kernel " : "", any_bf16 ? ad::bf16_kernel_name() : "");
+  std::vector<MethodResult> results = evaluate(manifest, predictors, eo, true);
+  for (size_t p = 0; p < results.size(); ++p) {
+    results[p].kind = kinds[p];
+    results[p].checkpoint = paths[p];
+  }
+
+  ReportContext ctx;
+  ctx.dataset = root;
+  ctx.options = eo;
+  // Speed on the first sequence of the split, 1 and 2 threads.
+  const std::string speed_id = results[0].sequences[0].id;
+  const dataset::Sequence speed_seq = dataset::read_sequence(manifest.sequence_path(speed_id));
+  const int speed_t0 = results[0].sequences[0].first_frame - 1;  // the evaluation's own start
+  ctx.speed_sequence = speed_id;
+  ctx.speed_frames = std::min(o.speed_frames, speed_seq.info.num_frames - 1 - speed_t0);
+  for (size_t p = 0; p + 1 < predictors.size(); ++p) {
+    if (kinds[p] == "replay") continue;  // a recording has no speed of its own
+    results[p].ms_per_frame_1thread = median_ms_per_frame(*predictors[p], speed_seq, speed_t0, ctx.speed_frames, 1);
+    results[p].ms_per_frame_2threads = median_ms_per_frame(*predictors[p], speed_seq, speed_t0, ctx.speed_frames, 2);
+  }
+  double blender_sum = 0;
+  int blender_n = 0;
+  for (const auto& s : results[0].sequences) {
+    const double b = blender_seconds_per_frame(manifest.sequence_path(s.id));
+    if (b > 0) {
+      blender_sum += b;
+      ++blender_n;
+    }
+  }
+  ctx.blender_s_per_frame = blender_n ? blender_sum / blender_n : -1;
+  std::ifstream loadavg("/proc/loadavg");  // context for the speed figures on a shared machine
+  loadavg >> ctx.load_average;
+
+  const auto written = write_report(o.out, results, ctx);
+  std::printf("\n%s", summary_table(results, ctx).c_str());
+  std::printf("wrote");
+  for (const auto& w : written) std::printf(" %s", w.c_str());
+  std::printf("\n");
+}
+
+
+}  // namespace layersnet::eval
