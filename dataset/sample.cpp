@@ -4,6 +4,7 @@
 #include "dataset/wind.h"
 
 #include <algorithm>
+#include <map>
 
 namespace layersnet::dataset {
 namespace {
@@ -51,6 +52,27 @@ Eigen::Vector3f root_acceleration(const SequenceInfo& info, int f) {
   return (info.translation.row(f) - 2 * info.translation.row(f - 1) + info.translation.row(f - 2)).transpose();
 }
 
+void build_vertex_neighbours(const SequenceInfo& info, SequenceStructure& s) {
+  std::vector<std::map<int32_t, float>> adjacent(static_cast<size_t>(s.num_vertices()));
+  for (int g = 0; g < info.num_garments(); ++g) {
+    const GarmentMesh& mesh = info.garments[g];
+    const int32_t offset = s.vertex_offsets[g];
+    const bool has_rest = mesh.rest.rows() == mesh.num_vertices;
+    for (int f = 0; f < mesh.num_faces(); ++f)
+      for (int c = 0; c < 3; ++c) {
+        const int a = mesh.faces(f, c), b = mesh.faces(f, (c + 1) % 3);
+        const float rest = has_rest ? (mesh.rest.row(a) - mesh.rest.row(b)).norm()
+                                    : (mesh.uv.row(3 * f + c) - mesh.uv.row(3 * f + (c + 1) % 3)).norm() * info.scale;
+        adjacent[offset + a].emplace(offset + b, rest);
+        adjacent[offset + b].emplace(offset + a, rest);
+      }
+  }
+  for (const auto& row : adjacent) {
+    for (const auto& [j, rest] : row) s.vertex_neighbours.items.push_back(j), s.neighbour_rest.push_back(rest);
+    s.vertex_neighbours.offsets.push_back(static_cast<int32_t>(s.vertex_neighbours.items.size()));
+  }
+}
+
 }  // namespace
 
 Eigen::Matrix<float, 1, 5> normalised_attributes(const GarmentAttributes& g, float body_friction) {
@@ -81,6 +103,7 @@ std::shared_ptr<const SequenceStructure> build_structure(const SequenceInfo& inf
   }
   s->attributes.resize(static_cast<Eigen::Index>(rows.size()), 5);
   for (size_t i = 0; i < rows.size(); ++i) s->attributes.row(static_cast<Eigen::Index>(i)) = rows[i];
+  build_vertex_neighbours(info, *s);
   return s;
 }
 

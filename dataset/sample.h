@@ -67,6 +67,10 @@ struct SequenceStructure {
   RowMatrix attributes;                   // (A, 5) normalised, deduplicated
   std::vector<int32_t> garment_attribute; // (G,)
   std::vector<std::string> garment_types; // (G,)
+  // Mesh neighbours of each vertex (every garment edge, both ways) and that edge's rest length,
+  // scene units: from the /rest template, else the UV length x scale (UVs are metres of rest cloth).
+  Csr vertex_neighbours;                  // N rows, ascending
+  std::vector<float> neighbour_rest;      // aligned with vertex_neighbours.items
   int num_vertices() const { return all.num_vertices; }
   int num_patches() const { return all.num_patches; }
 };

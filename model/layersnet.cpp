@@ -366,6 +366,34 @@ Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
       }
     }
   const Var<T> rel_v = constant(tape, rel, Ec, 12);
+  // The vertex's local features per candidate row, each 3-vector in the vertex's frame (RET).
+  const bool local = cfg.vertex_local_features;
+  LAYERSNET_CHECK(!local || in.vertex_local.size() == static_cast<std::size_t>(N * kVertexLocalDim),
+                  "model.vertex_local_features is on but the input has no vertex_local features (N = " << N << ")");
+  Var<T> loc_v;
+  if (local) {
+    std::vector<T> loc(Ec * kVertexLocalDim);
+    for (int64_t k = 0; k < Ec; ++k) {
+      const T* R = &Re[9 * k];
+      const T* f = &in.vertex_local[kVertexLocalDim * static_cast<int64_t>(cand_vertex[k])];
+      T* o = &loc[kVertexLocalDim * k];
+      for (int blk = 0; blk < kVertexLocalDim / 3; ++blk)
+        for (int c = 0; c < 3; ++c)
+          o[3 * blk + c] = ret ? R[3 * c] * f[3 * blk] + R[3 * c + 1] * f[3 * blk + 1] + R[3 * c + 2] * f[3 * blk + 2]
+                               : f[3 * blk + c];
+    }
+    loc_v = constant(tape, loc, Ec, kVertexLocalDim);
+  }
+  // The vertex branch's first-layer weight and input: the local columns sit after rel's 12.
+  auto with_local_weight = [&](const Var<T>& W_first) {
+    if (!local) return W_first;
+    const int64_t cols = W_first.cols;
+    return ad::concat_cols(tape, {ad::slice_cols(tape, W_first, 0, 12), p("decoder.local.weight"),
+                                  ad::slice_cols(tape, W_first, 12, cols)});
+  };
+  auto with_local_input = [&](const Var<T>& rel_part, const Var<T>& e_part, const Var<T>& h_part) {
+    return local ? ad::concat_cols(tape, {rel_part, loc_v, e_part, h_part}) : ad::concat_cols(tape, {rel_part, e_part, h_part});
+  };
 
   Var<T> a_p, a_e;  // decoder outputs (local frame): per patch (P, 3), per candidate (Ec, 3)
   if (ret && opt.factor_decoder) {
@@ -379,14 +407,14 @@ Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
                                                  rotate_blocks(Rp_host, ad::linear(tape, phi_p, Wt))});
     const Var<T> zh_v = rotate_blocks(Rv_host, ad::linear(tape, phi_v, Wt));  // (I⊗R_v) Wᵀ h_v  (N, 3k)
     const Var<T> ze_v = rotate_blocks(Re, ad::gather_rows(tape, z_p, in.cand_patches));
-    const Var<T> feat_v = ad::concat_cols(tape, {rel_v, ze_v, ad::gather_rows(tape, zh_v, cand_vertex)});
-    auto rest = [&](const Var<T>& f) {
-      const Var<T> h = ad::linear_relu(tape, f, M, b1);
+    const Var<T> feat_v = with_local_input(rel_v, ze_v, ad::gather_rows(tape, zh_v, cand_vertex));
+    auto rest = [&](const Var<T>& f, const Var<T>& M_first) {
+      const Var<T> h = ad::linear_relu(tape, f, M_first, b1);
       const Var<T> h2 = ad::linear_relu(tape, h, p("decoder.proj.1.weight"), p("decoder.proj.1.bias"));
       return ad::linear(tape, h2, p("decoder.proj.2.weight"), p("decoder.proj.2.bias"));
     };
-    a_p = rest(feat_p);
-    a_e = rest(feat_v);
+    a_p = rest(feat_p, M);
+    a_e = rest(feat_v, with_local_weight(M));
   } else {
     // Patch branch: [0 (12), φ(R_p) e_p, φ(R_p) h_p]; vertex branch: [rel, φ(R_v) e_p, φ(R_v) h_v].
     // k = 1: the fused W R Wᵀ op; k > 1: W (I⊗R) Wᵀ composed.
@@ -406,7 +434,14 @@ Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
       He_v = ad::gather_rows(tape, emb, in.cand_patches);
       Hh_v = ad::gather_rows(tape, phi_v, cand_vertex);
     }
-    a_e = mlp(tape, p, "decoder.proj", 3, false, ad::concat_cols(tape, {rel_v, He_v, Hh_v}));
+    if (local) {
+      const Var<T> W1 = with_local_weight(p("decoder.proj.0.weight"));
+      const Var<T> h = ad::linear_relu(tape, with_local_input(rel_v, He_v, Hh_v), W1, p("decoder.proj.0.bias"));
+      const Var<T> h2 = ad::linear_relu(tape, h, p("decoder.proj.1.weight"), p("decoder.proj.1.bias"));
+      a_e = ad::linear(tape, h2, p("decoder.proj.2.weight"), p("decoder.proj.2.bias"));
+    } else {
+      a_e = mlp(tape, p, "decoder.proj", 3, false, ad::concat_cols(tape, {rel_v, He_v, Hh_v}));
+    }
   }
   std::vector<T> base_p(P * 6);
   for (int64_t i = 0; i < P; ++i) std::copy_n(&in.patch_state[12 * i], 6, &base_p[6 * i]);

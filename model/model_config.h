@@ -25,6 +25,10 @@ struct ModelConfig {
   std::string attention = "ria";    // "ria" (paper eq. 5–7) or "tie" (TIE's LayerNorm logits)
   bool rotation_equivalent = true;  // RET (eq. 8–11); false = the "vanilla" ablation
   std::string orthogonality = "penalty";  // W_R: "penalty" (official) or "exact" (QR parametrisation)
+  // Not in the paper: the decoder's vertex branch also sees the vertex's local features
+  // (ModelInput::vertex_local: nearest body vertex motion, spring force, Laplacians), through
+  // its own first-layer weight decoder.local.weight (decoder_width, 21).
+  bool vertex_local_features = false;
 };
 
 struct LossConfig {

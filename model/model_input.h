@@ -23,6 +23,8 @@
 
 namespace layersnet::model {
 
+inline constexpr int kVertexLocalDim = 21;  // columns of ModelInput::vertex_local
+
 template <class T>
 struct ModelInput {
   int64_t N = 0, P = 0, A = 0, U = 0;
@@ -77,6 +79,16 @@ struct ModelInput {
   // Candidate patches of each vertex that passed the validity test (<= 4, as the official decoder).
   // CSR over N, items in [0, P). An empty row gives a zero relative acceleration.
   std::vector<int32_t> cand_offsets, cand_patches;
+  // Local features of each vertex for the decoder (ModelConfig::vertex_local_features; empty
+  // when off), world axes, seven 3-vectors:                                    (N, 21)
+  //   x_t − b_t, b'_{t+1} − v_t, b'_{t+1} − b'_t      the nearest body vertex b (zero if none
+  //                                                   within R_b), b' its velocity; / R_b, / σ_v, / σ_v
+  //   Σ_j (|e_j| − l_j) / |e_j| e_j, mean_j e_j       e_j = x_j − x_v over the mesh neighbours j,
+  //                                                   l_j rest length: spring force, Laplacian; / R_b
+  //   mean_j (v_j − v_v), v_t − v_{t−1}               velocity Laplacian, last acceleration; / σ_v
+  // σ_v the mean velocity std (std12 columns 3..5). The decoder rotates each 3-vector into the
+  // vertex's body frame, so the features keep the model rotation-equivariant.
+  std::vector<T> vertex_local;
 
   // ---- statistics -----------------------------------------------------------------------------------------
   // Per-column mean and std of the 12-d state ([pos, vel] stats repeated for both frames).
@@ -102,6 +114,7 @@ ModelInput<U> cast_input(const ModelInput<T>& in) {
   o.gravity = cv(in.gravity), o.gravity_rot = cv(in.gravity_rot);
   o.patch_body = in.patch_body, o.vertex_body = in.vertex_body;
   o.cand_offsets = in.cand_offsets, o.cand_patches = in.cand_patches;
+  o.vertex_local = cv(in.vertex_local);
   o.mean12 = cv(in.mean12), o.std12 = cv(in.std12);
   return o;
 }

@@ -1,6 +1,7 @@
 #include "model/params_layout.h"
 
 #include "autodiff/check.h"
+#include "model/model_input.h"
 
 #include <Eigen/QR>
 
@@ -97,6 +98,8 @@ void register_params(ad::ParamStore<T>& ps, const ModelConfig& c) {
   }
   if (c.rotation_equivalent) ps.add("decoder.rot_mapping.weight", d, 3 * c.decoder_ret_channels);
   add_mlp(ps, "decoder.proj", {m.dec_in, m.dec_width, m.dec_width, 3});
+  // Registered last so that switching it on leaves every other initial value unchanged.
+  if (c.vertex_local_features) ps.add("decoder.local.weight", m.dec_width, kVertexLocalDim);
   ps.finalize();
 }
 

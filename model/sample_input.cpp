@@ -21,6 +21,46 @@ std::vector<float> flat(const M& m) {
   return out;
 }
 
+// ModelInput::vertex_local (N, 21), world axes, scaled by 1/R_b (lengths) and 1/σ_v (velocities).
+std::vector<float> vertex_local_features(const dataset::TrainingSample& s, float body_radius, float sigma_v) {
+  const auto& nb = s.structure->vertex_neighbours;
+  const auto& rest = s.structure->neighbour_rest;
+  const int64_t N = s.num_vertices();
+  std::vector<float> out(static_cast<std::size_t>(N * kVertexLocalDim), 0.f);
+  const float inv_r = 1.f / body_radius, inv_v = 1.f / sigma_v;
+  for (int64_t v = 0; v < N; ++v) {
+    float* f = &out[static_cast<std::size_t>(v * kVertexLocalDim)];
+    const Eigen::Vector3f x = s.state.row(v).segment<3>(0), vel = s.state.row(v).segment<3>(3);
+    const Eigen::Vector3f vel_prev = s.state.row(v).segment<3>(9);
+    auto put = [&](int block, const Eigen::Vector3f& a, float scale) {
+      for (int c = 0; c < 3; ++c) f[3 * block + c] = a[c] * scale;
+    };
+    if (s.vertex_nearest_body.distance[v] < body_radius) {
+      const auto b = s.body_state.row(s.vertex_nearest_body.index[v]);
+      const Eigen::Vector3f b_vel_next = b.segment<3>(3), b_x = b.segment<3>(6), b_vel = b.segment<3>(9);
+      put(0, x - b_x, inv_r);
+      put(1, b_vel_next - vel, inv_v);
+      put(2, b_vel_next - b_vel, inv_v);
+    }
+    Eigen::Vector3f spring = Eigen::Vector3f::Zero(), lap = Eigen::Vector3f::Zero(), lap_vel = Eigen::Vector3f::Zero();
+    for (int32_t k = nb.offsets[v]; k < nb.offsets[v + 1]; ++k) {
+      const int32_t j = nb.items[k];
+      const Eigen::Vector3f e = s.state.row(j).segment<3>(0).transpose() - x;
+      const float length = e.norm();
+      if (length > 0) spring += (length - rest[k]) / length * e;
+      lap += e;
+      lap_vel += s.state.row(j).segment<3>(3).transpose() - vel;
+    }
+    const int degree = nb.size(static_cast<int>(v));
+    if (degree > 0) lap /= static_cast<float>(degree), lap_vel /= static_cast<float>(degree);
+    put(3, spring, inv_r);
+    put(4, lap, inv_r);
+    put(5, lap_vel, inv_v);
+    put(6, vel - vel_prev, inv_v);
+  }
+  return out;
+}
+
 }  // namespace
 
 ModelInput<float> model_input_from_sample(const dataset::TrainingSample& s, const dataset::NormalisationStats& stats,
@@ -118,6 +158,10 @@ ModelInput<float> model_input_from_sample(const dataset::TrainingSample& s, cons
     for (int c = 0; c < 3; ++c) centre[3 * p + c] = s.patch_state(p, c);
   decoder_candidates(xt, centre, in.own_patch, in.mesh_offsets, in.mesh_senders, cfg.decoder_patch_candidates,
                      in.cand_offsets, in.cand_patches);
+  if (cfg.vertex_local_features) {
+    const float sigma_v = (in.std12[3] + in.std12[4] + in.std12[5]) / 3.f;
+    in.vertex_local = vertex_local_features(s, rb, sigma_v);
+  }
   validate(in);
   return in;
 }
