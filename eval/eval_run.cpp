@@ -5,6 +5,7 @@
 #include "dataset/manifest.h"
 #include "dataset/stats.h"
 #include "eval/evaluate.h"
+#include "eval/machine.h"
 #include "eval/report.h"
 #include "train/checkpoint.h"
 #include "train/run_dir.h"
@@ -14,7 +15,6 @@
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>
-#include <fstream>
 #include <memory>
 
 namespace layersnet::eval {
@@ -133,8 +133,7 @@ void run_evaluation(EvalRunOptions o) {
     }
   }
   ctx.blender_s_per_frame = blender_n ? blender_sum / blender_n : -1;
-  std::ifstream loadavg("/proc/loadavg");  // context for the speed figures on a shared machine
-  loadavg >> ctx.load_average;
+  ctx.load_average = load_average_1min();  // context for the speed figures on a shared machine
 
   const auto written = write_report(o.out, results, ctx);
   std::printf("\n%s", summary_table(results, ctx).c_str());

@@ -2,6 +2,7 @@
 #include "eval/evaluate.h"
 
 #include "dataset/h5.h"
+#include "eval/machine.h"
 #include "eval/stress.h"
 
 #include <nlohmann/json.hpp>
@@ -176,9 +177,7 @@ double median_ms_per_frame(Predictor& predictor, const dataset::Sequence& seq, i
     throw;
   }
   omp_set_num_threads(before);
-  std::vector<double> ms = r.step_ms;
-  std::nth_element(ms.begin(), ms.begin() + static_cast<std::ptrdiff_t>(ms.size() / 2), ms.end());
-  return ms[ms.size() / 2];
+  return median(r.step_ms);
 }
 
 Summary summarise(const MethodResult& m) {

@@ -2,11 +2,11 @@
 #include "eval/report.h"
 
 #include "dataset/file_io.h"
+#include "eval/machine.h"
 
 #include <nlohmann/json.hpp>
 
 #include <cstdio>
-#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <set>
@@ -69,8 +69,8 @@ std::string curve_data(const std::vector<MethodResult>& methods, SummaryCurve cu
   return o.str();
 }
 
-bool run_gnuplot(const std::filesystem::path& dir, const std::vector<MethodResult>& methods) {
-  if (std::system("command -v gnuplot >/dev/null 2>&1") != 0) return false;
+bool plot(const std::filesystem::path& dir, const std::vector<MethodResult>& methods) {
+  if (!gnuplot_available()) return false;
   io::write_file_atomic(dir / "curve.dat", curve_data(methods, &Summary::curve_mm));
   io::write_file_atomic(dir / "strain.dat", curve_data(methods, &Summary::strain_p99_curve_percent));
   std::ostringstream gp;
@@ -105,8 +105,7 @@ bool run_gnuplot(const std::filesystem::path& dir, const std::vector<MethodResul
      << "plot '" << (dir / "speed.dat").string() << "' using 1:2 with points pt 7 ps 1.5, '' using 1:2:3 with labels "
      << "offset 1,1 left\n";
   io::write_file_atomic(dir / "plots.gp", gp.str());
-  const std::string cmd = "gnuplot '" + (dir / "plots.gp").string() + "' > '" + (dir / "gnuplot.log").string() + "' 2>&1";
-  return std::system(cmd.c_str()) == 0;
+  return run_gnuplot(dir / "plots.gp", dir / "gnuplot.log");
 }
 
 std::vector<std::string> all_types(const std::vector<MethodResult>& methods) {
@@ -312,7 +311,7 @@ std::vector<std::string> write_report(const std::string& dir_name, const std::ve
   std::vector<std::string> written;
   io::write_file_atomic(dir / "eval.json", report_json(methods, c));
   written.push_back((dir / "eval.json").string());
-  const bool ran = run_gnuplot(dir, methods);
+  const bool ran = plot(dir, methods);
   std::vector<std::string> plots, broken;
   for (const char* name : {"curve.png", "speed.png", "strain.png"}) {
     const std::filesystem::path png = dir / name;

@@ -5,6 +5,7 @@
 #include "dataset/neighbours.h"
 #include "dataset/wind.h"
 #include "eval/evaluate.h"
+#include "eval/machine.h"
 #include "eval/metrics.h"
 #include "model/layersnet.h"
 #include "model/params_layout.h"
@@ -36,12 +37,6 @@ Points interpolate(const Points& block, int n, int T, double u) {
   const auto a = block.middleRows(static_cast<Eigen::Index>(f0) * n, n);
   const auto b = block.middleRows(static_cast<Eigen::Index>(f1) * n, n);
   return (1.f - w) * a + w * b;
-}
-
-double median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
-  return v[v.size() / 2];
 }
 
 // Rotation (w, x, y, z) that maps +z (the wind axis of the spec) to +x: 90° about y.

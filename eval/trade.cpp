@@ -2,6 +2,7 @@
 #include "eval/trade.h"
 
 #include "dataset/file_io.h"
+#include "eval/machine.h"
 #include "eval/pareto.h"
 #include "model/params_layout.h"
 #include "train/config.h"
@@ -336,9 +337,8 @@ std::string plot_trade(const fs::path& out, const std::vector<layersnet::eval::T
      << "' using 1:2 with points pt 7 ps 1.2 lc rgb '#1f77b4' title 'variant', '' using 1:2:3 with labels offset 0.8,0.8 "
         "left font ',9' notitle\n";
   layersnet::io::write_file_atomic(out / "trade.gp", gp.str());
-  if (std::system("command -v gnuplot >/dev/null 2>&1") != 0) return "gnuplot not found: no trade.png (apt-get install gnuplot-nox)";
-  const std::string cmd = "gnuplot '" + (out / "trade.gp").string() + "' > '" + (out / "gnuplot.log").string() + "' 2>&1";
-  if (std::system(cmd.c_str()) != 0) return "gnuplot failed: see " + (out / "gnuplot.log").string();
+  if (!gnuplot_available()) return "gnuplot not found: no trade.png (apt-get install gnuplot-nox)";
+  if (!run_gnuplot(out / "trade.gp", out / "gnuplot.log")) return "gnuplot failed: see " + (out / "gnuplot.log").string();
   return "";
 }
 
@@ -358,13 +358,6 @@ std::string now_utc() {
   char b[32];
   std::strftime(b, sizeof b, "%Y-%m-%d %H:%M UTC", std::gmtime(&t));
   return b;
-}
-
-std::string load_average() {
-  std::ifstream in("/proc/loadavg");
-  std::string a, b, c;
-  in >> a >> b >> c;
-  return a + " " + b + " " + c;
 }
 
 // trade.md: settings, the table (front marked), the presets and why, caveats.
@@ -483,7 +476,7 @@ void write_reports(json& t, const TradeOptions& o, const fs::path& out, int budg
   }
   t["finished"] = now_utc();
   t["wall_s"] = std::chrono::duration<double>(Clock::now() - t0).count();
-  t["load_average_end"] = load_average();
+  t["load_average_end"] = load_averages();
   const std::string plot_msg = plot_trade(out, pts, front,
                                           "Rollout error against speed, " + std::to_string(budget) + " epoch(s) per variant",
                                           t.value("baselines", json::object()));
@@ -556,7 +549,7 @@ void speed_passes(json& t, const TradeOptions& o, const fs::path& out, int budge
         }
       }
     }
-    cache["load_average_end"] = load_average();
+    cache["load_average_end"] = load_averages();
     layersnet::io::write_file_atomic(dir / "speed.json", cache.dump(2));
   } else {
     std::printf("speed: reused %s\n", (dir / "speed.json").string().c_str());
@@ -639,7 +632,7 @@ void run_trade(const TradeOptions& o) {
   t["command"] = cmd.str();
   t["settings"] = {{"config", o.config}, {"dataset", base.data.dataset}, {"split", base.eval.split},
                    {"budget_epochs", budget}, {"overrides", o.overrides}, {"tolerance", o.tolerance},
-                   {"started", now_utc()}, {"load_average_start", load_average()},
+                   {"started", now_utc()}, {"load_average_start", load_averages()},
                    {"base_config_toml", layersnet::to_toml(base)}};
   std::printf("bench trade: %zu variant(s) around %s, %d epoch(s) each, data %s -> %s\n", variants.size(),
               o.config.c_str(), budget, base.data.dataset.c_str(), o.out.c_str());
