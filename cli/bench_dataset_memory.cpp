@@ -23,6 +23,7 @@ namespace fs = std::filesystem;
 struct MemoryOptions {
   std::string root;
   double make_gb = 0;
+  bool dlayers_size = false;  // --make-gb writes scenes of D-LAYERS size instead
   int stride = 4;
   std::string config;  // patch size, radii, frame selection; the defaults without it
   int cache_sequences = 0;  // 0: the config's data.cache_sequences
@@ -58,6 +59,14 @@ int make(const MemoryOptions& o) {
     so.frames = 40;
     so.rings = so.body_rings = 20;
     so.height = 0.147f * 19 / 0.8f;
+  }
+  if (o.dlayers_size) {  // 2 x 10,000 garment vertices and a 6,890-vertex body (SMPL), as D-LAYERS
+    so.frames = 40;
+    so.rings = 125;
+    so.segments = 80;
+    so.body_rings = 106;
+    so.body_segments = 65;
+    so.height = 0.147f * 124 / 0.8f;
   }
   const Sequence probe = make_synthetic_sequence(so);
   const double per_sequence = static_cast<double>(probe.info.bytes_per_frame()) * so.frames;
@@ -109,6 +118,8 @@ LAYERSNET_BENCH(dataset_memory, "Peak memory of one lazy training epoch (use --m
                   auto opts = std::make_shared<MemoryOptions>();
                   sub.add_option("dataset", opts->root, "data-set folder")->required();
                   sub.add_option("--make-gb", opts->make_gb, "write a synthetic data set of about this many GiB and exit");
+                  sub.add_flag("--dlayers-size", opts->dlayers_size,
+                               "with --make-gb: scenes of D-LAYERS size (20,000 garment and 6,890 body vertices, 40 frames)");
                   sub.add_option("--stride", opts->stride, "use every k-th sample frame (at 4 every frame is read once)");
                   sub.add_option("-c,--config", opts->config, "config file: patch size, radii, frames used (default: the defaults)");
                   sub.add_option("--cache-sequences", opts->cache_sequences,
