@@ -1,234 +1,26 @@
-// `layersnet inspect DATASET`: what a data set holds — sequences per split, frames, body and
-// garment vertex/face/patch counts, wind segments, statistics, and how many world edges join
-// the outer garment's patches to the inner garments' (the model's only cross-layer attention
-// besides the body) at the first frame after the generator's ramp. Reads headers and that
-// frame only unless --check, which reads every frame and checks every value against the spec.
-// --margins measures the ground truth's collision distances as the collision loss sees them,
-// to choose loss.collision_eps and eval.collision_shell from the data, and the ground truth's
-// edge strain, to choose eval.strain_limit.
+// `layersnet inspect DATASET`: what a data set holds (eval/inspect.h), with patches and world
+// edges at the patch size and world radius of a config or the options.
 #include "cli/command_registry.h"
-#include "dataset/manifest.h"
-#include "dataset/patches.h"
-#include "dataset/sample.h"
-#include "dataset/sequence.h"
-#include "dataset/stats.h"
-#include "dataset/wind.h"
-#include "train/cloth_constraints.h"
-#include "eval/metrics.h"
+#include "eval/inspect.h"
 #include "train/config.h"
 #include "train/train_data.h"
 
-#include <algorithm>
-#include <cstdio>
-#include <filesystem>
-#include <limits>
-#include <set>
+#include <memory>
 
 namespace {
-using namespace layersnet::dataset;
 
-struct InspectOptions {
-  std::string root;
-  bool check = false;
-  bool brief = false;
+struct InspectCli {
+  layersnet::eval::InspectOptions options;
   std::string config;  // model.patch_size, model.world_radius (and the rest of [model]) from here
   double patch_size = -1, world_radius = -1;  // < 0: from the config (or the code defaults)
-  bool margins = false;
 };
 
-// Signed distances (x - a)·n_a of garment vertices to their collision anchors, measured as the
-// collision loss does: a = nearest body vertex (body term) or nearest inner-garment vertex
-// (layer term, outer garment only), n_a its vertex normal. Training split, every frame after
-// the ramp.
-struct MarginTally {
-  std::vector<float> body, layer;
-  std::vector<float> stretch;  // edge length / rest length − 1, signed (garments with a rest shape)
-  std::vector<float> fold;     // far-corner distance of adjacent triangles / its rest value − 1
-  // layout: eval::garment_layout(info); inner_faces: eval::inner_faces(layout).
-  void add_frame(const SequenceInfo& info, const layersnet::eval::GarmentLayout& layout, const Faces& inner_faces,
-                 const FrameWindow& w, int t) {
-    const Points body_x = w.body_at(t, info.num_body_vertices);
-    Points x(layout.num_vertices(), 3);
-    for (int k = 0; k < layout.num_garments(); ++k)
-      x.middleRows(layout.offsets[k], info.garments[k].num_vertices) = w.garment_at(k, t, info.garments[k].num_vertices);
-    signed_distances(x, body_x, vertex_normals(body_x, info.body_faces), body);
-    for (int k = 0; k < layout.num_garments(); ++k) {
-      const GarmentMesh& g = info.garments[k];
-      if (g.rest.rows() != g.num_vertices) continue;
-      auto ratio = [&](int32_t a, int32_t b, std::vector<float>& out) {
-        const float rest = (g.rest.row(a) - g.rest.row(b)).norm();
-        if (rest > 0) out.push_back((x.row(layout.offsets[k] + a) - x.row(layout.offsets[k] + b)).norm() / rest - 1.f);
-      };
-      for (const auto& [a, b] : mesh_edges(g.faces)) ratio(a, b, stretch);
-      for (const auto& [a, b] : layersnet::far_corners(g.faces)) ratio(a, b, fold);
-    }
-    if (!layout.layered()) return;
-    const Points inner = x.topRows(layout.num_vertices() - layout.outer_vertices());
-    signed_distances(x.bottomRows(layout.outer_vertices()), inner, vertex_normals(inner, inner_faces), layer);
-  }
-  static void signed_distances(const Points& x, const Points& anchors, const Points& normals, std::vector<float>& out) {
-    const NearestBody nb = nearest_body(x, anchors);
-    for (Eigen::Index i = 0; i < x.rows(); ++i)
-      out.push_back((x.row(i) - anchors.row(nb.index[i])).dot(normals.row(nb.index[i])));
-  }
-  static void print_ratios(const char* what, std::vector<float> r) {
-    if (r.empty()) return;
-    std::sort(r.begin(), r.end());
-    const std::vector<double> sorted(r.begin(), r.end());
-    std::printf("ground-truth %s, %zu frames x pairs: percentiles", what, sorted.size());
-    for (double q : {0.001, 0.01, 0.05, 0.5, 0.95, 0.99, 0.999})
-      std::printf(" %g: %+.3f", 100 * q, layersnet::eval::quantile(sorted, q));
-    std::printf("\n");
-  }
-  static void print(const char* what, std::vector<float> d) {
-    if (d.empty()) {
-      std::printf("  %s: no vertices\n", what);
-      return;
-    }
-    std::sort(d.begin(), d.end());
-    const std::vector<double> sorted(d.begin(), d.end());
-    auto pct = [&](double q) { return layersnet::eval::quantile(sorted, q); };
-    std::printf("  %s (%zu vertex-frames): percentiles 1/5/10/50 %.3f / %.3f / %.3f / %.3f; share closer than", what,
-                d.size(), pct(0.01), pct(0.05), pct(0.10), pct(0.5));
-    for (float eps : {0.001f, 0.01f, 0.03f, 0.05f, 0.06f, 0.1f}) {
-      const auto n = std::lower_bound(d.begin(), d.end(), eps) - d.begin();
-      std::printf(" %g: %.1f%%", eps, 100.0 * static_cast<double>(n) / static_cast<double>(d.size()));
-    }
-    std::printf("\n");
-  }
-};
-
-// Outer-garment patches and their world edges to inner-garment patches, over sequences.
-struct CrossGarmentTally {
-  int64_t patches = 0, edges = 0, without = 0;
-  int32_t min = std::numeric_limits<int32_t>::max();
-  void add(const std::vector<int32_t>& counts) {
-    for (int32_t c : counts) {
-      ++patches, edges += c, without += c == 0;
-      min = std::min(min, c);
-    }
-  }
-  void print(const char* indent) const {
-    if (patches == 0) {
-      std::printf("%sno outer-garment patches (single-garment sequences)\n", indent);
-      return;
-    }
-    std::printf("%s%ld outer-garment patches: %.3g cross-garment world edges each (min %d), %.1f%% with none\n", indent,
-                static_cast<long>(patches), static_cast<double>(edges) / static_cast<double>(patches), min,
-                100.0 * static_cast<double>(without) / static_cast<double>(patches));
-  }
-};
-
-// The sample training would build at the sequence's first frame after the ramp (t >= 2 as
-// every sample); its world edges depend on positions only, so any statistics do.
-std::vector<int32_t> cross_garment_edges(const SequenceFile& f, const SampleOptions& options, int* frame) {
-  const SequenceInfo& info = f.info();
-  if (info.num_frames < 4) return {};  // too short for any sample
-  *frame = std::clamp(info.settled_frame(), 2, info.num_frames - 2);
-  const FrameWindow w = f.read_frames(*frame - 2, 4);
-  return outer_to_inner_world_edges(build_sample(info, w, *frame, NormalisationStats{}, nullptr, options));
-}
-
-void print_wind(const SequenceInfo& info) {
-  const auto segments = wind_segments(info);
-  if (segments.empty()) {
-    std::printf("    wind: none (no /wind group)\n");
-    return;
-  }
-  std::printf("    wind: %zu segment(s):", segments.size());
-  for (const auto& s : segments) {
-    if (s.strength == 0.f)
-      std::printf(" [%d,%d) calm;", s.begin, s.end);
-    else
-      std::printf(" [%d,%d) strength %.4g along (%.2f, %.2f, %.2f);", s.begin, s.end, s.strength, s.direction.x(),
-                  s.direction.y(), s.direction.z());
-  }
-  std::printf("\n");
-}
-
-int run_inspect(const InspectOptions& o) {
+int run_inspect(const InspectCli& o) {
   layersnet::Config config = layersnet::load_config(o.config.empty() ? std::vector<std::string>{}
                                                                      : std::vector<std::string>{o.config});
   if (o.patch_size >= 0) config.model.patch_size = o.patch_size;
   if (o.world_radius >= 0) config.model.world_radius = o.world_radius;
-  const SampleOptions sample_options = layersnet::sample_options_for(config.model);
-  const float patch_size = sample_options.patch_size;
-  const DatasetManifest m = read_manifest(o.root);
-  std::printf("data set %s: %zu sequences (train %zu, val %zu, test %zu)\nsource: %s\n", o.root.c_str(),
-              m.all_ids().size(), m.train.size(), m.val.size(), m.test.size(), m.source.c_str());
-  if (std::filesystem::exists(m.stats_path())) {
-    const NormalisationStats s = read_stats(m.stats_path());
-    std::printf("stats.h5: from %zu training sequences; position std (%.4g, %.4g, %.4g), velocity std (%.4g, %.4g, %.4g)\n",
-                s.sequences.size(), s.position.std[0], s.position.std[1], s.position.std[2], s.velocity.std[0],
-                s.velocity.std[1], s.velocity.std[2]);
-  } else {
-    std::printf("stats.h5: missing (create it with `layersnet prepare %s`)\n", o.root.c_str());
-  }
-  int64_t frames = 0, garments = 0, vertices = 0, patches = 0, with_wind = 0;
-  std::set<std::string> types;
-  CrossGarmentTally cross_total;
-  for (const char* split : {"train", "val", "test"}) {
-    for (const auto& id : m.split(split)) {
-      const SequenceFile f(m.sequence_path(id));
-      if (o.check) (void)f.read_all();
-      const SequenceInfo& info = f.info();
-      frames += info.num_frames;
-      with_wind += info.has_wind;
-      if (!o.brief)
-        std::printf("%-12s %-5s %4d frames @ %g fps, body %d vertices / %ld faces, friction %.3g, %d garment(s)%s\n",
-                    id.c_str(), split, info.num_frames, info.fps, info.num_body_vertices,
-                    static_cast<long>(info.body_faces.rows()), info.body_friction, info.num_garments(),
-                    o.check ? ", all values checked" : "");
-      for (const auto& g : info.garments) {
-        const PatchStructure p = build_patches(g, patch_size);
-        ++garments;
-        vertices += g.num_vertices;
-        patches += p.num_patches;
-        types.insert(g.type);
-        if (!o.brief)
-          std::printf("    garment %-16s type %-22s N %6d  F %6d  panels %3d  patches %5d  (tension %.3g, bending %.3g, "
-                      "mass %.3g, self-friction %.3g)\n",
-                      g.name.c_str(), g.type.c_str(), g.num_vertices, g.num_faces(),
-                      static_cast<int>(std::set<int32_t>(g.panel.begin(), g.panel.end()).size()), p.num_patches,
-                      g.attributes.tension_stiffness, g.attributes.bending_stiffness, g.attributes.mass,
-                      g.attributes.self_friction);
-      }
-      if (!o.brief) print_wind(info);
-      int t = 0;
-      const std::vector<int32_t> cross = cross_garment_edges(f, sample_options, &t);
-      cross_total.add(cross);
-      if (!o.brief && info.num_garments() >= 2) {
-        CrossGarmentTally one;
-        one.add(cross);
-        std::printf("    at frame %d:", t);
-        one.print(" ");
-      }
-    }
-  }
-  std::printf("total: %ld frames, %ld garments (%zu types), %ld garment vertices, %ld patches (size %g), %ld/%zu "
-              "sequences with wind\n",
-              static_cast<long>(frames), static_cast<long>(garments), types.size(), static_cast<long>(vertices),
-              static_cast<long>(patches), patch_size, static_cast<long>(with_wind), m.all_ids().size());
-  std::printf("cross-garment world edges (world radius %g, at the first frame after each ramp, else 2):", sample_options.neighbours.world_radius);
-  cross_total.print(" ");
-  if (o.margins) {
-    MarginTally tally;
-    for (const auto& id : m.train) {
-      const SequenceFile f(m.sequence_path(id));
-      const SequenceInfo& info = f.info();
-      const int first = std::min(info.settled_frame(), info.num_frames - 1);
-      const FrameWindow w = f.read_frames(first, info.num_frames - first);
-      const layersnet::eval::GarmentLayout layout = layersnet::eval::garment_layout(info);
-      const Faces inner = layersnet::eval::inner_faces(layout);
-      for (int t = first; t < info.num_frames; ++t) tally.add_frame(info, layout, inner, w, t);
-    }
-    std::printf("ground-truth collision distances, scene units (the collision loss penalises d < loss.collision_eps):\n");
-    MarginTally::print("garment to nearest body vertex", tally.body);
-    MarginTally::print("outer garment to nearest inner vertex", tally.layer);
-    MarginTally::print_ratios("edge strain (length / rest length - 1; eval.strain_limit bounds its magnitude)", tally.stretch);
-    MarginTally::print_ratios("far-corner distance of triangles sharing an edge / rest - 1 (eval.fold_limit bounds "
-                              "its shortening)", tally.fold);
-  }
+  layersnet::eval::inspect_dataset(o.options, layersnet::sample_options_for(config.model));
   return 0;
 }
 
@@ -236,14 +28,14 @@ int run_inspect(const InspectOptions& o) {
 
 LAYERSNET_COMMAND(inspect, "Summarise a D-LAYERS-H5 data set (sequences, garments, frames, patches, wind)",
                   [](CLI::App& sub) {
-                    auto opts = std::make_shared<InspectOptions>();
-                    sub.add_option("dataset", opts->root, "data-set folder holding dataset.json")->required();
-                    sub.add_flag("--check", opts->check, "also read every frame and check all values");
-                    sub.add_flag("--brief", opts->brief, "totals only");
+                    auto opts = std::make_shared<InspectCli>();
+                    sub.add_option("dataset", opts->options.root, "data-set folder holding dataset.json")->required();
+                    sub.add_flag("--check", opts->options.check, "also read every frame and check all values");
+                    sub.add_flag("--brief", opts->options.brief, "totals only");
                     sub.add_option("--config,-c", opts->config,
                                    "take model.patch_size and model.world_radius from this config (resolved, with its includes)");
                     sub.add_option("--patch-size", opts->patch_size, "UV patch size (default: the config's, else 0.04)");
-                    sub.add_flag("--margins", opts->margins,
+                    sub.add_flag("--margins", opts->options.margins,
                                  "measure the training split's ground-truth collision distances (for loss.collision_eps)");
                     sub.add_option("--world-radius", opts->world_radius,
                                    "patch-to-patch world-edge radius, scene units (default: the config's, else 0.4)");

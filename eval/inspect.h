@@ -1,0 +1,27 @@
+#pragma once
+// What a data set holds (`layersnet inspect`) — sequences per split, frames, body and
+// garment vertex/face/patch counts, wind segments, statistics, and how many world edges join
+// the outer garment's patches to the inner garments' (the model's only cross-layer attention
+// besides the body) at the first frame after the generator's ramp. Reads headers and that
+// frame only unless --check, which reads every frame and checks every value against the spec.
+// --margins measures the ground truth's collision distances as the collision loss sees them,
+// to choose loss.collision_eps and eval.collision_shell from the data, and the ground truth's
+// edge strain, to choose eval.strain_limit.
+#include "dataset/sample.h"
+
+#include <string>
+
+namespace layersnet::eval {
+
+struct InspectOptions {
+  std::string root;      // data-set folder
+  bool check = false;    // read every frame and check every value
+  bool brief = false;    // totals only
+  bool margins = false;  // the training split's ground-truth collision distances and strain
+};
+
+// Prints the summary; patches and world edges at `sample_options` (patch size, world radius).
+// Throws DatasetError for an unreadable data set.
+void inspect_dataset(const InspectOptions& options, const dataset::SampleOptions& sample_options);
+
+}  // namespace layersnet::eval
