@@ -1,6 +1,6 @@
 #pragma once
 // Dense ops (autodiff/ops_dense.h): X(EnumName, function_stem). Add a line per new op.
-// Means share their sum's op (node.s[0] holds the factor 1 or 1/count).
+// Means share their sum's op (ReduceParams::factor is 1 or 1/count).
 #define LAYERSNET_DENSE_OPS(X) \
   X(Linear, linear)            \
   X(LinearRelu, linear_relu)   \

@@ -175,24 +175,21 @@ void transpose_csr(std::span<const int32_t> senders, int64_t n_send, int32_t* by
 }
 
 template <class T>
-RiaProblem<T> make_problem(const Node<T>& node) {
+RiaProblem<T> make_problem(const RiaParams<T>& p, const Var<T>& q, const Var<T>& r, const Var<T>& s) {
   RiaProblem<T> pb;
-  const Var<T>& q = node.in[0];
-  const Var<T>& s = node.in[2];
-  const int64_t n_edges = node.idx_len[1];
   pb.n_recv = q.rows;
   pb.n_send = s.rows;
-  pb.heads = node.i[0];
-  pb.dim = node.i[2];
-  pb.message_kinds = static_cast<uint32_t>(node.i[1]);
-  pb.offsets = node.idx[0];
-  pb.senders = node.idx[1];
-  pb.kinds = node.idx[2];
-  pb.head_kinds = reinterpret_cast<const uint32_t*>(node.idx[2] + n_edges);
-  pb.scale = node.s[0];
-  pb.eps = node.s[1];
+  pb.heads = static_cast<int64_t>(p.head_kinds.size());
+  pb.dim = p.head_dim;
+  pb.offsets = p.offsets.data();
+  pb.senders = p.senders.data();
+  pb.kinds = p.kinds.data();
+  pb.head_kinds = p.head_kinds.data();
+  pb.message_kinds = p.message_kinds;
+  pb.scale = p.scale;
+  pb.eps = p.eps;
   pb.q = q.value;
-  pb.r = node.in[1].value;
+  pb.r = r.value;
   pb.s = s.value;
   return pb;
 }
@@ -207,9 +204,7 @@ std::vector<uint32_t> layersnet_head_kinds(int64_t heads) {
 }
 
 // Node: in[0] = q, in[1] = r, in[2] = s, in[3] = the weights output (a second output: its
-// gradient is read, never written); idx[0] = offsets (P+1), idx[1] = senders (E),
-// idx[2] = one int32 block [kinds (E) | head_kinds (H) | by_sender (M+1) | edges (E)];
-// i[0] = H, i[1] = message_kinds, i[2] = D; s[0] = scale, s[1] = eps;
+// gradient is read, never written); RiaParams;
 // saved = [a (E*H) | rho (E*H) | cq = q.(s + r) (E*H) | dw scratch (E*H) |
 //          ds_edge (E*H*D), only when s needs a gradient].
 template <class T>
@@ -232,21 +227,18 @@ RiaResult<T> rot_inv_attention(Tape<T>& tape, const Var<T>& q, const Var<T>& r, 
   check_indices("rot_inv_attention senders", graph.senders, s.rows);
   check_indices("rot_inv_attention kinds", graph.kinds, 32);
 
-  RiaProblem<T> pb;
-  pb.n_recv = q.rows;
-  pb.n_send = s.rows;
-  pb.heads = H;
-  pb.dim = q.cols / H;
-  pb.offsets = graph.offsets.data();
-  pb.senders = graph.senders.data();
-  pb.kinds = graph.kinds.data();
-  pb.head_kinds = graph.head_kinds.data();
-  pb.message_kinds = graph.message_kinds;
-  pb.scale = scale;
-  pb.eps = eps;
-  pb.q = q.value;
-  pb.r = r.value;
-  pb.s = s.value;
+  // Views of the caller's graph for the forward; the node keeps copies.
+  RiaParams<T> params{.offsets = graph.offsets,
+                      .senders = graph.senders,
+                      .kinds = graph.kinds,
+                      .head_kinds = graph.head_kinds,
+                      .message_kinds = graph.message_kinds,
+                      .head_dim = q.cols / H,
+                      .scale = scale,
+                      .eps = eps,
+                      .sender_offsets = {},
+                      .edges_by_sender = {}};
+  const RiaProblem<T> pb = make_problem(params, q, r, s);
 
   const bool grad = tape.wants_grad({q, r, s});
   RiaResult<T> res{tape.new_var(q.rows, q.cols, grad), tape.new_var(n_edges, H, grad)};
@@ -256,43 +248,35 @@ RiaResult<T> rot_inv_attention(Tape<T>& tape, const Var<T>& q, const Var<T>& r, 
   ria_forward_any(pb, saved, saved + EH, saved + 2 * EH, res.weights.value, res.out.value);
   if (!grad) return res;
 
-  Node<T>& node = tape.record(OpKind::RotInvAttention, res.out, {q, r, s, res.weights});
-  node.idx[0] = tape.copy_indices(graph.offsets);
-  node.idx[1] = tape.copy_indices(graph.senders);
-  node.idx_len[0] = q.rows + 1;
-  node.idx_len[1] = n_edges;
-  const int64_t n_ints = n_edges + H + (s.rows + 1) + n_edges;
-  int32_t* ints = tape.arena().template allocate_array<int32_t>(static_cast<std::size_t>(n_ints));
-  std::copy(graph.kinds.begin(), graph.kinds.end(), ints);
-  for (int64_t h = 0; h < H; ++h) ints[n_edges + h] = static_cast<int32_t>(graph.head_kinds[static_cast<std::size_t>(h)]);
-  if (s_grad) transpose_csr(graph.senders, s.rows, ints + n_edges + H, ints + n_edges + H + s.rows + 1);
-  node.idx[2] = ints;
-  node.idx_len[2] = n_ints;
-  node.i[0] = H;
-  node.i[1] = graph.message_kinds;
-  node.i[2] = pb.dim;
-  node.s[0] = scale;
-  node.s[1] = eps;
-  node.saved = saved;
+  params.offsets = tape.copy_to_arena(graph.offsets);
+  params.senders = tape.copy_to_arena(graph.senders);
+  params.kinds = tape.copy_to_arena(graph.kinds);
+  params.head_kinds = tape.copy_to_arena(graph.head_kinds);
+  if (s_grad) {
+    int32_t* sender_offsets = tape.arena().template allocate_array<int32_t>(static_cast<std::size_t>(s.rows + 1));
+    int32_t* edges = tape.arena().template allocate_array<int32_t>(static_cast<std::size_t>(n_edges));
+    transpose_csr(graph.senders, s.rows, sender_offsets, edges);
+    params.sender_offsets = {sender_offsets, static_cast<std::size_t>(s.rows + 1)};
+    params.edges_by_sender = {edges, static_cast<std::size_t>(n_edges)};
+  }
+  tape.record(OpKind::RotInvAttention, res.out, {q, r, s, res.weights}, params).saved = saved;
   return res;
 }
 
 template <class T>
 void backward_rot_inv_attention(const Node<T>& node) {
-  const RiaProblem<T> pb = make_problem(node);
-  const Var<T>& q = node.in[0];
-  const Var<T>& r = node.in[1];
-  const Var<T>& s = node.in[2];
-  const Var<T>& w = node.in[3];
-  const int64_t n_edges = node.idx_len[1];
-  const int64_t EH = n_edges * pb.heads;
+  const auto& [q, r, s, w] = node.in;
+  const RiaParams<T>& params = std::get<RiaParams<T>>(node.params);
+  const RiaProblem<T> pb = make_problem(params, q, r, s);
+  const int64_t EH = static_cast<int64_t>(params.senders.size()) * pb.heads;
   T* ds_edge = s.grad ? node.saved + 4 * EH : nullptr;
   ria_backward_receivers_any(pb, node.saved, node.saved + EH, node.saved + 2 * EH, node.out.grad, w.grad,
                              node.saved + 3 * EH, q.grad, r.grad, ds_edge);
   if (s.grad) {
-    const int32_t* by_sender = node.idx[2] + n_edges + pb.heads;
-    if (pb.dim == 16) ria_backward_senders<T, 16>(pb, by_sender, by_sender + pb.n_send + 1, ds_edge, s.grad);
-    else ria_backward_senders<T, 0>(pb, by_sender, by_sender + pb.n_send + 1, ds_edge, s.grad);
+    const int32_t* sender_offsets = params.sender_offsets.data();
+    const int32_t* edges = params.edges_by_sender.data();
+    if (pb.dim == 16) ria_backward_senders<T, 16>(pb, sender_offsets, edges, ds_edge, s.grad);
+    else ria_backward_senders<T, 0>(pb, sender_offsets, edges, ds_edge, s.grad);
   }
 }
 

@@ -335,13 +335,13 @@ Var<T> scale(Tape<T>& tape, const Var<T>& x, std::type_identity_t<T> c) {
   const bool grad = tape.wants_grad({x});
   Var<T> out = tape.new_var(x.rows, x.cols, grad);
   unary_forward(x, out, [c](const auto& v) { return v * c; });
-  if (grad) tape.record(OpKind::Scale, out, {x}).s[0] = c;
+  if (grad) tape.record(OpKind::Scale, out, {x}, ScaleParams<T>{c});
   return out;
 }
 
 template <class T>
 void backward_scale(const Node<T>& node) {
-  const T c = node.s[0];
+  const T c = std::get<ScaleParams<T>>(node.params).factor;
   unary_backward(node.in[0], node.out, [c](const auto&, const auto& g) { return g * c; });
 }
 
@@ -364,13 +364,13 @@ Var<T> hinge_sq(Tape<T>& tape, const Var<T>& x, std::type_identity_t<T> thr) {
   const bool grad = tape.wants_grad({x});
   Var<T> out = tape.new_var(x.rows, x.cols, grad);
   unary_forward(x, out, [thr](const auto& v) { return (v - thr).min(T(0)).square(); });
-  if (grad) tape.record(OpKind::HingeSq, out, {x}).s[0] = thr;
+  if (grad) tape.record(OpKind::HingeSq, out, {x}, HingeSqParams<T>{thr});
   return out;
 }
 
 template <class T>
 void backward_hinge_sq(const Node<T>& node) {
-  const T thr = node.s[0];
+  const T thr = std::get<HingeSqParams<T>>(node.params).threshold;
   unary_backward(node.in[0], node.out,
                  [thr](const auto& v, const auto& g) { return T(2) * (v - thr).min(T(0)) * g; });
 }
@@ -458,11 +458,7 @@ Var<T> layer_norm(Tape<T>& tape, const Var<T>& x, const Var<T>& gamma, const Var
   Var<T> out = tape.new_var(x.rows, x.cols, grad);
   T* saved = tape.scratch(static_cast<std::size_t>(2 * x.rows));  // [mean (N) | rstd (N)]
   layer_norm_forward(x.value, gamma.value, beta.value, eps, x.rows, x.cols, out.value, saved, saved + x.rows);
-  if (grad) {
-    Node<T>& node = tape.record(OpKind::LayerNorm, out, {x, gamma, beta});
-    node.saved = saved;
-    node.s[0] = eps;
-  }
+  if (grad) tape.record(OpKind::LayerNorm, out, {x, gamma, beta}).saved = saved;
   return out;
 }
 
@@ -494,13 +490,7 @@ Var<T> concat_cols(Tape<T>& tape, std::span<const Var<T>> inputs) {
       for (const auto& v : inputs) dst = std::copy_n(v.value + r * v.cols, v.cols, dst);
     }
   });
-  if (grad) {
-    auto* more = tape.arena().template allocate_array<Var<T>>(inputs.size());
-    std::copy(inputs.begin(), inputs.end(), more);
-    Node<T>& node = tape.record(OpKind::ConcatCols, out, {});
-    node.more_in = more;
-    node.n_more = static_cast<int32_t>(inputs.size());
-  }
+  if (grad) tape.record(OpKind::ConcatCols, out, {}, ConcatColsParams<T>{tape.copy_to_arena(inputs)});
   return out;
 }
 
@@ -508,8 +498,7 @@ template <class T>
 void backward_concat_cols(const Node<T>& node) {
   const ConstMatMap<T> g(node.out.grad, node.out.rows, node.out.cols);
   int64_t c0 = 0;
-  for (int32_t k = 0; k < node.n_more; ++k) {
-    const Var<T>& v = node.more_in[k];
+  for (const Var<T>& v : std::get<ConcatColsParams<T>>(node.params).inputs) {
     if (v.grad) {
       MatMap<T> gv(v.grad, v.rows, v.cols);
       for_row_blocks(v.rows, v.cols,
@@ -528,7 +517,7 @@ Var<T> slice_cols(Tape<T>& tape, const Var<T>& x, int64_t c0, int64_t c1) {
   const ConstMatMap<T> xv(x.value, x.rows, x.cols);
   MatMap<T> ov(out.value, out.rows, out.cols);
   for_row_blocks(x.rows, out.cols, [&](int64_t r0, int64_t n) { ov.middleRows(r0, n) = xv.block(r0, c0, n, c1 - c0); });
-  if (grad) tape.record(OpKind::SliceCols, out, {x}).i[0] = c0;
+  if (grad) tape.record(OpKind::SliceCols, out, {x}, SliceColsParams{c0});
   return out;
 }
 
@@ -538,12 +527,12 @@ void backward_slice_cols(const Node<T>& node) {
   if (!x.grad) return;
   const ConstMatMap<T> g(node.out.grad, node.out.rows, node.out.cols);
   MatMap<T> gx(x.grad, x.rows, x.cols);
-  const int64_t c0 = node.i[0];
+  const int64_t c0 = std::get<SliceColsParams>(node.params).first_col;
   for_row_blocks(x.rows, g.cols(),
                  [&](int64_t r0, int64_t n) { gx.block(r0, c0, n, g.cols()) += g.middleRows(r0, n); });
 }
 
-// ---- reductions (node.s[0] = factor: 1 for sums, 1/count for means) ------------------------
+// ---- reductions (ReduceParams::factor: 1 for sums, 1/count for means) ----------------------
 
 namespace {
 
@@ -564,7 +553,7 @@ Var<T> reduce_op(Tape<T>& tape, OpKind kind, const Var<T>& x, int64_t rows, int6
     });
     for (int64_t c = 0; c < width; ++c) out.value[c] = s[c] * factor;
   }
-  if (grad) tape.record(kind, out, {x}).s[0] = factor;
+  if (grad) tape.record(kind, out, {x}, ReduceParams<T>{factor});
   return out;
 }
 
@@ -573,7 +562,7 @@ template <class T>
 void reduce_backward(const Node<T>& node) {
   const Var<T>& x = node.in[0];
   if (!x.grad) return;
-  const T factor = node.s[0];
+  const T factor = std::get<ReduceParams<T>>(node.params).factor;
   Var<T> g = node.out;
   g.value = node.out.grad;
   MatMap<T> gx(x.grad, x.rows, x.cols);

@@ -116,7 +116,7 @@ void backward_row_norm(const Node<T>& node) {
 }
 
 // ---- row_normalize ----------------------------------------------------------------------
-// Node: in[0] = x, s[0] = eps, saved = max(||x[n]||, eps) (N).
+// Node: in[0] = x; RowNormalizeParams::eps; saved = max(||x[n]||, eps) (N).
 template <class T>
 Var<T> row_normalize(Tape<T>& tape, const Var<T>& x, T eps) {
   LAYERSNET_CHECK(eps > T(0), "row_normalize: eps must be positive, got " << eps);
@@ -124,11 +124,7 @@ Var<T> row_normalize(Tape<T>& tape, const Var<T>& x, T eps) {
   Var<T> out = tape.new_var(x.rows, x.cols, grad);
   T* m = tape.scratch(static_cast<std::size_t>(x.rows));
   row_normalize_forward(x.value, x.rows, x.cols, eps, out.value, m);
-  if (grad) {
-    Node<T>& node = tape.record(OpKind::RowNormalize, out, {x});
-    node.s[0] = eps;
-    node.saved = m;
-  }
+  if (grad) tape.record(OpKind::RowNormalize, out, {x}, RowNormalizeParams<T>{eps}).saved = m;
   return out;
 }
 
@@ -136,7 +132,8 @@ template <class T>
 void backward_row_normalize(const Node<T>& node) {
   const Var<T>& x = node.in[0];
   if (x.grad)
-    row_normalize_backward(node.out.value, node.saved, node.out.grad, x.rows, x.cols, node.s[0], x.grad);
+    row_normalize_backward(node.out.value, node.saved, node.out.grad, x.rows, x.cols,
+                           std::get<RowNormalizeParams<T>>(node.params).eps, x.grad);
 }
 
 // ---- cross3 -----------------------------------------------------------------------------
@@ -174,7 +171,7 @@ void backward_cross3(const Node<T>& node) {
 }
 
 // ---- rotate3 ----------------------------------------------------------------------------
-// Node: in[0] = R, in[1] = v, i[0] = transpose.
+// Node: in[0] = R, in[1] = v; RotationParams::transpose.
 template <class T>
 Var<T> rotate3(Tape<T>& tape, const Var<T>& R, const Var<T>& v, bool transpose) {
   check_shape("rotate3 v", v, v.rows, 3);
@@ -183,7 +180,7 @@ Var<T> rotate3(Tape<T>& tape, const Var<T>& R, const Var<T>& v, bool transpose) 
   Var<T> out = tape.new_var(v.rows, 3, grad);
 #pragma omp parallel for schedule(static) if (v.rows * 15 > kParallelMin)
   for (int64_t n = 0; n < v.rows; ++n) mat3_apply(R.value + 9 * n, v.value + 3 * n, transpose, out.value + 3 * n);
-  if (grad) tape.record(OpKind::Rotate3, out, {R, v}).i[0] = transpose;
+  if (grad) tape.record(OpKind::Rotate3, out, {R, v}, RotationParams{transpose});
   return out;
 }
 
@@ -191,7 +188,7 @@ template <class T>
 void backward_rotate3(const Node<T>& node) {
   const Var<T>& R = node.in[0];
   const Var<T>& v = node.in[1];
-  const bool transpose = node.i[0] != 0;
+  const bool transpose = std::get<RotationParams>(node.params).transpose;
 #pragma omp parallel for schedule(static) if (v.rows * 36 > kParallelMin)
   for (int64_t n = 0; n < v.rows; ++n)
     mat3_apply_backward(R.value + 9 * n, v.value + 3 * n, node.out.grad + 3 * n, transpose,
@@ -199,7 +196,7 @@ void backward_rotate3(const Node<T>& node) {
 }
 
 // ---- rot_map_apply ----------------------------------------------------------------------
-// Node: in[0] = W, in[1] = R, in[2] = v, i[0] = transpose,
+// Node: in[0] = W, in[1] = R, in[2] = v; RotationParams::transpose;
 // saved = [t = v W (N, 3) | u = rows R t (N, 3) | scratch dU (N, 3) | scratch dT (N, 3)].
 template <class T>
 Var<T> rot_map_apply(Tape<T>& tape, const Var<T>& W, const Var<T>& R, const Var<T>& v, bool transpose) {
@@ -215,11 +212,7 @@ Var<T> rot_map_apply(Tape<T>& tape, const Var<T>& W, const Var<T>& R, const Var<
 #pragma omp parallel for schedule(static) if (n_rows * 15 > kParallelMin)
   for (int64_t n = 0; n < n_rows; ++n) mat3_apply(R.value + 9 * n, saved + 3 * n, transpose, saved + 3 * (n_rows + n));
   out.val().noalias() = u * W.val().transpose();  // rows out[n] = W u[n]
-  if (grad) {
-    Node<T>& node = tape.record(OpKind::RotMapApply, out, {W, R, v});
-    node.i[0] = transpose;
-    node.saved = saved;
-  }
+  if (grad) tape.record(OpKind::RotMapApply, out, {W, R, v}, RotationParams{transpose}).saved = saved;
   return out;
 }
 
@@ -228,7 +221,7 @@ void backward_rot_map_apply(const Node<T>& node) {
   const Var<T>& W = node.in[0];
   const Var<T>& R = node.in[1];
   const Var<T>& v = node.in[2];
-  const bool transpose = node.i[0] != 0;
+  const bool transpose = std::get<RotationParams>(node.params).transpose;
   const int64_t n_rows = v.rows;
   T* saved = node.saved;
   ConstMatMap<T> t(saved, n_rows, 3), u(saved + 3 * n_rows, n_rows, 3);

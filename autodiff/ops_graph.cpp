@@ -127,7 +127,7 @@ void check_indices(const char* what, std::span<const int32_t> idx, int64_t bound
 }
 
 // ---- gather_rows ------------------------------------------------------------------------
-// Node: in[0] = x, idx[0] = idx (E).
+// Node: in[0] = x; RowIndexParams::rows = idx (E).
 template <class T>
 Var<T> gather_rows(Tape<T>& tape, const Var<T>& x, std::span<const int32_t> idx) {
   check_indices("gather_rows", idx, x.rows);
@@ -135,22 +135,20 @@ Var<T> gather_rows(Tape<T>& tape, const Var<T>& x, std::span<const int32_t> idx)
   const bool grad = tape.wants_grad({x});
   Var<T> out = tape.new_var(n, x.cols, grad);
   gather_rows_forward(x.value, idx.data(), n, x.cols, out.value);
-  if (grad) {
-    Node<T>& node = tape.record(OpKind::GatherRows, out, {x});
-    node.idx[0] = tape.copy_indices(idx);
-    node.idx_len[0] = n;
-  }
+  if (grad) tape.record(OpKind::GatherRows, out, {x}, RowIndexParams{tape.copy_to_arena(idx)});
   return out;
 }
 
 template <class T>
 void backward_gather_rows(const Node<T>& node) {
   const Var<T>& x = node.in[0];
-  if (x.grad) scatter_add_rows_kernel(node.out.grad, node.idx[0], node.out.rows, x.cols, x.grad);
+  if (x.grad)
+    scatter_add_rows_kernel(node.out.grad, std::get<RowIndexParams>(node.params).rows.data(), node.out.rows, x.cols,
+                            x.grad);
 }
 
 // ---- scatter_add_rows -------------------------------------------------------------------
-// Node: in[0] = x, idx[0] = idx (E).
+// Node: in[0] = x; RowIndexParams::rows = idx (E).
 template <class T>
 Var<T> scatter_add_rows(Tape<T>& tape, const Var<T>& x, std::span<const int32_t> idx, int64_t n_out) {
   LAYERSNET_CHECK(static_cast<int64_t>(idx.size()) == x.rows,
@@ -159,11 +157,7 @@ Var<T> scatter_add_rows(Tape<T>& tape, const Var<T>& x, std::span<const int32_t>
   const bool grad = tape.wants_grad({x});
   Var<T> out = tape.zeros(n_out, x.cols, grad);
   scatter_add_rows_kernel(x.value, idx.data(), x.rows, x.cols, out.value);
-  if (grad) {
-    Node<T>& node = tape.record(OpKind::ScatterAddRows, out, {x});
-    node.idx[0] = tape.copy_indices(idx);
-    node.idx_len[0] = x.rows;
-  }
+  if (grad) tape.record(OpKind::ScatterAddRows, out, {x}, RowIndexParams{tape.copy_to_arena(idx)});
   return out;
 }
 
@@ -172,16 +166,17 @@ void backward_scatter_add_rows(const Node<T>& node) {
   const Var<T>& x = node.in[0];
   if (!x.grad) return;
   const int64_t cols = x.cols;
+  const int32_t* idx = std::get<RowIndexParams>(node.params).rows.data();
 #pragma omp parallel for schedule(static) if (x.rows * cols > kParallelMin)
   for (int64_t e = 0; e < x.rows; ++e) {
-    const T* src = node.out.grad + int64_t{node.idx[0][e]} * cols;
+    const T* src = node.out.grad + int64_t{idx[e]} * cols;
     T* dst = x.grad + e * cols;
     for (int64_t c = 0; c < cols; ++c) dst[c] += src[c];
   }
 }
 
 // ---- segment_sum ------------------------------------------------------------------------
-// Node: in[0] = x, idx[0] = offsets (S+1).
+// Node: in[0] = x; SegmentParams::offsets (S+1).
 template <class T>
 Var<T> segment_sum(Tape<T>& tape, const Var<T>& x, std::span<const int32_t> offsets) {
   check_csr("segment_sum", offsets, x.rows);
@@ -189,22 +184,20 @@ Var<T> segment_sum(Tape<T>& tape, const Var<T>& x, std::span<const int32_t> offs
   const bool grad = tape.wants_grad({x});
   Var<T> out = tape.zeros(n_seg, x.cols, grad);
   segment_sum_forward(x.value, offsets.data(), n_seg, x.cols, out.value);
-  if (grad) {
-    Node<T>& node = tape.record(OpKind::SegmentSum, out, {x});
-    node.idx[0] = tape.copy_indices(offsets);
-    node.idx_len[0] = n_seg + 1;
-  }
+  if (grad) tape.record(OpKind::SegmentSum, out, {x}, SegmentParams{tape.copy_to_arena(offsets)});
   return out;
 }
 
 template <class T>
 void backward_segment_sum(const Node<T>& node) {
   const Var<T>& x = node.in[0];
-  if (x.grad) segment_sum_backward(node.out.grad, node.idx[0], node.out.rows, x.cols, x.grad);
+  if (x.grad)
+    segment_sum_backward(node.out.grad, std::get<SegmentParams>(node.params).offsets.data(), node.out.rows, x.cols,
+                         x.grad);
 }
 
 // ---- segment_softmax --------------------------------------------------------------------
-// Node: in[0] = logits, idx[0] = offsets (S+1); the output values are the saved softmax.
+// Node: in[0] = logits; SegmentParams::offsets (S+1); the output values are the saved softmax.
 template <class T>
 Var<T> segment_softmax(Tape<T>& tape, const Var<T>& logits, std::span<const int32_t> offsets) {
   check_csr("segment_softmax", offsets, logits.rows);
@@ -212,19 +205,17 @@ Var<T> segment_softmax(Tape<T>& tape, const Var<T>& logits, std::span<const int3
   const bool grad = tape.wants_grad({logits});
   Var<T> out = tape.new_var(logits.rows, logits.cols, grad);
   segment_softmax_forward(logits.value, offsets.data(), n_seg, logits.cols, out.value);
-  if (grad) {
-    Node<T>& node = tape.record(OpKind::SegmentSoftmax, out, {logits});
-    node.idx[0] = tape.copy_indices(offsets);
-    node.idx_len[0] = n_seg + 1;
-  }
+  if (grad) tape.record(OpKind::SegmentSoftmax, out, {logits}, SegmentParams{tape.copy_to_arena(offsets)});
   return out;
 }
 
 template <class T>
 void backward_segment_softmax(const Node<T>& node) {
   const Var<T>& z = node.in[0];
-  if (z.grad)
-    segment_softmax_backward(node.out.value, node.out.grad, node.idx[0], node.idx_len[0] - 1, z.cols, z.grad);
+  if (!z.grad) return;
+  const std::span<const int32_t> offsets = std::get<SegmentParams>(node.params).offsets;
+  segment_softmax_backward(node.out.value, node.out.grad, offsets.data(), static_cast<int64_t>(offsets.size()) - 1,
+                           z.cols, z.grad);
 }
 
 // ---- concat_rows ------------------------------------------------------------------------

@@ -59,18 +59,12 @@ Var<T> Tape<T>::zeros(int64_t rows, int64_t cols, bool with_grad) {
 }
 
 template <class T>
-const int32_t* Tape<T>::copy_indices(std::span<const int32_t> indices) {
-  int32_t* p = arena_.allocate_array<int32_t>(indices.size());
-  if (!indices.empty()) std::memcpy(p, indices.data(), indices.size_bytes());
-  return p;
-}
-
-template <class T>
-Node<T>& Tape<T>::record(OpKind op, const Var<T>& out, std::initializer_list<Var<T>> inputs) {
-  LAYERSNET_CHECK(inputs.size() <= 4, "an op records at most 4 inputs; use Node::more_in for more");
+Node<T>& Tape<T>::record(OpKind op, const Var<T>& out, std::initializer_list<Var<T>> inputs, OpParams<T> params) {
+  LAYERSNET_CHECK(inputs.size() <= 4, "an op records at most 4 inputs; pass more in its params (as concat_cols)");
   Node<T>& node = nodes_.emplace_back();
   node.op = op;
   node.out = out;
+  node.params = std::move(params);
   std::size_t k = 0;
   for (const auto& v : inputs) node.in[k++] = v;
   return node;

@@ -14,8 +14,10 @@
 #include "autodiff/arena.h"
 #include "autodiff/check.h"
 #include "autodiff/op_list.h"
+#include "autodiff/op_params.h"
 #include "autodiff/var.h"
 
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <initializer_list>
@@ -40,19 +42,15 @@ const char* matmul_precision_name(MatmulPrecision p);  // "float32" | "bf16" (bf
 
 const char* op_name(OpKind op);
 
-// What backward needs of one op. Fields are op-specific; each op's header says which it uses.
+// What backward needs of one op: its inputs, its output, its parameters (autodiff/op_params.h)
+// and the forward intermediates it saved.
 template <class T>
 struct Node {
   OpKind op{};
   Var<T> out;
   std::array<Var<T>, 4> in{};
-  const Var<T>* more_in = nullptr;  // ops with a variable number of inputs (concat)
-  int32_t n_more = 0;
-  std::array<const int32_t*, 3> idx{};  // index arrays (in the arena)
-  std::array<int64_t, 3> idx_len{};
-  std::array<T, 4> s{};        // scalar parameters
-  std::array<int64_t, 4> i{};  // integer parameters
-  T* saved = nullptr;          // forward intermediates kept for backward (in the arena)
+  OpParams<T> params;  // the struct of this op kind; std::monostate for ops without any
+  T* saved = nullptr;  // in the arena; layout in each op's recording code
 };
 
 template <class T>
@@ -78,8 +76,13 @@ class Tape {
   Var<T> leaf(const T* data, int64_t rows, int64_t cols);
   Var<T> zeros(int64_t rows, int64_t cols, bool with_grad = false);
 
-  // Copies an index list into the arena (nodes keep pointers, callers' vectors may die).
-  const int32_t* copy_indices(std::span<const int32_t> indices);
+  // Copies an array into the arena (nodes keep views, callers' vectors may die).
+  template <class U>
+  std::span<const U> copy_to_arena(std::span<const U> data) {
+    U* p = arena_.allocate_array<U>(data.size());
+    std::copy(data.begin(), data.end(), p);
+    return {p, data.size()};
+  }
   T* scratch(std::size_t count) { return arena_.allocate_array<T>(count); }
 
   // True when an op with these inputs must record a node and produce a gradient.
@@ -89,7 +92,7 @@ class Tape {
       if (v.grad) return true;
     return false;
   }
-  Node<T>& record(OpKind op, const Var<T>& out, std::initializer_list<Var<T>> inputs);
+  Node<T>& record(OpKind op, const Var<T>& out, std::initializer_list<Var<T>> inputs, OpParams<T> params = {});
 
   // Seeds d loss / d loss = 1 (loss must be 1x1) and walks the nodes backwards.
   void backward(const Var<T>& loss);
