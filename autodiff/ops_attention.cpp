@@ -196,13 +196,6 @@ RiaProblem<T> make_problem(const RiaParams<T>& p, const Var<T>& q, const Var<T>&
 
 }  // namespace
 
-std::vector<uint32_t> layersnet_head_kinds(int64_t heads) {
-  std::vector<uint32_t> table(static_cast<std::size_t>(heads));
-  for (int64_t h = 0; h < heads; ++h)
-    table[static_cast<std::size_t>(h)] = h % 2 == 0 ? (1u << kRiaWorld) | (1u << kRiaInter) : (1u << kRiaMesh);
-  return table;
-}
-
 // Node: in[0] = q, in[1] = r, in[2] = s, in[3] = the weights output (a second output: its
 // gradient is read, never written); RiaParams;
 // saved = [a (E*H) | rho (E*H) | cq = q.(s + r) (E*H) | dw scratch (E*H) |

@@ -17,11 +17,10 @@
 // Both outputs are differentiable; gradients flow to q, r and s.
 //
 // Head masks: each edge has a kind (0..31) and head h attends to the kinds whose bits are set
-// in head_kinds[h]. LayersNet (as the official code): kinds world / mesh (incl. the garment attribute
-// token) / inter (body, wind, gravity); world heads (h even) attend world + inter, mesh
-// heads (h odd) attend mesh; the (s + r) message is summed for world and mesh edges only.
-// layersnet_head_kinds() returns that table. A receiver with no attended edge for a head
-// gets zero output (and zero gradient) for that head.
+// in head_kinds[h]; only edges whose kind is in message_kinds add the (s + r) message. The
+// caller owns the meaning of the kinds (LayersNet's world / mesh / inter table is in
+// model/layersnet.cpp). A receiver with no attended edge for a head gets zero output (and
+// zero gradient) for that head.
 //
 // Deviation from the official code (quirk 8): the official logit divides by
 // ||r - s||/2 + 1e-7 and the weight by ||r - s|| with no eps, which is infinite at r = s and
@@ -36,7 +35,6 @@
 
 #include <cstdint>
 #include <span>
-#include <vector>
 
 namespace layersnet::ad {
 
@@ -47,11 +45,6 @@ struct RiaGraph {
   std::span<const uint32_t> head_kinds;  // (H) bit k set: head h attends to kind k
   uint32_t message_kinds = ~0u;          // bit k set: kind k edges add w * (s + r) to out
 };
-
-// LayersNet's edge kinds and head table (head h = 2g + m, m = 0 world, m = 1 mesh).
-enum RiaEdgeKind : int32_t { kRiaWorld = 0, kRiaMesh = 1, kRiaInter = 2 };
-std::vector<uint32_t> layersnet_head_kinds(int64_t heads);
-constexpr uint32_t kLayersnetMessageKinds = (1u << kRiaWorld) | (1u << kRiaMesh);
 
 template <class T>
 struct RiaResult {

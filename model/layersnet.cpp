@@ -7,6 +7,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <vector>
 
 namespace layersnet::model {
 namespace {
@@ -34,6 +35,21 @@ class StageClock {
   std::chrono::steady_clock::time_point t0_;
 };
 
+// Edge kinds of the fused attention and the heads that attend to them (as the official
+// code): world heads [0, G) attend world-neighbour patches and, in the same softmax, the
+// body/wind/gravity tokens (inter edges); mesh heads [G, 2G) attend mesh-adjacent patches
+// and the garment's attribute token. Inter edges send their messages through the RET, so
+// only world and mesh edges add the fused (s + r) message.
+enum EdgeKind : int32_t { kWorldEdge = 0, kMeshEdge = 1, kInterEdge = 2 };
+constexpr uint32_t kSelfMessageKinds = (1u << kWorldEdge) | (1u << kMeshEdge);
+
+std::vector<uint32_t> head_kinds(int64_t groups) {
+  std::vector<uint32_t> table;
+  for (int64_t h = 0; h < 2 * groups; ++h)
+    table.push_back(h < groups ? (1u << kWorldEdge) | (1u << kInterEdge) : (1u << kMeshEdge));
+  return table;
+}
+
 // Index lists of one forward (built from ModelInput, no tape). Token table rows:
 //   [0, P) patches, [P, P+A) attribute tokens, [P+A, P+A+T) body/wind/gravity tokens.
 template <class T>
@@ -54,8 +70,7 @@ struct Graph {
 template <class T>
 Graph<T> build_graph(const ModelInput<T>& in, int64_t groups) {
   Graph<T> g;
-  for (int64_t h = 0; h < 2 * groups; ++h)
-    g.head_kinds.push_back(h < groups ? (1u << ad::kRiaWorld) | (1u << ad::kRiaInter) : (1u << ad::kRiaMesh));
+  g.head_kinds = head_kinds(groups);
   const int64_t P = in.P;
   g.P = P, g.A = in.A;
   const int64_t U = in.U, wind_tok = in.has_wind ? U : -1, grav_tok = U + (in.has_wind ? 1 : 0);
@@ -96,10 +111,10 @@ Graph<T> build_graph(const ModelInput<T>& in, int64_t groups) {
         g.fused_inter_pos.push_back(static_cast<int32_t>(g.fused_send.size()));
         g.inter_recv.push_back(static_cast<int32_t>(i)), g.inter_send.push_back(g.joint_send[k]);
       }
-      g.fused_send.push_back(g.joint_send[k]), g.fused_kind.push_back(world ? ad::kRiaWorld : ad::kRiaInter);
+      g.fused_send.push_back(g.joint_send[k]), g.fused_kind.push_back(world ? kWorldEdge : kInterEdge);
     }
     for (int32_t k = g.mesh_offsets[i]; k < g.mesh_offsets[i + 1]; ++k)
-      g.fused_send.push_back(g.mesh_send[k]), g.fused_kind.push_back(ad::kRiaMesh);
+      g.fused_send.push_back(g.mesh_send[k]), g.fused_kind.push_back(kMeshEdge);
     g.fused_offsets.push_back(static_cast<int32_t>(g.fused_send.size()));
   }
   return g;
@@ -221,7 +236,7 @@ Streams<T> encoder_layer(ad::Tape<T>& tape, const ParamView<T>& p, const ModelCo
   Var<T> out;
   StageClock edges_clock(opt.times, &StageTimes::attention_edges_ms);
   if (cfg.attention == "ria" && opt.fused_attention) {
-    const ad::RiaGraph graph{gr.fused_offsets, gr.fused_send, gr.fused_kind, gr.head_kinds, ad::kLayersnetMessageKinds};
+    const ad::RiaGraph graph{gr.fused_offsets, gr.fused_send, gr.fused_kind, gr.head_kinds, kSelfMessageKinds};
     const T scale = static_cast<T>(1.0 / std::sqrt(static_cast<double>(m.head_dim)));
     const auto ria = ad::rot_inv_attention(tape, q, r, s, graph, scale, static_cast<T>(kEps));
     out = ria.out;

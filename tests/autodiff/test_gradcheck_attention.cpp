@@ -3,6 +3,7 @@
 // empty neighbour lists, near-coincident receivers/senders and saturated logits.
 #include "autodiff/ops_dense.h"
 #include "autodiff/ops_graph.h"
+#include "edge_kinds.h"
 #include "gradcheck_registry.h"
 
 #include <omp.h>
@@ -21,7 +22,7 @@ namespace {
 struct Graph {
   std::vector<int32_t> offsets{0}, senders, kinds;
   std::vector<uint32_t> head_kinds;
-  uint32_t message_kinds = kLayersnetMessageKinds;
+  uint32_t message_kinds = kSelfMessageKinds;
   RiaGraph view() const { return {offsets, senders, kinds, head_kinds, message_kinds}; }
   int64_t edges() const { return static_cast<int64_t>(senders.size()); }
 };
@@ -37,7 +38,7 @@ Graph random_graph(const std::vector<int>& counts, int n_send, int heads, unsign
     }
     g.offsets.push_back(static_cast<int32_t>(g.senders.size()));
   }
-  g.head_kinds = layersnet_head_kinds(heads);
+  g.head_kinds = alternating_head_kinds(heads);
   return g;
 }
 
@@ -127,8 +128,8 @@ GRADCHECK_TEST(RotInvAttention, OneReceiverOneSenderOneEdge) {
   Graph g;
   g.offsets = {0, 1};
   g.senders = {0};
-  g.kinds = {kRiaMesh};
-  g.head_kinds = {1u << kRiaMesh};
+  g.kinds = {kMeshEdge};
+  g.head_kinds = {1u << kMeshEdge};
   const RowMat<double> q = random_matrix(1, 2, 121), r = random_matrix(1, 2, 122), s = random_matrix(1, 2, 123);
   const GradcheckReport rep = expect_gradcheck(OpKind::RotInvAttention, ria_out(g, 0.5), {{q}, {r}, {s}});
   // One edge: a = 1, out = (s + r) / ||r - s||.
@@ -143,8 +144,8 @@ GRADCHECK_TEST(RotInvAttention, EmptyListsAndHeadsWithNothingToAttend) {
   Graph g;
   g.offsets = {0, 2, 2, 4};
   g.senders = {0, 1, 2, 0};
-  g.kinds = {kRiaInter, kRiaInter, kRiaMesh, kRiaMesh};
-  g.head_kinds = layersnet_head_kinds(2);
+  g.kinds = {kInterEdge, kInterEdge, kMeshEdge, kMeshEdge};
+  g.head_kinds = alternating_head_kinds(2);
   const RowMat<double> q = random_matrix(3, 4, 131), r = random_matrix(3, 4, 132), s = random_matrix(3, 4, 133);
   const GradcheckReport rep = expect_gradcheck(OpKind::RotInvAttention, ria_out(g, 0.5), {{q}, {r}, {s}});
   // Inter edges carry no (s + r) message: receiver 0 output is zero, as is receiver 1's.
@@ -159,7 +160,7 @@ GRADCHECK_TEST(RotInvAttention, EmptyListsAndHeadsWithNothingToAttend) {
   // No edges at all.
   Graph none;
   none.offsets = {0, 0};
-  none.head_kinds = layersnet_head_kinds(2);
+  none.head_kinds = alternating_head_kinds(2);
   const GradcheckReport z = expect_gradcheck(OpKind::RotInvAttention, ria_out(none, 0.5),
                                              {{random_matrix(1, 4, 134)}, {random_matrix(1, 4, 135)}, {random_matrix(2, 4, 136)}});
   EXPECT_TRUE(z.output.isZero());
@@ -173,8 +174,8 @@ GRADCHECK_TEST(RotInvAttention, NearCoincidentReceiverAndSender) {
   Graph g;
   g.offsets = {0, 3};
   g.senders = {0, 1, 2};
-  g.kinds = {kRiaWorld, kRiaWorld, kRiaInter};
-  g.head_kinds = {(1u << kRiaWorld) | (1u << kRiaInter)};
+  g.kinds = {kWorldEdge, kWorldEdge, kInterEdge};
+  g.head_kinds = {(1u << kWorldEdge) | (1u << kInterEdge)};
   const RowMat<double> r = random_matrix(1, 3, 142);
   const RowMat<double> q = r + 0.3 * random_matrix(1, 3, 141);  // q.(s + r) > 0: the near edge wins
   RowMat<double> s = random_matrix(3, 3, 143);
@@ -202,8 +203,8 @@ GRADCHECK_TEST(RotInvAttention, SaturatedLogitsOfPlusMinus80) {
   Graph g;
   g.offsets = {0, 3};
   g.senders = {0, 1, 2};
-  g.kinds = {kRiaWorld, kRiaWorld, kRiaWorld};
-  g.head_kinds = {1u << kRiaWorld};
+  g.kinds = {kWorldEdge, kWorldEdge, kWorldEdge};
+  g.head_kinds = {1u << kWorldEdge};
   RowMat<double> q(1, 2), r(1, 2), s(3, 2);
   q << 1, 0;
   r << 0, 0;
@@ -266,10 +267,10 @@ TEST(RotInvAttention, RejectsBadShapesAndIndices) {
   g.offsets = {0, 1, 1};
   g.senders = {5};  // out of range
   g.kinds = {0};
-  g.head_kinds = layersnet_head_kinds(2);
+  g.head_kinds = alternating_head_kinds(2);
   EXPECT_THROW(rot_inv_attention(tape, v, v, v, g.view(), 1.0), CheckError);
   g.senders = {1};
-  g.head_kinds = layersnet_head_kinds(3);  // 4 columns do not split into 3 heads
+  g.head_kinds = alternating_head_kinds(3);  // 4 columns do not split into 3 heads
   EXPECT_THROW(rot_inv_attention(tape, v, v, v, g.view(), 1.0), CheckError);
 }
 

@@ -5,6 +5,7 @@
 // against double, and for arena reuse across steps.
 #include "autodiff/ops_dense.h"
 #include "autodiff/ops_graph.h"
+#include "edge_kinds.h"
 #include "gradcheck_registry.h"
 
 #include <random>
@@ -19,27 +20,27 @@ constexpr int kHeads = 2, kDim = 4, kP = 4, kM = 5, kK = 3;  // one group: head 
 // Receiver i: a few world and mesh patch senders, then kK inter senders (rows kM + i*kK + k).
 struct LayerGraph {
   std::vector<int32_t> offsets{0}, senders, kinds, inter_edges, inter_receivers, inter_senders, inter_offsets{0};
-  std::vector<uint32_t> head_kinds = layersnet_head_kinds(kHeads);
+  std::vector<uint32_t> head_kinds = alternating_head_kinds(kHeads);
   LayerGraph() {
     std::mt19937 rng(7);
     for (int i = 0; i < kP; ++i) {
       const int n_self = i == 2 ? 0 : 1 + static_cast<int>(rng() % 4);  // receiver 2: inter edges only
       for (int k = 0; k < n_self; ++k) {
         senders.push_back(static_cast<int32_t>(rng() % kM));
-        kinds.push_back(k % 2 == 0 ? kRiaWorld : kRiaMesh);
+        kinds.push_back(k % 2 == 0 ? kWorldEdge : kMeshEdge);
       }
       for (int k = 0; k < kK; ++k) {
         inter_edges.push_back(static_cast<int32_t>(senders.size()));
         inter_receivers.push_back(i);
         inter_senders.push_back(kM + i * kK + k);
         senders.push_back(kM + i * kK + k);
-        kinds.push_back(kRiaInter);
+        kinds.push_back(kInterEdge);
       }
       offsets.push_back(static_cast<int32_t>(senders.size()));
       inter_offsets.push_back(static_cast<int32_t>(inter_edges.size()));
     }
   }
-  RiaGraph view() const { return {offsets, senders, kinds, head_kinds, kLayersnetMessageKinds}; }
+  RiaGraph view() const { return {offsets, senders, kinds, head_kinds, kSelfMessageKinds}; }
 };
 
 // Inputs: q, r (P, H*D); s = [patch senders; inter senders] (M + P*K, H*D); W (D, 3);
