@@ -413,7 +413,7 @@ void Run::run_epoch(int epoch) {
   }
   // best.h5 first: a kill between the two writes resumes from the previous checkpoint and
   // writes both again.
-  if (best) save((fs::path(options_.run_dir) / "best.h5").string());
+  if (best) save(best_checkpoint_path(options_.run_dir));
   if (config_.train.epoch_checkpoints || state_.epoch == config_.train.epochs) save_step_checkpoint();
 }
 
