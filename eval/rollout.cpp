@@ -151,7 +151,7 @@ Points predict_positions(ad::Tape<T>& tape, ad::ParamStore<T>& params, const Con
     pred = model::forward(tape, params, config.model, input);  // no copy on the float rollout path
   else
     pred = model::forward(tape, params, config.model, model::cast_input<T>(input));
-  Points x = pred.vertex.val().leftCols(3).template cast<float>();
+  Points x = model::next_positions(pred).template cast<float>();
   x.rowwise() += sample.root_translation_next.transpose();
   return x;
 }

@@ -22,6 +22,7 @@
 #include "model/model_config.h"
 #include "model/model_input.h"
 
+#include <Eigen/Core>
 #include <cstdint>
 #include <string>
 
@@ -32,6 +33,13 @@ struct Predictions {
   ad::Var<T> vertex;  // (N, 9)
   ad::Var<T> patch;   // (P, 9)
 };
+
+// x_{t+1} of every garment vertex, the first three columns of Predictions::vertex: (N, 3),
+// root-relative scene units.
+template <class T>
+Eigen::Matrix<T, Eigen::Dynamic, 3, Eigen::RowMajor> next_positions(const Predictions<T>& p) {
+  return p.vertex.val().leftCols(3);
+}
 
 // Wall-clock split of one forward (ms, steady clock) and the work each stage did, for the
 // cost benches (`layersnet bench scaling`, `bench scene`; model/README.md "Cost and scaling").

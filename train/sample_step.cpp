@@ -54,9 +54,8 @@ SampleOutcome train_sample(const TrainData& data, Window& window, int t, int sel
     {
       ad::NoRecord<float> off(tape);
       const auto pred = model::forward(tape, params, config.model, input);
-      predicted.resize(static_cast<std::size_t>(pred.vertex.rows) * 3);
-      for (int64_t v = 0; v < pred.vertex.rows; ++v)
-        for (int c = 0; c < 3; ++c) predicted[static_cast<std::size_t>(v * 3 + c)] = pred.vertex.value[v * 9 + c];
+      const auto x_next = model::next_positions(pred);
+      predicted.assign(x_next.data(), x_next.data() + x_next.size());
     }
     out.model_seconds += seconds_since(start);
     window.feed_back(f + 1, predicted.data());
@@ -100,20 +99,19 @@ double predict_and_score(const TrainData& data, const Window& window, int t, con
   ad::NoRecord<float> off(tape);
   const auto pred = model::forward(tape, params, config.model, input);
   double sum = 0;
-  const int64_t n = pred.vertex.rows;
-  if (predicted) predicted->resize(static_cast<std::size_t>(n) * 3);
-  for (int64_t v = 0; v < n; ++v) {
+  const auto x_next = model::next_positions(pred);
+  if (predicted) predicted->assign(x_next.data(), x_next.data() + x_next.size());
+  for (int64_t v = 0; v < x_next.rows(); ++v) {
     double d2 = 0;
     for (int c = 0; c < 3; ++c) {
-      const float x = pred.vertex.value[v * 9 + c];
-      if (predicted) (*predicted)[static_cast<std::size_t>(v * 3 + c)] = x;
+      const float x = x_next(v, c);
       const double d = static_cast<double>(x) - s.target(v, c);
       d2 += d * d;
     }
     sum += std::sqrt(d2);
   }
   tape.reset();
-  return n > 0 ? sum / static_cast<double>(n) : 0.0;
+  return x_next.rows() > 0 ? sum / static_cast<double>(x_next.rows()) : 0.0;
 }
 
 }  // namespace

@@ -260,9 +260,7 @@ TEST_F(TrainerTest, RolloutValidationFeedsPredictionsBackAndPicksBestByIt) {
     const auto input = model::model_input_from_sample(s, val.stats(), c.model);
     ad::NoRecord<float> off(tape);
     const auto pred = model::forward(tape, params, c.model, input);
-    std::vector<float> x(static_cast<std::size_t>(pred.vertex.rows) * 3);
-    for (int64_t v = 0; v < pred.vertex.rows; ++v)
-      for (int k = 0; k < 3; ++k) x[static_cast<std::size_t>(v * 3 + k)] = pred.vertex.value[v * 9 + k];
+    const auto x = model::next_positions(pred);
     tape.reset();
     fed.set_garments_relative(f + 1, x.data());
   }
