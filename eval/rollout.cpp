@@ -8,6 +8,7 @@
 #include "model/layersnet.h"
 #include "model/sample_input.h"
 #include "train/checkpoint.h"
+#include "train/run_dir.h"
 #include "train/train_data.h"
 
 #include <chrono>
@@ -31,50 +32,6 @@ Points FollowBody::step(const dataset::Sequence& seq, int t, const Points&, cons
   Points x = x_now;
   x.rowwise() += shift;
   return x;
-}
-
-namespace {
-const char* const kStatQuantities[] = {"position", "velocity", "acceleration",
-                                       "root_position", "root_velocity", "root_acceleration"};
-dataset::MeanStd* stat_slot(dataset::NormalisationStats& s, int q) {
-  dataset::MeanStd* slots[] = {&s.position, &s.velocity, &s.acceleration,
-                               &s.root_position, &s.root_velocity, &s.root_acceleration};
-  return slots[q];
-}
-}  // namespace
-
-bool stats_from_checkpoint(const std::map<std::string, std::vector<double>>& stored, dataset::NormalisationStats& out) {
-  dataset::NormalisationStats s;
-  for (int q = 0; q < 6; ++q) {
-    const std::string base = kStatQuantities[q];
-    auto find = [&](const std::string& what) {
-      auto it = stored.find(base + "." + what);
-      return it != stored.end() ? it : stored.find(base + "_" + what);
-    };
-    const auto mean = find("mean"), std = find("std");
-    if (mean == stored.end() || std == stored.end() || mean->second.size() != 3 || std->second.size() != 3)
-      return false;
-    dataset::MeanStd* slot = stat_slot(s, q);
-    slot->mean = Eigen::Vector3d(mean->second[0], mean->second[1], mean->second[2]);
-    slot->std = Eigen::Vector3d(std->second[0], std->second[1], std->second[2]);
-    if (const auto c = find("count"); c != stored.end() && !c->second.empty())
-      slot->count = static_cast<int64_t>(c->second[0]);
-  }
-  out = s;
-  return true;
-}
-
-std::map<std::string, std::vector<double>> stats_to_checkpoint(const dataset::NormalisationStats& stats) {
-  std::map<std::string, std::vector<double>> out;
-  dataset::NormalisationStats s = stats;
-  for (int q = 0; q < 6; ++q) {
-    const dataset::MeanStd* slot = stat_slot(s, q);
-    const std::string base = kStatQuantities[q];
-    out[base + ".mean"] = {slot->mean[0], slot->mean[1], slot->mean[2]};
-    out[base + ".std"] = {slot->std[0], slot->std[1], slot->std[2]};
-    out[base + ".count"] = {static_cast<double>(slot->count)};
-  }
-  return out;
 }
 
 template <class T>
@@ -164,7 +121,9 @@ std::unique_ptr<ModelPredictor> load_model_predictor(const std::string& path, co
                                                      const dataset::NormalisationStats* fallback_stats) {
   LoadedModel m = load_model(path);
   dataset::NormalisationStats stats;
-  if (!stats_from_checkpoint(m.checkpoint.stats, stats)) {
+  if (!m.checkpoint.stats.empty()) {
+    stats = stats_from_arrays(m.checkpoint.stats, path);
+  } else {
     if (!fallback_stats)
       throw std::runtime_error(path + ": the checkpoint holds no normalisation statistics (/stats/position.mean ...) "
                                "and no data set stats.h5 was given; run `layersnet prepare <dataset>`");

@@ -60,13 +60,6 @@ class FollowBody : public Predictor {
               const Points& x_now) override;
 };
 
-// Statistics stored in a checkpoint (/stats/<quantity>.{mean,std,count} as the trainer
-// writes them, train/run_dir.h; "<quantity>_mean" is accepted too), quantity one of
-// position, velocity, acceleration, root_position, root_velocity, root_acceleration.
-// Returns false (and leaves `out` untouched) when any mean/std is missing.
-bool stats_from_checkpoint(const std::map<std::string, std::vector<double>>& stored, dataset::NormalisationStats& out);
-// The inverse, for writing checkpoints in tests and tools.
-std::map<std::string, std::vector<double>> stats_to_checkpoint(const dataset::NormalisationStats& stats);
 
 
 // The dataset sample of a rollout step: the window t-2..t+1 with the body from the data and the

@@ -121,20 +121,25 @@ std::map<std::string, std::vector<double>> stats_to_arrays(const dataset::Normal
 dataset::NormalisationStats stats_from_arrays(const std::map<std::string, std::vector<double>>& a,
                                               const std::string& origin) {
   dataset::NormalisationStats s;
-  auto get = [&](const std::string& key, std::size_t n) -> const std::vector<double>& {
-    const auto it = a.find(key);
-    if (it == a.end() || it->second.size() != n)
-      throw std::runtime_error(origin + ": /stats/" + key + " is missing or not " + std::to_string(n) +
-                               " values (checkpoint written by another program version?)");
+  // "<quantity>.<what>", or "<quantity>_<what>" as other writers spell it.
+  auto find = [&](const std::string& name, const std::string& what) {
+    const auto it = a.find(name + "." + what);
+    return it != a.end() ? it : a.find(name + "_" + what);
+  };
+  auto get = [&](const std::string& name, const std::string& what) -> const std::vector<double>& {
+    const auto it = find(name, what);
+    if (it == a.end() || it->second.size() != 3)
+      throw std::runtime_error(origin + ": /stats/" + name + "." + what +
+                               " is missing or not 3 values (checkpoint written by another program version?)");
     return it->second;
   };
   for (const auto& [name, field] : stat_fields()) {
     dataset::MeanStd& m = s.*field;
-    const auto& mean = get(name + ".mean", 3);
-    const auto& std = get(name + ".std", 3);
+    const auto& mean = get(name, "mean");
+    const auto& std = get(name, "std");
     m.mean = {mean[0], mean[1], mean[2]};
     m.std = {std[0], std[1], std[2]};
-    m.count = static_cast<int64_t>(get(name + ".count", 1)[0]);
+    if (const auto c = find(name, "count"); c != a.end() && !c->second.empty()) m.count = static_cast<int64_t>(c->second[0]);
   }
   return s;
 }

@@ -40,7 +40,8 @@ class RunLock {
   int fd_ = -1;
 };
 
-// NormalisationStats <-> checkpoint /stats arrays ("position.mean", "position.std", ...).
+// NormalisationStats <-> checkpoint /stats arrays ("position.mean", "position.std", ...;
+// reading also accepts "position_mean", and a missing count leaves it 0).
 std::map<std::string, std::vector<double>> stats_to_arrays(const dataset::NormalisationStats& stats);
 // Throws std::runtime_error naming `origin` and the missing array.
 dataset::NormalisationStats stats_from_arrays(const std::map<std::string, std::vector<double>>& arrays,

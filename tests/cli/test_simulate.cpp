@@ -9,6 +9,7 @@
 #include "model/params_layout.h"
 #include "train/checkpoint.h"
 #include "train/config.h"
+#include "train/run_dir.h"
 
 #include "tests/eval/cli_test_util.h"
 
@@ -65,7 +66,7 @@ class Simulate : public ::testing::Test {
     model::init_params(ps, c.model, 7);
     Checkpoint cp;
     cp.config_toml = to_toml(c);
-    cp.stats = stats_to_checkpoint(stats);
+    cp.stats = stats_to_arrays(stats);
     write_checkpoint(checkpoint(), ps, cp);
     // The user's files: every body frame, and each garment at frame 0 with its UVs.
     fs::create_directories(root_ / "body");

@@ -7,6 +7,7 @@
 #include "model/params_layout.h"
 #include "train/checkpoint.h"
 #include "train/config.h"
+#include "train/run_dir.h"
 
 #include <sys/wait.h>
 
@@ -62,7 +63,7 @@ inline dataset::NormalisationStats write_tiny_data_and_checkpoint(const std::fil
   model::init_params(ps, c.model, 7);
   Checkpoint cp;
   cp.config_toml = to_toml(c);
-  cp.stats = stats_to_checkpoint(stats);
+  cp.stats = stats_to_arrays(stats);
   write_checkpoint((root / "tiny.h5").string(), ps, cp);
   return stats;
 }

@@ -74,7 +74,7 @@ class Extremes : public ::testing::Test {
     ASSERT_FALSE(all.empty()) << log_.str();
     checkpoint_ = all.back();
     model_ = std::make_unique<LoadedModel>(load_model(checkpoint_));
-    ASSERT_TRUE(stats_from_checkpoint(model_->checkpoint.stats, stats_));
+    stats_ = stats_from_arrays(model_->checkpoint.stats, "model");
     source_ = dataset::make_synthetic_sequence(synthetic_options());
   }
   static void TearDownTestSuite() {
