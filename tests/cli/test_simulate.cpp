@@ -60,14 +60,7 @@ class Simulate : public ::testing::Test {
     const auto m = dataset::write_synthetic_dataset((root_ / "data").string(), 1, 0, 0, scene_options());
     const auto stats = dataset::compute_stats(m);
     seq_ = dataset::read_sequence(m.sequence_path(m.train.front()));
-    Config c = load_config({std::string(LAYERSNET_SOURCE_DIR) + "/configs/tiny.toml"});
-    ad::ParamStore<float> ps;
-    model::register_params(ps, c.model);
-    model::init_params(ps, c.model, 7);
-    Checkpoint cp;
-    cp.config_toml = to_toml(c);
-    cp.stats = stats_to_arrays(stats);
-    write_checkpoint(checkpoint(), ps, cp);
+    cli_test::write_tiny_checkpoint(checkpoint(), stats);
     // The user's files: every body frame, and each garment at frame 0 with its UVs.
     fs::create_directories(root_ / "body");
     for (int t = 0; t < seq_.info.num_frames; ++t) {

@@ -39,6 +39,21 @@ inline std::string slurp(const std::filesystem::path& p) {
   return s.str();
 }
 
+// A freshly initialised configs/tiny.toml model (seed 7) carrying `stats`; its config names
+// `dataset` when one is given.
+inline void write_tiny_checkpoint(const std::filesystem::path& path, const dataset::NormalisationStats& stats,
+                                  const std::string& dataset = "") {
+  Config c = load_config({std::string(LAYERSNET_SOURCE_DIR) + "/configs/tiny.toml"});
+  if (!dataset.empty()) c.data.dataset = dataset;
+  ad::ParamStore<float> ps;
+  model::register_params(ps, c.model);
+  model::init_params(ps, c.model, 7);
+  Checkpoint cp;
+  cp.config_toml = to_toml(c);
+  cp.stats = stats_to_arrays(stats);
+  write_checkpoint(path.string(), ps, cp);
+}
+
 // At root/data: a synthetic data set (n_train / n_val / n_test sequences of two tube garments,
 // 9 frames, on a coarse body) with its stats.h5. At root/tiny.h5: a freshly initialised
 // configs/tiny.toml model (seed 7) whose config names that data set and which carries its
@@ -56,15 +71,7 @@ inline dataset::NormalisationStats write_tiny_data_and_checkpoint(const std::fil
   const auto m = dataset::write_synthetic_dataset((root / "data").string(), n_train, n_val, n_test, o);
   const auto stats = dataset::compute_stats(m);
   dataset::write_stats(m.stats_path(), stats);
-  Config c = load_config({std::string(LAYERSNET_SOURCE_DIR) + "/configs/tiny.toml"});
-  c.data.dataset = (root / "data").string();
-  ad::ParamStore<float> ps;
-  model::register_params(ps, c.model);
-  model::init_params(ps, c.model, 7);
-  Checkpoint cp;
-  cp.config_toml = to_toml(c);
-  cp.stats = stats_to_arrays(stats);
-  write_checkpoint((root / "tiny.h5").string(), ps, cp);
+  write_tiny_checkpoint(root / "tiny.h5", stats, (root / "data").string());
   return stats;
 }
 

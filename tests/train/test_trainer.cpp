@@ -15,6 +15,7 @@
 #include "train/run_dir.h"
 #include "train/sample_step.h"
 #include "train/train_data.h"
+#include "tests/train/child_process.h"
 
 #include <gtest/gtest.h>
 #include <fcntl.h>
@@ -573,27 +574,8 @@ TEST_F(TrainerTest, NonFiniteGradientSkipsTheUpdateAndStopsAfterKInARow) {
   }
 }
 
-// Runs the real program; returns its pid (the caller waits).
-pid_t spawn(const std::vector<std::string>& args, const fs::path& log) {
-  const pid_t pid = ::fork();
-  if (pid == 0) {
-    const int fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
-    ::dup2(fd, 1);
-    ::dup2(fd, 2);
-    std::vector<char*> argv;
-    for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-    argv.push_back(nullptr);
-    ::execv(argv[0], argv.data());
-    ::_exit(127);
-  }
-  return pid;
-}
-
-int wait_exit(pid_t pid) {
-  int status = 0;
-  ::waitpid(pid, &status, 0);
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -WTERMSIG(status);
-}
+using testing::spawn;
+using testing::wait_exit;
 
 TEST_F(TrainerTest, KilledRunResumesToBitIdenticalParameters) {
   const std::string data = make_dataset(3, 1, 8);

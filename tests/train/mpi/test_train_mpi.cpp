@@ -9,6 +9,7 @@
 #include "train/checkpoint.h"
 #include "train/run_dir.h"
 #include "train/trainer.h"
+#include "tests/train/child_process.h"
 
 #include <gtest/gtest.h>
 #include <dirent.h>
@@ -43,36 +44,8 @@ std::vector<std::string> mpirun(int ranks) {
           "--mca", "btl_vader_single_copy_mechanism", "none"};
 }
 
-pid_t spawn(const std::vector<std::string>& args, const fs::path& log) {
-  const pid_t pid = ::fork();
-  if (pid == 0) {
-    ::setpgid(0, 0);  // its own group: a timeout ends the launcher and its ranks together
-    const int fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
-    ::dup2(fd, 1);
-    ::dup2(fd, 2);
-    std::vector<char*> argv;
-    for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-    argv.push_back(nullptr);
-    ::execv(argv[0], argv.data());
-    ::_exit(127);
-  }
-  return pid;
-}
-
-// Exit status (negative: the signal), or nullopt after `limit` (the group is killed).
-std::optional<int> wait_exit(pid_t pid, std::chrono::seconds limit) {
-  const auto end = Clock::now() + limit;
-  int status = 0;
-  while (::waitpid(pid, &status, WNOHANG) == 0) {
-    if (Clock::now() > end) {
-      ::kill(-pid, SIGKILL);
-      ::waitpid(pid, &status, 0);
-      return std::nullopt;
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  }
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -WTERMSIG(status);
-}
+using testing::spawn;
+using testing::wait_exit;
 
 // The pid of the process whose environment says OMPI_COMM_WORLD_RANK=rank under `launcher`.
 pid_t find_rank(pid_t launcher, int rank) {
