@@ -410,10 +410,17 @@ Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
     return local ? ad::concat_cols(tape, {rel_part, loc_v, e_part, h_part}) : ad::concat_cols(tape, {rel_part, e_part, h_part});
   };
 
+  // The decoder MLP decoder.proj with its first-layer weight given (factored and/or with local columns).
+  auto decode = [&](const Var<T>& f, const Var<T>& W_first) {
+    const Var<T> h = ad::linear_relu(tape, f, W_first, p("decoder.proj.0.bias"));
+    const Var<T> h2 = ad::linear_relu(tape, h, p("decoder.proj.1.weight"), p("decoder.proj.1.bias"));
+    return ad::linear(tape, h2, p("decoder.proj.2.weight"), p("decoder.proj.2.bias"));
+  };
+
   Var<T> a_p, a_e;  // decoder outputs (local frame): per patch (P, 3), per candidate (Ec, 3)
   if (ret && opt.factor_decoder) {
     // First layer on [rel, R Wᵀe, R Wᵀh] with weight [W1_rel | W1_e W | W1_h W] (exact, rank 3k).
-    const Var<T> W1 = p("decoder.proj.0.weight"), b1 = p("decoder.proj.0.bias");
+    const Var<T> W1 = p("decoder.proj.0.weight");
     const Var<T> M = ad::concat_cols(tape, {ad::slice_cols(tape, W1, 0, 12),
                                             ad::linear(tape, ad::slice_cols(tape, W1, 12, 12 + d), Wt),
                                             ad::linear(tape, ad::slice_cols(tape, W1, 12 + d, 12 + 2 * d), Wt)});
@@ -423,13 +430,8 @@ Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
     const Var<T> zh_v = rotate_blocks(Rv_host, ad::linear(tape, phi_v, Wt));  // (I⊗R_v) Wᵀ h_v  (N, 3k)
     const Var<T> ze_v = rotate_blocks(Re, ad::gather_rows(tape, z_p, in.cand_patches));
     const Var<T> feat_v = with_local_input(rel_v, ze_v, ad::gather_rows(tape, zh_v, cand_vertex));
-    auto rest = [&](const Var<T>& f, const Var<T>& M_first) {
-      const Var<T> h = ad::linear_relu(tape, f, M_first, b1);
-      const Var<T> h2 = ad::linear_relu(tape, h, p("decoder.proj.1.weight"), p("decoder.proj.1.bias"));
-      return ad::linear(tape, h2, p("decoder.proj.2.weight"), p("decoder.proj.2.bias"));
-    };
-    a_p = rest(feat_p, M);
-    a_e = rest(feat_v, with_local_weight(M));
+    a_p = decode(feat_p, M);
+    a_e = decode(feat_v, with_local_weight(M));
   } else {
     // Patch branch: [0 (12), φ(R_p) e_p, φ(R_p) h_p]; vertex branch: [rel, φ(R_v) e_p, φ(R_v) h_v].
     // k = 1: the fused W R Wᵀ op; k > 1: W (I⊗R) Wᵀ composed.
@@ -439,7 +441,8 @@ Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
     };
     const Var<T> He_p = ret ? phi(Rp_host, Rp, emb) : emb;
     const Var<T> Hh_p = ret ? phi(Rp_host, Rp, phi_p) : phi_p;
-    a_p = mlp(tape, p, "decoder.proj", 3, false, ad::concat_cols(tape, {tape.zeros(P, 12), He_p, Hh_p}));
+    const Var<T> W1 = p("decoder.proj.0.weight");
+    a_p = decode(ad::concat_cols(tape, {tape.zeros(P, 12), He_p, Hh_p}), W1);
     Var<T> He_v, Hh_v;
     if (ret) {
       const Var<T> z_e = rotate_blocks(Re, ad::gather_rows(tape, ad::linear(tape, emb, Wt), in.cand_patches));
@@ -449,14 +452,7 @@ Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
       He_v = ad::gather_rows(tape, emb, in.cand_patches);
       Hh_v = ad::gather_rows(tape, phi_v, cand_vertex);
     }
-    if (local) {
-      const Var<T> W1 = with_local_weight(p("decoder.proj.0.weight"));
-      const Var<T> h = ad::linear_relu(tape, with_local_input(rel_v, He_v, Hh_v), W1, p("decoder.proj.0.bias"));
-      const Var<T> h2 = ad::linear_relu(tape, h, p("decoder.proj.1.weight"), p("decoder.proj.1.bias"));
-      a_e = ad::linear(tape, h2, p("decoder.proj.2.weight"), p("decoder.proj.2.bias"));
-    } else {
-      a_e = mlp(tape, p, "decoder.proj", 3, false, ad::concat_cols(tape, {rel_v, He_v, Hh_v}));
-    }
+    a_e = decode(with_local_input(rel_v, He_v, Hh_v), with_local_weight(W1));
   }
   std::vector<T> base_p(P * 6);
   for (int64_t i = 0; i < P; ++i) std::copy_n(&in.patch_state[12 * i], 6, &base_p[6 * i]);
