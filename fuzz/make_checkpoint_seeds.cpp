@@ -3,6 +3,7 @@
 #include "model/params_layout.h"
 #include "train/checkpoint.h"
 #include "train/config.h"
+#include "train/run_dir.h"
 
 #include <filesystem>
 
@@ -18,12 +19,13 @@ int main(int argc, char** argv) {
     layersnet::Checkpoint cp;
     cp.config_toml = layersnet::to_toml(config);
     cp.has_optimizer = variant == 1;
-    if (variant == 1)
-      for (const char* q : {"position", "velocity", "acceleration", "root_position", "root_velocity", "root_acceleration"}) {
-        cp.stats[std::string(q) + ".mean"] = {0.0, 0.0, 0.0};
-        cp.stats[std::string(q) + ".std"] = {1.0, 1.0, 1.0};
-        cp.stats[std::string(q) + ".count"] = {1.0};
-      }
+    if (variant == 1) {
+      layersnet::dataset::NormalisationStats stats;  // mean 0, std 1
+      for (auto* q : {&stats.position, &stats.velocity, &stats.acceleration, &stats.root_position,
+                      &stats.root_velocity, &stats.root_acceleration})
+        q->count = 1;
+      cp.stats = layersnet::stats_to_arrays(stats);
+    }
     layersnet::write_checkpoint((dir / ("checkpoint" + std::to_string(variant))).string(), params, cp);
   }
   return 0;
