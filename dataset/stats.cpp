@@ -10,15 +10,6 @@
 namespace layersnet::dataset {
 namespace {
 
-const char* const kQuantities[] = {"position", "velocity", "acceleration",
-                                   "root_position", "root_velocity", "root_acceleration"};
-
-MeanStd* field(NormalisationStats& s, int i) {
-  MeanStd* f[] = {&s.position, &s.velocity, &s.acceleration, &s.root_position, &s.root_velocity,
-                  &s.root_acceleration};
-  return f[i];
-}
-
 // Adds one sequence's quantities to the six accumulators.
 void accumulate_sequence(const SequenceFile& file, const StatsOptions& o, StatsAccumulator acc[6]) {
   const SequenceInfo& info = file.info();
@@ -87,7 +78,7 @@ NormalisationStats compute_stats(const DatasetManifest& m, const StatsOptions& o
   StatsAccumulator acc[6];
   for (const auto& id : m.train) accumulate_sequence(SequenceFile(m.sequence_path(id)), o, acc);
   NormalisationStats s;
-  for (int i = 0; i < 6; ++i) *field(s, i) = acc[i].result();
+  for (std::size_t i = 0; i < kStatQuantities.size(); ++i) s.*kStatQuantities[i].field = acc[i].result();
   s.sequences = m.train;
   return s;
 }
@@ -100,10 +91,9 @@ void write_stats(const std::string& path, const NormalisationStats& s) {
     h5::write_string_attr(f, "units",
                           "scene units relative to the body root translation; velocity per frame, "
                           "acceleration per frame^2 (dt = 1 frame)");
-    NormalisationStats copy = s;
-    for (int i = 0; i < 6; ++i) {
-      const MeanStd& q = *field(copy, i);
-      h5::Handle g = h5::create_group(f, kQuantities[i], h5::Where{path, std::string("/") + kQuantities[i]});
+    for (const auto& [name, field] : kStatQuantities) {
+      const MeanStd& q = s.*field;
+      h5::Handle g = h5::create_group(f, name, h5::Where{path, std::string("/") + name});
       Eigen::Vector3d sd = q.std;
       for (int k = 0; k < 3; ++k)
         if (!(sd[k] != 0)) sd[k] = 1.0;
@@ -123,10 +113,10 @@ NormalisationStats read_stats(const std::string& path) {
   if (version != 1) root.fail("attribute 'version' is " + std::to_string(version) + ", must be 1");
   NormalisationStats s;
   s.sequences = h5::read_string_array_attr(f.get(), "sequences", root);
-  for (int i = 0; i < 6; ++i) {
-    const std::string gp = std::string("/") + kQuantities[i];
-    h5::Handle g = h5::open_group(f.get(), kQuantities[i], h5::Where{path, gp});
-    MeanStd& q = *field(s, i);
+  for (const auto& [quantity, field] : kStatQuantities) {
+    const std::string gp = std::string("/") + quantity;
+    h5::Handle g = h5::open_group(f.get(), quantity, h5::Where{path, gp});
+    MeanStd& q = s.*field;
     for (const char* name : {"mean", "std"}) {
       const h5::Where w{path, gp + "/" + name};
       h5::Handle ds = h5::open_dataset(g.get(), name, w);

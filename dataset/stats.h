@@ -39,6 +39,18 @@ struct NormalisationStats {
   std::vector<std::string> sequences;  // ids it was computed from
 };
 
+// The six quantities, by the names stats.h5 groups and checkpoint /stats arrays give them.
+struct StatQuantity {
+  const char* name;
+  MeanStd NormalisationStats::*field;
+};
+inline constexpr std::array<StatQuantity, 6> kStatQuantities = {{{"position", &NormalisationStats::position},
+                                                                  {"velocity", &NormalisationStats::velocity},
+                                                                  {"acceleration", &NormalisationStats::acceleration},
+                                                                  {"root_position", &NormalisationStats::root_position},
+                                                                  {"root_velocity", &NormalisationStats::root_velocity},
+                                                                  {"root_acceleration", &NormalisationStats::root_acceleration}}};
+
 // Streaming accumulator (double sums; merged over frames and sequences).
 class StatsAccumulator {
  public:

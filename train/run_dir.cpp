@@ -92,24 +92,10 @@ RunLock::~RunLock() {
   if (fd_ >= 0) ::close(fd_);  // releases the flock
 }
 
-namespace {
-
-const std::vector<std::pair<std::string, dataset::MeanStd dataset::NormalisationStats::*>>& stat_fields() {
-  static const std::vector<std::pair<std::string, dataset::MeanStd dataset::NormalisationStats::*>> f = {
-      {"position", &dataset::NormalisationStats::position},
-      {"velocity", &dataset::NormalisationStats::velocity},
-      {"acceleration", &dataset::NormalisationStats::acceleration},
-      {"root_position", &dataset::NormalisationStats::root_position},
-      {"root_velocity", &dataset::NormalisationStats::root_velocity},
-      {"root_acceleration", &dataset::NormalisationStats::root_acceleration}};
-  return f;
-}
-
-}  // namespace
-
 std::map<std::string, std::vector<double>> stats_to_arrays(const dataset::NormalisationStats& s) {
   std::map<std::string, std::vector<double>> out;
-  for (const auto& [name, field] : stat_fields()) {
+  for (const auto& [quantity, field] : dataset::kStatQuantities) {
+    const std::string name = quantity;
     const dataset::MeanStd& m = s.*field;
     out[name + ".mean"] = {m.mean[0], m.mean[1], m.mean[2]};
     out[name + ".std"] = {m.std[0], m.std[1], m.std[2]};
@@ -133,7 +119,8 @@ dataset::NormalisationStats stats_from_arrays(const std::map<std::string, std::v
                                " is missing or not 3 values (checkpoint written by another program version?)");
     return it->second;
   };
-  for (const auto& [name, field] : stat_fields()) {
+  for (const auto& [quantity, field] : dataset::kStatQuantities) {
+    const std::string name = quantity;
     dataset::MeanStd& m = s.*field;
     const auto& mean = get(name, "mean");
     const auto& std = get(name, "std");
