@@ -238,53 +238,12 @@ void backward_rot_map_apply(const Node<T>& node) {
   if (W.grad) W.grd().noalias() += v.val().transpose() * dt;
 }
 
-// ---- rotation_from_normals (data, no tape) -----------------------------------------------
-template <class T>
-void rotation_from_normals(std::span<const T> normals, std::span<T> rotations) {
-  LAYERSNET_CHECK(normals.size() % 3 == 0 && rotations.size() / 9 == normals.size() / 3 && rotations.size() % 9 == 0,
-                  "rotation_from_normals: normals (N, 3) has " << normals.size() << " numbers and rotations (N, 9) "
-                                                               << rotations.size() << "; sizes must match");
-  const auto n_rows = static_cast<int64_t>(normals.size() / 3);
-#pragma omp parallel for schedule(static) if (n_rows * 40 > kParallelMin)
-  for (int64_t k = 0; k < n_rows; ++k) {
-    const double n[3] = {double(normals[3 * k]), double(normals[3 * k + 1]), double(normals[3 * k + 2])};
-    T* R = rotations.data() + 9 * k;
-    const double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-    if (len < 1e-12) {
-      for (int c = 0; c < 9; ++c) R[c] = T(c % 4 == 0);
-      continue;
-    }
-    double x[3] = {1, 0, 0};
-    for (int c = 0; c < 3; ++c)
-      if (std::abs(n[c]) < 1e-7) x[c] = 1;
-    // Gram-Schmidt twice for unit n: near an axis the first pass cancels (1 - n_x^2 ~ 1e-14)
-    // and leaves x off-orthogonal by ~1e-10; the second pass brings it to rounding level.
-    // A non-unit n (the gravity quirk) gets the official single pass only.
-    const double nn = n[0] * n[0] + n[1] * n[1] + n[2] * n[2];
-    const int passes = std::abs(nn - 1.0) < 1e-6 ? 2 : 1;
-    for (int pass = 0; pass < passes; ++pass) {
-      const double nx = (n[0] * x[0] + n[1] * x[1] + n[2] * x[2]) / (pass == 0 ? 1.0 : nn);
-      for (int c = 0; c < 3; ++c) x[c] -= nx * n[c];
-      const double xl = std::sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]);
-      for (int c = 0; c < 3; ++c) x[c] /= xl;
-    }
-    double y[3];
-    cross(n, x, y);
-    for (int c = 0; c < 3; ++c) {
-      R[c] = T(x[c]);
-      R[3 + c] = T(y[c]);
-      R[6 + c] = T(n[c]);
-    }
-  }
-}
-
 #define LAYERSNET_INSTANTIATE(T)                                                                     \
   template Var<T> row_norm<T>(Tape<T>&, const Var<T>&);                                             \
   template Var<T> row_normalize<T>(Tape<T>&, const Var<T>&, T);                                     \
   template Var<T> cross3<T>(Tape<T>&, const Var<T>&, const Var<T>&);                                \
   template Var<T> rotate3<T>(Tape<T>&, const Var<T>&, const Var<T>&, bool);                         \
   template Var<T> rot_map_apply<T>(Tape<T>&, const Var<T>&, const Var<T>&, const Var<T>&, bool);    \
-  template void rotation_from_normals<T>(std::span<const T>, std::span<T>);                         \
   template void backward_row_norm<T>(const Node<T>&);                                               \
   template void backward_row_normalize<T>(const Node<T>&);                                          \
   template void backward_cross3<T>(const Node<T>&);                                                 \

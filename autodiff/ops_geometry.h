@@ -8,7 +8,6 @@
 #include "autodiff/tape.h"
 
 #include <cstdint>
-#include <span>
 
 namespace layersnet::ad {
 
@@ -32,7 +31,7 @@ template <class T>
 Var<T> cross3(Tape<T>& tape, const Var<T>& a, const Var<T>& b);
 
 // out[n] = R[n] v[n], or R[n]^T v[n] when `transpose`.   R: (N, 9), v: (N, 3) -> (N, 3)
-// (world -> local with R from rotation_from_normals, local -> world with the transpose).
+// (world -> local with R of rows [x; y; n], local -> world with the transpose).
 template <class T>
 Var<T> rotate3(Tape<T>& tape, const Var<T>& R, const Var<T>& v, bool transpose = false);
 
@@ -43,17 +42,5 @@ Var<T> rotate3(Tape<T>& tape, const Var<T>& R, const Var<T>& v, bool transpose =
 // `transpose` form (eq. 11 rotates back with phi(R)^T). Gradients to W, R and v.
 template <class T>
 Var<T> rot_map_apply(Tape<T>& tape, const Var<T>& W, const Var<T>& R, const Var<T>& v, bool transpose = false);
-
-// Local frames from normals, the official utils/mesh3d.py rotation_from_normals:
-//   x0 = (1, 0, 0), then x0_c = 1 for every component with |n_c| < 1e-7;
-//   x = normalize(x0 - (n . x0) n);  y = n x x;  R = rows [x; y; n]  (world -> local, R n = e_z
-//   for a unit n).
-// n: (N, 3) as N*3 numbers; R: (N, 9) output as N*9 numbers. Not differentiable (data only).
-// n is NOT normalised here (the official gravity frame uses a non-unit vector; quirk 2), so
-// R is orthonormal only for unit n. Robustness: computed in double, so normals within 1e-7
-// of an axis still give orthonormal rows in float; a zero normal (||n|| < 1e-12), where the
-// official code returns a degenerate matrix, gives the identity.
-template <class T>
-void rotation_from_normals(std::span<const T> normals, std::span<T> rotations);
 
 }  // namespace layersnet::ad

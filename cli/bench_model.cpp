@@ -15,10 +15,10 @@
 #include "dataset/file_io.h"
 #include "cli/exit_codes.h"
 #include "losses/losses.h"
-#include "model/input_builder.h"
+#include "losses/sample_loss_input.h"
 #include "model/layersnet.h"
 #include "model/params_layout.h"
-#include "model/synthetic_scene.h"
+#include "model/sample_input.h"
 
 #include <Eigen/Core>
 #include <malloc.h>
@@ -28,6 +28,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -56,27 +57,32 @@ struct BenchModelOptions {
   std::string json;
 };
 
-// The reference's SIZES (layersnet_torch.py): same grids, cell, spacing, radii, heights.
-model::SyntheticSceneOptions reference_scene(const std::string& size) {
-  model::SyntheticSceneOptions o;
+// The reference's SIZES (layersnet_torch.py): same grids, cells (3 x 4 quads per patch at the
+// config's patch size), spacing, radii, heights.
+dataset::SyntheticOptions reference_scene(const std::string& size, const ModelConfig& mc) {
+  dataset::SyntheticOptions o;
+  std::array<int, 2> inner, outer, body;  // (around, along) vertices
   if (size == "small") {
-    o.garments = {{40, 25}, {40, 25}};
-    o.body = {100, 40};
+    inner = outer = {40, 25};
+    body = {100, 40};
   } else if (size == "dlayers") {
-    o.garments = {{100, 80}, {125, 96}};
-    o.body = {106, 65};
+    inner = {100, 80}, outer = {125, 96};
+    body = {106, 65};
   } else {
     throw std::runtime_error("bench model: --size '" + size + "' is unknown; use small or dlayers");
   }
-  o.cell = {3, 4};
-  o.spacing = 0.05;
-  o.garment_radius = {1.235, 1.26};
-  o.garment_z0 = {0.0, -0.2};
-  double zmax = 0;
-  for (std::size_t g = 0; g < o.garments.size(); ++g)
-    zmax = std::max(zmax, o.garment_z0[g] + (o.garments[g][1] - 1) * o.spacing);
-  o.body_radius = 1.2;
-  o.body_z = {-0.6, zmax + 0.6};
+  o.frames = 6;
+  o.sheets = {{inner[0], inner[1], 1.235f, 0.f}, {outer[0], outer[1], 1.26f, -0.2f}};
+  o.sheet_spacing = 0.05f;
+  o.sheet_uv_step = {static_cast<float>(mc.patch_size / 3), static_cast<float>(mc.patch_size / 4)};
+  float zmax = 0;
+  for (const auto& g : o.sheets) zmax = std::max(zmax, g.z0 + (g.along - 1) * o.sheet_spacing);
+  o.body_segments = body[0];
+  o.body_rings = body[1];
+  o.body_radius = 1.2f;
+  o.body_bottom = -0.6f;
+  o.height = zmax + 1.2f;
+  o.body_caps = false;
   o.wind = true;
   o.seed = 0;
   return o;
@@ -185,16 +191,17 @@ int run_bench_model(const BenchModelOptions& o) {
   if (!o.no_reference && !with_ref)
     std::printf("bench model: timing ours only (no --reference; %s)\n", kReferenceOrigin);
   const fs::path script = o.reference;
-  const auto scene = model::make_synthetic_scene(reference_scene(o.size));
   ModelConfig mc;  // official sizes
   mc.body_query = "first";  // the reference's ball query: first K body vertices in index order
   mc.decoder_ret_channels = 1;  // the reference's rank-3 decoder map (same FLOPs and parameters)
   LossConfig lc;
+  const bench::Scene scene = bench::make_scene(reference_scene(o.size, mc), mc);
+  // The input as a rollout step builds it (sample with its neighbour searches, model input).
   const double t_build0 = now_ms();
-  const auto in64 = model::build_model_input(scene, mc);
+  const dataset::TrainingSample sample = bench::sample_of(scene, mc);
+  const auto in = model::model_input_from_sample(sample, scene.stats, mc);
   const double build_ms = now_ms() - t_build0;
-  const auto in = model::cast_input<float>(in64);
-  const auto target = losses::cast_loss_input<float>(losses::build_loss_input(scene, in64));
+  const auto target = losses::loss_input_from_sample(sample, scene.seq.info);
   ad::ParamStore<float> ps;
   model::register_params(ps, mc);
   model::init_params(ps, mc, 1);
@@ -211,7 +218,7 @@ int run_bench_model(const BenchModelOptions& o) {
   nlohmann::json ours_scene = {{"N", in.N},
                                {"P", in.P},
                                {"A", in.A},
-                               {"Nb", scene.B},
+                               {"Nb", scene.seq.info.num_body_vertices},
                                {"U", u_lists},
                                {"U_all", in.U},
                                {"E_world", in.world_senders.size()},

@@ -1,19 +1,20 @@
 // `layersnet bench scaling`: rollout ms/frame and training step ms of one outfit re-meshed at
 // several garment vertex counts, with the split of where the time goes.
 //
-// The outfit: two open cylindrical garment grids of fixed metric extent (inner 5.0 x 4.0,
-// outer 6.25 x 4.75 scene units, radii 1.235 / 1.26) around a fixed body (106 x 65 = 6890
-// vertices, radius 1.2; the body never changes with the garment resolution). At a target N
-// the garment spacing is h = sqrt(area / N). Two patch modes:
+// The outfit (bench_util.h): two open cylindrical garment sheets of fixed metric extent (inner
+// 5.0 x 4.0, outer 6.25 x 4.75 scene units, radii 1.235 / 1.26) around a fixed body (106 x 65 =
+// 6890 vertices, radius 1.2; the body never changes with the garment resolution). At a target N
+// the garment spacing is h = sqrt(area / N). Patches come from the sheets' UVs at the model's
+// patch size (ModelConfig defaults: 0.04 UV); two patch modes set the UV scale:
 //   metric    patch = UV cell of fixed metric size (--patch-size, scene units): P constant,
 //             only the per-vertex parts (input build, decoder) grow with N;
 //   vertices  patch = --cell x --cell grid quads: P ∝ N, world neighbours of a patch grow too
 //             (R is metric, patches shrink), so the attention rows grow faster than N.
-// Model: ModelConfig defaults (the official sizes, which configs/default.toml keeps; its
-// patch_size is a UV size of the data set path and does not apply here), random init.
+// Model: ModelConfig defaults (the official sizes, which configs/default.toml keeps), random init.
 //
-// Per size and thread count: input build (model/input_builder.h, incl. neighbour search;
-// the searches are also timed alone by re-running the same dataset/neighbours.h calls),
+// Per size and thread count: input build (dataset::build_sample + model::model_input_from_sample
+// with the patch structure cached, as a rollout step; incl. neighbour search; the searches are
+// also timed alone by re-running the same dataset/neighbours.h calls),
 // forward stages (model::StageTimes), inference = input build + forward (no tape), training
 // step = forward + losses + backward + Adam. Interleaved passes over all sizes (foreign load
 // spreads over every size); medians over all passes' iterations after the first pass's warm-up.
@@ -23,10 +24,10 @@
 #include "dataset/file_io.h"
 #include "dataset/neighbours.h"
 #include "losses/losses.h"
-#include "model/input_builder.h"
+#include "losses/sample_loss_input.h"
 #include "model/layersnet.h"
 #include "model/params_layout.h"
-#include "model/synthetic_scene.h"
+#include "model/sample_input.h"
 
 #include <Eigen/Core>
 #include <malloc.h>
@@ -34,14 +35,11 @@
 #include <omp.h>
 
 #include <algorithm>
-#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
-#include <functional>
 #include <map>
-#include <set>
 #include <sstream>
 #include <stdexcept>
 
@@ -62,11 +60,7 @@ struct ScalingOptions {
   std::string json, png;
 };
 
-struct OutfitGarment {
-  double around, along, radius, z0;  // extent (scene units), nominal radius, first row height
-};
-constexpr OutfitGarment kOutfit[2] = {{5.0, 4.0, 1.235, 0.0}, {6.25, 4.75, 1.26, -0.2}};
-
+using bench::kOutfit;
 using bench::median;
 using bench::median_times;
 using bench::now_ms;
@@ -90,129 +84,47 @@ std::vector<T> parse_list(const std::string& list, const char* what) {
   return out;
 }
 
-// Patches from grid quads: quad (i, j) of garment g goes to cell_of(g, i, j); cells numbered
-// densely per garment in (u, v) order (as model/synthetic_scene.cpp does for its fixed cells).
-// Rewrites v2p, p2v, own_patch, mesh adjacency and patch_garment of `s`, whose faces must be
-// the synthetic scene's (two per quad, garments in order, i-major).
-using CellOf = std::function<std::array<int, 2>(int g, int i, int j)>;
-void repatch(model::SceneWindow& s, const std::vector<std::array<int, 2>>& grids, const CellOf& cell_of) {
-  std::vector<std::array<int, 3>> face_cell;  // (g, cu, cv) of every face
-  for (int g = 0; g < static_cast<int>(grids.size()); ++g)
-    for (int i = 0; i + 1 < grids[g][0]; ++i)
-      for (int j = 0; j + 1 < grids[g][1]; ++j) {
-        const auto c = cell_of(g, i, j);
-        face_cell.push_back({g, c[0], c[1]}), face_cell.push_back({g, c[0], c[1]});
-      }
-  if (face_cell.size() * 3 != s.faces.size())
-    throw std::runtime_error("bench scaling: repatch expects 2 faces per grid quad; the synthetic scene changed");
-  std::set<std::array<int, 3>> cells(face_cell.begin(), face_cell.end());
-  std::map<std::array<int, 3>, int32_t> id;
-  s.patch_garment.clear();
-  for (const auto& c : cells) id.emplace(c, static_cast<int32_t>(id.size())), s.patch_garment.push_back(c[0]);
-  s.P = static_cast<int64_t>(id.size());
-  std::vector<std::set<int32_t>> v2p(s.N), adj(s.P);
-  for (std::size_t f = 0; f < face_cell.size(); ++f)
-    for (int k = 0; k < 3; ++k) v2p[s.faces[3 * f + k]].insert(id[face_cell[f]]);
-  for (std::size_t f = 0; f < s.faces.size(); f += 3)
-    for (int k = 0; k < 3; ++k)
-      for (int32_t pu : v2p[s.faces[f + k]])
-        for (int32_t pw : v2p[s.faces[f + (k + 1) % 3]]) adj[pu].insert(pw), adj[pw].insert(pu);
-  std::vector<std::vector<int32_t>> p2v(s.P);
-  s.v2p_offsets.assign(1, 0), s.v2p_patches.clear(), s.own_patch.clear();
-  for (int64_t v = 0; v < s.N; ++v) {
-    for (int32_t p : v2p[v]) s.v2p_patches.push_back(p), p2v[p].push_back(static_cast<int32_t>(v));
-    s.v2p_offsets.push_back(static_cast<int32_t>(s.v2p_patches.size()));
-    s.own_patch.push_back(v2p[v].empty() ? -1 : *v2p[v].begin());
-  }
-  s.p2v_offsets.assign(1, 0), s.p2v_vertices.clear(), s.adj_offsets.assign(1, 0), s.adj_patches.clear();
-  for (int64_t p = 0; p < s.P; ++p) {
-    s.p2v_vertices.insert(s.p2v_vertices.end(), p2v[p].begin(), p2v[p].end());
-    s.p2v_offsets.push_back(static_cast<int32_t>(s.p2v_vertices.size()));
-    s.adj_patches.insert(s.adj_patches.end(), adj[p].begin(), adj[p].end());
-    s.adj_offsets.push_back(static_cast<int32_t>(s.adj_patches.size()));
-  }
-}
-
-// The outfit at about `target` garment vertices (see the file comment).
-model::SceneWindow make_outfit(int64_t target, const std::string& mode, const ScalingOptions& o) {
-  double area = 0, zmax = 0;
-  for (const auto& g : kOutfit) area += g.around * g.along, zmax = std::max(zmax, g.z0 + g.along);
-  const double h = std::sqrt(area / static_cast<double>(target));
-  model::SyntheticSceneOptions so;
-  so.garments.clear();
-  for (const auto& g : kOutfit) {
-    so.garments.push_back({static_cast<int>(std::lround(g.around / h)) + 1, static_cast<int>(std::lround(g.along / h)) + 1});
-    so.garment_radius.push_back(g.radius), so.garment_z0.push_back(g.z0);
-  }
-  so.cell = {1 << 20, 1 << 20};  // one patch per garment here (cheap); repatch() below sets the real ones
-  so.spacing = h;
-  so.body = {106, 65};
-  so.body_radius = 1.2;
-  so.body_z = {-0.6, zmax + 0.6};
-  so.wind = true;
-  so.seed = 0;
-  model::SceneWindow s = model::make_synthetic_scene(so);
-  CellOf cell_of;
+// The outfit at about `target` garment vertices (see the file comment): UV step per grid step
+// so that a patch is o.patch_size scene units (metric) or o.cell x o.cell quads (vertices).
+bench::Scene make_outfit(int64_t target, const std::string& mode, const ScalingOptions& o, const ModelConfig& mc) {
+  dataset::SyntheticOptions so = bench::outfit(target);
+  float step = 0;
   if (mode == "metric") {
-    cell_of = [&o, h](int g, int i, int j) {
-      const int nu = std::max(1, static_cast<int>(std::lround(kOutfit[g].around / o.patch_size)));
-      const int nv = std::max(1, static_cast<int>(std::lround(kOutfit[g].along / o.patch_size)));
-      const int cu = std::min(nu - 1, static_cast<int>(std::floor((i + 0.5) * h / o.patch_size)));
-      const int cv = std::min(nv - 1, static_cast<int>(std::floor((j + 0.5) * h / o.patch_size)));
-      return std::array<int, 2>{cu, cv};
-    };
+    step = static_cast<float>(so.sheet_spacing * mc.patch_size / o.patch_size);
   } else if (mode == "vertices") {
-    cell_of = [&o](int, int i, int j) { return std::array<int, 2>{i / o.cell, j / o.cell}; };
+    step = static_cast<float>(mc.patch_size / o.cell);
   } else {
     throw std::runtime_error("bench scaling: --modes item '" + mode + "' is unknown; use metric and/or vertices");
   }
-  repatch(s, so.garments, cell_of);
-  return s;
+  so.sheet_uv_step = {step, step};
+  return bench::make_scene(so, mc);
 }
 
-// The input builder's neighbour searches alone (same dataset/neighbours.h calls and sizes).
+// The sample's neighbour searches alone (the same dataset/neighbours.h calls and sizes as
+// build_sample, and the decoder candidates of model_input_from_sample).
 struct SearchMs {
   double world = 0, body = 0, nearest = 0, candidates = 0;
   double total() const { return world + body + nearest + candidates; }
 };
-SearchMs time_searches(const model::SceneWindow& s, const ModelConfig& mc) {
-  auto rel = [](const std::vector<double>& x, const double r[3]) {
-    std::vector<double> o(x.size());
-    for (std::size_t i = 0; i < x.size(); ++i) o[i] = x[i] - r[i % 3];
-    return o;
-  };
-  auto pts = [](const std::vector<double>& x) {
-    dataset::Points p(static_cast<Eigen::Index>(x.size() / 3), 3);
-    for (std::size_t i = 0; i < x.size(); ++i) p(static_cast<Eigen::Index>(i / 3), static_cast<Eigen::Index>(i % 3)) = static_cast<float>(x[i]);
-    return p;
-  };
-  const auto xt = rel(s.x_t, s.root[2]), b1 = rel(s.body_tp1, s.root[3]);
-  std::vector<double> centre(3 * s.P, 0.0);
-  for (int64_t p = 0; p < s.P; ++p) {
-    const int32_t b = s.p2v_offsets[p], e = s.p2v_offsets[p + 1];
-    for (int32_t k = b; k < e; ++k)
-      for (int c = 0; c < 3; ++c) centre[3 * p + c] += xt[3 * s.p2v_vertices[k] + c] / (e - b);
-  }
+SearchMs time_searches(const dataset::TrainingSample& s, const ModelConfig& mc) {
+  const dataset::Points centres = s.patch_state.leftCols<3>(), body = s.body_state.leftCols<3>();
+  const dataset::Points x = s.state.leftCols<3>();
+  const dataset::PatchStructure& all = s.structure->all;
   SearchMs ms;
   double t0 = now_ms();
-  const auto cp = pts(centre), bp = pts(b1), xp = pts(xt);
-  dataset::Csr adjacency{s.adj_offsets, s.adj_patches};
-  const auto w = dataset::world_edges(cp, adjacency, static_cast<float>(mc.world_radius));
+  const auto w = dataset::world_edges(centres, all.adjacency, static_cast<float>(mc.world_radius));
   ms.world = now_ms() - t0;
   t0 = now_ms();
-  dataset::NeighbourOptions no;
-  no.body_radius = static_cast<float>(mc.body_radius);
-  no.body_k = mc.body_neighbors;
-  no.body_query = mc.body_query == "first" ? dataset::BodyQuery::kFirstInIndexOrder : dataset::BodyQuery::kNearest;
-  no.official_padding = false;
-  const auto nb = dataset::body_neighbours(cp, bp, no);
+  const auto nb = dataset::body_neighbours(centres, body, model::sample_options_for(mc).neighbours);
   ms.body = now_ms() - t0;
   t0 = now_ms();
-  const auto n1 = dataset::nearest_body(cp, bp), n2 = dataset::nearest_body(xp, bp);
+  const auto n1 = dataset::nearest_body(centres, body), n2 = dataset::nearest_body(x, body);
   ms.nearest = now_ms() - t0;
   t0 = now_ms();
+  std::vector<double> xt(x.data(), x.data() + x.size()), centre(centres.data(), centres.data() + centres.size());
   std::vector<int32_t> co, ci;
-  model::decoder_candidates(xt, centre, s.own_patch, s.adj_offsets, s.adj_patches, mc.decoder_patch_candidates, co, ci);
+  model::decoder_candidates(xt, centre, all.own_patch, all.adjacency.offsets, all.adjacency.items,
+                            mc.decoder_patch_candidates, co, ci);
   ms.candidates = now_ms() - t0;
   if (w.items.size() + nb.hits.size() + n1.index.size() + n2.index.size() + ci.size() == 0) std::printf(" ");  // keep the work
   return ms;
@@ -238,7 +150,8 @@ struct Samples {
 struct Case {
   std::string mode;
   double h = 0;
-  model::SceneWindow scene;
+  bench::Scene scene;
+  dataset::TrainingSample sample;  // at scene.t, for timing the searches alone
   model::ModelInput<float> input;
   losses::LossInput<float> target;
   int64_t U = 0;
@@ -253,7 +166,7 @@ void measure(Case& c, const ModelConfig& mc, int threads, int skip, int n, bool 
   Eigen::setNbThreads(1);  // the ops own the threads (see bench model)
   Samples& s = c.by_threads[threads];
   for (int it = 0; it < skip + n; ++it) {
-    const SearchMs sm = time_searches(c.scene, mc);
+    const SearchMs sm = time_searches(c.sample, mc);
     const bench::InferenceTiming t = bench::time_inference(c.scene, mc, ps, tape);
     if (it >= skip) {
       s.input.push_back(t.input_ms), s.fwd.push_back(t.forward_ms), s.infer.push_back(t.input_ms + t.forward_ms);
@@ -288,7 +201,7 @@ Row summarise(const Case& c, int threads, const Samples& s) {
   r.input_ms = median(s.input), r.forward_ms = median(s.fwd), r.infer_ms = median(s.infer);
   r.search = {median(s.search[0]), median(s.search[1]), median(s.search[2]), median(s.search[3])};
   r.stages = median_times(s.stages);
-  r.N = c.input.N, r.P = c.input.P, r.B = c.scene.B, r.U = c.input.U;
+  r.N = c.input.N, r.P = c.input.P, r.B = c.scene.seq.info.num_body_vertices, r.U = c.input.U;
   r.E_world = r.stages.world_rows, r.E_inter = r.stages.inter_rows, r.E_body = r.stages.body_rows;
   r.E_mesh = r.stages.mesh_rows, r.E_cand = r.stages.candidate_rows;
   r.train_ms = median(s.train), r.train_forward_ms = median(s.train_fwd), r.losses_ms = median(s.losses);
@@ -426,10 +339,10 @@ int run_bench_scaling(const ScalingOptions& o) {
     for (int64_t n : sizes) {
       Case c;
       c.mode = mode, c.h = std::sqrt(area / static_cast<double>(n));
-      c.scene = make_outfit(n, mode, o);
-      const auto in64 = model::build_model_input(c.scene, mc);
-      c.input = model::cast_input<float>(in64);
-      c.target = losses::cast_loss_input<float>(losses::build_loss_input(c.scene, in64));
+      c.scene = make_outfit(n, mode, o, mc);
+      c.sample = bench::sample_of(c.scene, mc);
+      c.input = model::model_input_from_sample(c.sample, c.scene.stats, mc);
+      c.target = losses::loss_input_from_sample(c.sample, c.scene.seq.info);
       cases.push_back(std::move(c));
     }
   // One parameter set, optimiser and tape for every case (the tape's arena keeps the largest size).

@@ -1,6 +1,7 @@
 // `layersnet bench scene`: cost follows the scene's content. One motion (the
 // synthetic outfit of `bench scaling` at --vertices, 3x3-quad patches, body 106 x 65), timed
-// in configurations that each take one part away (model/scene_variants.h):
+// in configurations that each take one part away (synthetic options: every other part of the
+// sequence stays bit-identical, dataset/synthetic.h):
 //   full         two garments + wind + body near
 //   one_garment  the inner garment only (its vertices, patches and their edges)
 //   no_wind      no wind token (ModelInput has_wind = false: no encoder, no edges)
@@ -14,7 +15,8 @@
 //   body encoder            U body tokens                  other encoders       2P + A + ext + tokens
 //   attention projections   4P + 2 tokens                  FFN/LN/memory        (L-1) tokens + P
 //   decoder                 candidate rows + N + P         unstaged remainder   P
-//   input build             N + P (the body/wind searches still run)
+//   input build             N + P (the body/wind searches still run; sample + model input,
+//                           patch structure cached as in a rollout)
 //   train step              (train - Adam) x expected forward share (backward assumed ∝ forward)
 #include "autodiff/optim.h"
 #include "cli/bench_util.h"
@@ -22,11 +24,10 @@
 #include "dataset/file_io.h"
 #include "eval/metrics.h"
 #include "losses/losses.h"
-#include "model/input_builder.h"
+#include "losses/sample_loss_input.h"
 #include "model/layersnet.h"
 #include "model/params_layout.h"
-#include "model/scene_variants.h"
-#include "model/synthetic_scene.h"
+#include "model/sample_input.h"
 
 #include <Eigen/Core>
 #include <malloc.h>
@@ -59,30 +60,9 @@ using bench::now_ms;
 using bench::uptime_load;
 using eval::quantile;
 
-// The outfit of bench scaling (inner 5.0 x 4.0, outer 6.25 x 4.75 scene units) at ~`target`
-// garment vertices, patches of 3x3 grid quads.
-model::SceneWindow make_scene(int64_t target) {
-  const double ext[2][4] = {{5.0, 4.0, 1.235, 0.0}, {6.25, 4.75, 1.26, -0.2}};  // around, along, radius, z0
-  const double area = ext[0][0] * ext[0][1] + ext[1][0] * ext[1][1], h = std::sqrt(area / static_cast<double>(target));
-  model::SyntheticSceneOptions so;
-  so.garments.clear();
-  for (const auto& g : ext) {
-    so.garments.push_back({static_cast<int>(std::lround(g[0] / h)) + 1, static_cast<int>(std::lround(g[1] / h)) + 1});
-    so.garment_radius.push_back(g[2]), so.garment_z0.push_back(g[3]);
-  }
-  so.cell = {3, 3};
-  so.spacing = h;
-  so.body = {106, 65};
-  so.body_radius = 1.2;
-  so.body_z = {-0.6, 4.55 + 0.6};
-  so.wind = true;
-  so.seed = 0;
-  return model::make_synthetic_scene(so);
-}
-
 struct Config {
   std::string name;
-  model::SceneWindow scene;
+  bench::Scene scene;
   model::ModelInput<float> input;
   losses::LossInput<float> target;
   std::vector<double> infer, input_ms, forward, train, adam;
@@ -127,17 +107,27 @@ int run_bench_scene(const SceneBenchOptions& o) {
   Eigen::setNbThreads(1);
   const ModelConfig mc;  // official sizes
   const LossConfig lc;
-  const double far[3] = {0, 0, 20};
+  // The outfit at --vertices with 3 x 3-quad patches, and its variants: the same sequence
+  // without the outer garment, the wind, the body's nearness (20 units up), or all three.
+  dataset::SyntheticOptions full = bench::outfit(o.vertices);
+  full.sheet_uv_step = {static_cast<float>(mc.patch_size / 3), static_cast<float>(mc.patch_size / 3)};
+  dataset::SyntheticOptions one = full, calm = full, far = full, bare = full;
+  one.sheets.resize(1);
+  calm.wind = false;
+  far.body_offset = {0.f, 0.f, 20.f};
+  bare.sheets.resize(1), bare.wind = false, bare.body_offset = far.body_offset;
   std::vector<Config> cs(5);
-  cs[0].name = "full", cs[0].scene = make_scene(o.vertices);
-  cs[1].name = "one_garment", cs[1].scene = model::keep_first_garments(cs[0].scene, 1);
-  cs[2].name = "no_wind", cs[2].scene = cs[0].scene, model::drop_wind(cs[2].scene);
-  cs[3].name = "body_far", cs[3].scene = cs[0].scene, model::move_body(cs[3].scene, far);
-  cs[4].name = "bare", cs[4].scene = cs[1].scene, model::drop_wind(cs[4].scene), model::move_body(cs[4].scene, far);
-  for (auto& c : cs) {
-    const auto in64 = model::build_model_input(c.scene, mc);
-    c.input = model::cast_input<float>(in64);
-    c.target = losses::cast_loss_input<float>(losses::build_loss_input(c.scene, in64));
+  const std::pair<const char*, const dataset::SyntheticOptions*> variants[5] = {
+      {"full", &full}, {"one_garment", &one}, {"no_wind", &calm}, {"body_far", &far}, {"bare", &bare}};
+  const dataset::NormalisationStats stats = dataset::compute_stats(dataset::make_synthetic_sequence(full));
+  for (int k = 0; k < 5; ++k) {
+    Config& c = cs[k];
+    c.name = variants[k].first;
+    c.scene = bench::make_scene(*variants[k].second, mc);
+    c.scene.stats = stats;  // the full scene's statistics for every variant
+    const dataset::TrainingSample sample = bench::sample_of(c.scene, mc);
+    c.input = model::model_input_from_sample(sample, c.scene.stats, mc);
+    c.target = losses::loss_input_from_sample(sample, c.scene.seq.info);
   }
   ad::ParamStore<float> ps;
   model::register_params(ps, mc);

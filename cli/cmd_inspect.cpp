@@ -2,8 +2,8 @@
 // edges at the patch size and world radius of a config or the options.
 #include "cli/command_registry.h"
 #include "eval/inspect.h"
+#include "model/sample_input.h"
 #include "train/config.h"
-#include "train/train_data.h"
 
 #include <memory>
 
@@ -20,7 +20,7 @@ int run_inspect(const InspectCli& o) {
                                                                      : std::vector<std::string>{o.config});
   if (o.patch_size >= 0) config.model.patch_size = o.patch_size;
   if (o.world_radius >= 0) config.model.world_radius = o.world_radius;
-  layersnet::eval::inspect_dataset(o.options, layersnet::sample_options_for(config.model));
+  layersnet::eval::inspect_dataset(o.options, layersnet::model::sample_options_for(config.model));
   return 0;
 }
 

@@ -8,24 +8,41 @@
 
 namespace layersnet::dataset {
 
-Points vertex_normals(const Eigen::Ref<const Points>& x, const Faces& faces, const Eigen::Vector3f& fallback) {
-  Points n = Points::Zero(x.rows(), 3);
+namespace {
+
+template <class Scalar>
+Eigen::Matrix<Scalar, Eigen::Dynamic, 3, Eigen::RowMajor> normals_of(
+    const Eigen::Ref<const Eigen::Matrix<Scalar, Eigen::Dynamic, 3, Eigen::RowMajor>>& x, const Faces& faces,
+    const Eigen::Matrix<Scalar, 3, 1>& fallback) {
+  using Vec = Eigen::Matrix<Scalar, 3, 1>;
+  Eigen::Matrix<Scalar, Eigen::Dynamic, 3, Eigen::RowMajor> n =
+      Eigen::Matrix<Scalar, Eigen::Dynamic, 3, Eigen::RowMajor>::Zero(x.rows(), 3);
   for (Eigen::Index f = 0; f < faces.rows(); ++f) {
-    const Eigen::Vector3f a = x.row(faces(f, 0)), b = x.row(faces(f, 1)), c = x.row(faces(f, 2));
-    const Eigen::Vector3f fn = (b - a).cross(c - a);
-    const float len = fn.norm();
-    if (!(len > 1e-20f) || !std::isfinite(len)) continue;  // zero-area face: no direction
-    const Eigen::RowVector3f unit = (fn / len).transpose();
+    const Vec a = x.row(faces(f, 0)), b = x.row(faces(f, 1)), c = x.row(faces(f, 2));
+    const Vec fn = (b - a).cross(c - a);
+    const Scalar len = fn.norm();
+    if (!(len > Scalar(1e-20f)) || !std::isfinite(len)) continue;  // zero-area face: no direction
+    const Eigen::Matrix<Scalar, 1, 3> unit = (fn / len).transpose();
     for (int k = 0; k < 3; ++k) n.row(faces(f, k)) += unit;
   }
   for (Eigen::Index v = 0; v < n.rows(); ++v) {
-    const float len = n.row(v).norm();
-    if (len > 1e-12f && std::isfinite(len))
+    const Scalar len = n.row(v).norm();
+    if (len > Scalar(1e-12f) && std::isfinite(len))
       n.row(v) /= len;
     else
       n.row(v) = fallback.transpose();
   }
   return n;
+}
+
+}  // namespace
+
+Points vertex_normals(const Eigen::Ref<const Points>& x, const Faces& faces, const Eigen::Vector3f& fallback) {
+  return normals_of<float>(x, faces, fallback);
+}
+
+PointsD vertex_normals(const Eigen::Ref<const PointsD>& x, const Faces& faces, const Eigen::Vector3d& fallback) {
+  return normals_of<double>(x, faces, fallback);
 }
 
 int64_t PointGrid::key_of(int64_t i, int64_t j, int64_t k) const {

@@ -21,9 +21,13 @@ namespace layersnet::dataset {
 
 // Per-vertex normals: normalised sum of the incident faces' unit normals, face normal
 // (v1 - v0) x (v2 - v0) (counter-clockwise = outward). Zero-area faces add nothing; a vertex
-// with no usable face gets `fallback`. Always finite. x: (B, 3), faces (Fb, 3) -> (B, 3).
+// with no usable face gets `fallback`. Always finite. x: (V, 3), faces (F, 3) -> (V, 3).
+// The double form serves the loss targets (float positions, normals summed in double).
+using PointsD = Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>;  // (rows, 3)
 Points vertex_normals(const Eigen::Ref<const Points>& x, const Faces& faces,
                       const Eigen::Vector3f& fallback = Eigen::Vector3f::UnitZ());
+PointsD vertex_normals(const Eigen::Ref<const PointsD>& x, const Faces& faces,
+                       const Eigen::Vector3d& fallback = Eigen::Vector3d::UnitZ());
 
 // Uniform hash grid over a point set; radius queries visit the 27 cells around a point.
 class PointGrid {

@@ -10,16 +10,17 @@
 namespace layersnet::dataset {
 namespace {
 
-// Adds one sequence's quantities to the six accumulators.
-void accumulate_sequence(const SequenceFile& file, const StatsOptions& o, StatsAccumulator acc[6]) {
-  const SequenceInfo& info = file.info();
+// Adds one sequence's quantities to the six accumulators; read(first, count) gives a
+// window holding frames [first, first + count).
+template <class ReadFrames>
+void accumulate_sequence(const SequenceInfo& info, const ReadFrames& read, const StatsOptions& o, StatsAccumulator acc[6]) {
   const int T = info.num_frames;
   const int64_t n_rows = info.total_garment_vertices() + (o.include_body ? info.num_body_vertices : 0);
   // Root-relative positions of the two previous frames (rows: garments then body).
   Eigen::MatrixX3d prev, prev_vel;
   for (int first = 0; first < T; first += o.window_frames) {
     const int count = std::min(o.window_frames, T - first);
-    const FrameWindow w = file.read_frames(first, count);
+    const FrameWindow& w = read(first, count);
     for (int t = first; t < first + count; ++t) {
       const Eigen::RowVector3d root = info.translation.row(t).cast<double>();
       Eigen::MatrixX3d x(n_rows, 3);
@@ -76,10 +77,22 @@ NormalisationStats compute_stats(const DatasetManifest& m, const StatsOptions& o
   if (m.train.empty())
     throw DatasetError(m.manifest_path(), "/splits/train", "is empty: statistics come from the training split only");
   StatsAccumulator acc[6];
-  for (const auto& id : m.train) accumulate_sequence(SequenceFile(m.sequence_path(id)), o, acc);
+  for (const auto& id : m.train) {
+    const SequenceFile file(m.sequence_path(id));
+    accumulate_sequence(file.info(), [&](int first, int count) { return file.read_frames(first, count); }, o, acc);
+  }
   NormalisationStats s;
   for (std::size_t i = 0; i < kStatQuantities.size(); ++i) s.*kStatQuantities[i].field = acc[i].result();
   s.sequences = m.train;
+  return s;
+}
+
+NormalisationStats compute_stats(const Sequence& seq, const StatsOptions& o) {
+  StatsAccumulator acc[6];
+  accumulate_sequence(seq.info, [&](int, int) -> const FrameWindow& { return seq.frames; }, o, acc);
+  NormalisationStats s;
+  for (std::size_t i = 0; i < kStatQuantities.size(); ++i) s.*kStatQuantities[i].field = acc[i].result();
+  s.sequences = {seq.info.path};
   return s;
 }
 

@@ -70,6 +70,9 @@ struct StatsOptions {
 
 // Computes the statistics over the manifest's train split, reading frame windows lazily.
 NormalisationStats compute_stats(const DatasetManifest& manifest, const StatsOptions& options = {});
+// The same over one sequence in memory (synthetic scenes of tests and benchmarks), as if it
+// were the whole training split; `sequences` holds its info.path.
+NormalisationStats compute_stats(const Sequence& sequence, const StatsOptions& options = {});
 
 void write_stats(const std::string& path, const NormalisationStats& stats);
 // Reads and checks stats.h5; throws DatasetError naming the problem.

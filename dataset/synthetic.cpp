@@ -21,22 +21,29 @@ float unit_random(uint64_t& state) {
 }
 
 Eigen::Vector3f root_at(const SyntheticOptions& o, float t) {
-  return Eigen::Vector3f(o.motion * std::sin(0.4f * t), 0.5f * o.motion * std::sin(0.25f * t), 0.f);
+  return Eigen::Vector3f(o.motion * std::sin(0.4f * t), 0.5f * o.motion * std::sin(0.25f * t), 0.f) +
+         Eigen::Vector3f(o.offset[0], o.offset[1], o.offset[2]);
 }
 
-// Closed cylinder, outward counter-clockwise faces (side, bottom cap, top cap).
+GarmentAttributes random_attributes(uint64_t& rng) {
+  GarmentAttributes a;
+  a.tension_stiffness = 15 + 85 * unit_random(rng);
+  a.bending_stiffness = 15 + 185 * unit_random(rng);
+  a.mass = 0.2f + 0.6f * unit_random(rng);
+  a.self_friction = 40 + 40 * unit_random(rng);
+  return a;
+}
+
+// Cylinder, outward counter-clockwise faces (side, then bottom and top caps if any).
 void make_body(const SyntheticOptions& o, Points& rest, Faces& faces) {
   const int R = std::max(o.body_rings, 2), S = std::max(o.body_segments, 3);
-  rest.resize(R * S + 2, 3);
+  rest.resize(R * S + (o.body_caps ? 2 : 0), 3);
   for (int r = 0; r < R; ++r)
     for (int s = 0; s < S; ++s) {
       const float a = 2 * kPi * s / S;
       rest.row(r * S + s) << o.body_radius * std::cos(a), o.body_radius * std::sin(a),
-          o.height * r / (R - 1) - 0.2f;
+          o.height * r / (R - 1) + o.body_bottom;
     }
-  const int c0 = R * S, c1 = R * S + 1;
-  rest.row(c0) << 0, 0, -0.2f;
-  rest.row(c1) << 0, 0, o.height - 0.2f;
   std::vector<int32_t> f;
   auto tri = [&](int a, int b, int c) { f.insert(f.end(), {a, b, c}); };
   for (int r = 0; r + 1 < R; ++r)
@@ -45,10 +52,15 @@ void make_body(const SyntheticOptions& o, Points& rest, Faces& faces) {
       tri(r * S + s, r * S + s1, (r + 1) * S + s);
       tri(r * S + s1, (r + 1) * S + s1, (r + 1) * S + s);
     }
-  for (int s = 0; s < S; ++s) {
-    const int s1 = (s + 1) % S;
-    tri(c0, s1, s);
-    tri(c1, (R - 1) * S + s, (R - 1) * S + s1);
+  if (o.body_caps) {
+    const int c0 = R * S, c1 = R * S + 1;
+    rest.row(c0) << 0, 0, o.body_bottom;
+    rest.row(c1) << 0, 0, o.height + o.body_bottom;
+    for (int s = 0; s < S; ++s) {
+      const int s1 = (s + 1) % S;
+      tri(c0, s1, s);
+      tri(c1, (R - 1) * S + s, (R - 1) * S + s1);
+    }
   }
   faces = Eigen::Map<Faces>(f.data(), static_cast<Eigen::Index>(f.size() / 3), 3);
 }
@@ -89,10 +101,39 @@ GarmentMesh make_tube(const SyntheticOptions& o, float radius, const std::string
   g.uv = Eigen::Map<Uvs>(uv.data(), static_cast<Eigen::Index>(uv.size() / 2), 2);
   g.panel = panel;
   g.rest = rest;
-  g.attributes.tension_stiffness = 15 + 85 * unit_random(rng);
-  g.attributes.bending_stiffness = 15 + 185 * unit_random(rng);
-  g.attributes.mass = 0.2f + 0.6f * unit_random(rng);
-  g.attributes.self_friction = 40 + 40 * unit_random(rng);
+  g.attributes = random_attributes(rng);
+  return g;
+}
+
+// Open cylindrical sheet (SyntheticSheet): vertex (i, j) is row i * along + j; one UV panel.
+GarmentMesh make_sheet(const SyntheticOptions& o, const SyntheticSheet& sheet, const std::string& name,
+                       const std::string& type, uint64_t& rng, Points& rest) {
+  const int U = std::max(sheet.around, 2), V = std::max(sheet.along, 2);
+  GarmentMesh g;
+  g.name = name;
+  g.type = type;
+  g.num_vertices = U * V;
+  rest.resize(U * V, 3);
+  for (int i = 0; i < U; ++i)
+    for (int j = 0; j < V; ++j) {
+      const float a = i * o.sheet_spacing / sheet.radius;
+      rest.row(i * V + j) << sheet.radius * std::cos(a), sheet.radius * std::sin(a), sheet.z0 + j * o.sheet_spacing;
+    }
+  std::vector<int32_t> f;
+  std::vector<float> uv;
+  auto corner = [&](int i, int j) { uv.push_back(o.sheet_uv_step[0] * i), uv.push_back(o.sheet_uv_step[1] * j); };
+  for (int i = 0; i + 1 < U; ++i)
+    for (int j = 0; j + 1 < V; ++j) {
+      const int a = i * V + j, b = (i + 1) * V + j, c = (i + 1) * V + j + 1, d = i * V + j + 1;
+      f.insert(f.end(), {a, b, c, a, c, d});
+      corner(i, j), corner(i + 1, j), corner(i + 1, j + 1);
+      corner(i, j), corner(i + 1, j + 1), corner(i, j + 1);
+    }
+  g.faces = Eigen::Map<Faces>(f.data(), static_cast<Eigen::Index>(f.size() / 3), 3);
+  g.uv = Eigen::Map<Uvs>(uv.data(), static_cast<Eigen::Index>(uv.size() / 2), 2);
+  g.panel.assign(f.size() / 3, 0);
+  g.rest = rest;
+  g.attributes = random_attributes(rng);
   return g;
 }
 
@@ -113,18 +154,22 @@ Sequence make_synthetic_sequence(const SyntheticOptions& o) {
   seq.frames.first = 0;
   seq.frames.count = T;
   seq.frames.body.resize(static_cast<Eigen::Index>(T) * s.num_body_vertices, 3);
+  const Eigen::RowVector3f body_offset(o.body_offset[0], o.body_offset[1], o.body_offset[2]);
   for (int t = 0; t < T; ++t) {
     const Eigen::RowVector3f root = root_at(o, static_cast<float>(t)).transpose();
     s.translation.row(t) = root;
     seq.frames.body.middleRows(static_cast<Eigen::Index>(t) * s.num_body_vertices, s.num_body_vertices) =
-        body_rest.rowwise() + root;
+        (body_rest.rowwise() + root).rowwise() + body_offset;
   }
   static const char* kTypes[] = {"tee", "jacket", "dress_sleeveless"};
   const float phase = 6.f * unit_random(rng);
-  for (int gi = 0; gi < std::clamp(o.garments, 1, 3); ++gi) {
+  const int G = o.sheets.empty() ? std::clamp(o.garments, 1, 3) : static_cast<int>(o.sheets.size());
+  for (int gi = 0; gi < G; ++gi) {
     Points rest;
-    s.garments.push_back(make_tube(o, o.radius + gi * o.layer_gap, std::string("g") + std::to_string(gi) + "_" +
-                                   kTypes[gi], kTypes[gi], rng, rest));
+    const char* type = kTypes[gi % 3];
+    const std::string name = std::string("g") + std::to_string(gi) + "_" + type;
+    s.garments.push_back(o.sheets.empty() ? make_tube(o, o.radius + gi * o.layer_gap, name, type, rng, rest)
+                                          : make_sheet(o, o.sheets[gi], name, type, rng, rest));
     Points pos(static_cast<Eigen::Index>(T) * rest.rows(), 3);
     for (int t = 0; t < T; ++t) {
       const Eigen::RowVector3f lagged = root_at(o, t - 0.7f).transpose();
@@ -154,7 +199,8 @@ DatasetManifest write_synthetic_dataset(const std::string& root, int n_train, in
                                         const SequenceWriteOptions& write_options) {
   DatasetManifest m;
   m.root = root;
-  m.source = "layersnet synthetic scene (dataset/synthetic.cpp), " + std::to_string(options.garments) +
+  const int garments = options.sheets.empty() ? options.garments : static_cast<int>(options.sheets.size());
+  m.source = "layersnet synthetic scene (dataset/synthetic.cpp), " + std::to_string(garments) +
              " garment(s), " + std::to_string(options.frames) + " frames";
   const int total = n_train + n_val + n_test;
   std::vector<std::string> ids;

@@ -39,7 +39,7 @@ NetworkPredictor<T>::NetworkPredictor(Config config, ad::ParamStore<T> params, d
     : config_(std::move(config)),
       params_(std::move(params)),
       stats_(std::move(stats)),
-      sample_options_(sample_options_for(config_.model)) {}
+      sample_options_(model::sample_options_for(config_.model)) {}
 
 ModelPredictor::ModelPredictor(std::string name, Config config, ad::ParamStore<float> params,
                                dataset::NormalisationStats stats)

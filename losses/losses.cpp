@@ -2,7 +2,6 @@
 
 #include "dataset/neighbours.h"
 #include "dataset/patches.h"
-#include "model/input_builder.h"
 #include "model/params_layout.h"
 #include "model/tape_helpers.h"
 
@@ -13,13 +12,6 @@ namespace layersnet::losses {
 namespace {
 
 using ad::Var;
-
-std::vector<double> relative(const std::vector<double>& x, const double root[3]) {
-  std::vector<double> r(x.size());
-  for (std::size_t i = 0; i < x.size(); ++i) r[i] = x[i] - root[i % 3];
-  return r;
-}
-
 
 // Rows [r0, r1) of a (rows, 3) array as float points for the k-d tree.
 template <class T>
@@ -43,27 +35,6 @@ Var<T> collision_term(ad::Tape<T>& tape, const Var<T>& x, const Var<T>& anchor, 
 }
 
 }  // namespace
-
-LossInput<double> build_loss_input(const model::SceneWindow& s, const model::ModelInput<double>& in) {
-  LAYERSNET_CHECK(static_cast<int64_t>(s.x_tp1.size()) == 3 * s.N,
-                  "build_loss_input: SceneWindow.x_tp1 (ground truth at t+1) must be (N, 3)");
-  LossInput<double> L;
-  L.target = relative(s.x_tp1, s.root[3]);
-  L.faces = s.faces;
-  L.garment_offsets = s.garment_offsets;
-  L.target_normals = model::vertex_normals(L.target, s.faces);
-  L.target_patch.assign(in.P * 3, 0.0);
-  for (int64_t p = 0; p < in.P; ++p) {
-    const int32_t b = in.p2v_offsets[p], e = in.p2v_offsets[p + 1];
-    for (int32_t k = b; k < e; ++k)
-      for (int c = 0; c < 3; ++c) L.target_patch[3 * p + c] += L.target[3 * in.p2v_vertices[k] + c];
-    for (int c = 0; c < 3; ++c) L.target_patch[3 * p + c] /= std::max(1, e - b);
-  }
-  L.body_pos = relative(s.body_tp1, s.root[3]);
-  L.body_normals = model::vertex_normals(L.body_pos, s.body_faces);
-  set_target_edges(L);
-  return L;
-}
 
 template <class T>
 void set_target_edges(LossInput<T>& L) {

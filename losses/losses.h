@@ -25,7 +25,6 @@
 #include "model/layersnet.h"
 #include "model/model_config.h"
 #include "model/model_input.h"
-#include "model/scene.h"
 
 #include <cstdint>
 #include <string>
@@ -51,8 +50,6 @@ struct LossInput {
 // Fills L.edges and L.target_edge_length from L.faces and L.target.
 template <class T>
 void set_target_edges(LossInput<T>& L);
-
-LossInput<double> build_loss_input(const model::SceneWindow& scene, const model::ModelInput<double>& input);
 
 template <class U, class T>
 LossInput<U> cast_loss_input(const LossInput<T>& in) {

@@ -1,7 +1,7 @@
 #include "losses/sample_loss_input.h"
 
 #include "autodiff/check.h"
-#include "model/input_builder.h"
+#include "dataset/neighbours.h"
 
 namespace layersnet::losses {
 
@@ -11,10 +11,10 @@ LossInput<float> loss_input_from_sample(const dataset::TrainingSample& s, const 
   const auto& st = *s.structure;
   const int64_t N = s.num_vertices(), P = s.num_patches(), B = s.body_state.rows();
   LossInput<float> L;
-  std::vector<double> target(N * 3);
+  dataset::PointsD target(N, 3);  // normals summed in double
   L.target.resize(N * 3);
   for (int64_t v = 0; v < N; ++v)
-    for (int c = 0; c < 3; ++c) L.target[3 * v + c] = s.target(v, c), target[3 * v + c] = s.target(v, c);
+    for (int c = 0; c < 3; ++c) L.target[3 * v + c] = s.target(v, c), target(v, c) = s.target(v, c);
   L.target_patch.resize(P * 3);
   for (int64_t p = 0; p < P; ++p)
     for (int c = 0; c < 3; ++c) L.target_patch[3 * p + c] = s.target_patch_centre(p, c);
@@ -23,8 +23,9 @@ LossInput<float> loss_input_from_sample(const dataset::TrainingSample& s, const 
     for (Eigen::Index i = 0; i < f.rows(); ++i)
       for (int k = 0; k < 3; ++k) L.faces.push_back(f(i, k) + st.vertex_offsets[g]);
   }
-  const auto normals = model::vertex_normals(target, L.faces);
-  L.target_normals.assign(normals.begin(), normals.end());
+  const dataset::PointsD normals = dataset::vertex_normals(
+      target, Eigen::Map<const dataset::Faces>(L.faces.data(), static_cast<Eigen::Index>(L.faces.size() / 3), 3));
+  L.target_normals.assign(normals.data(), normals.data() + normals.size());
   L.garment_offsets = st.vertex_offsets;
   set_target_edges(L);
   L.body_pos.resize(B * 3);

@@ -1,12 +1,30 @@
 #include "model/sample_input.h"
 
 #include "autodiff/check.h"
-#include "model/input_builder.h"
 
 #include <algorithm>
+#include <array>
+#include <cmath>
 
 namespace layersnet::model {
 namespace {
+
+using Vec3 = std::array<double, 3>;
+
+Vec3 row3(const std::vector<double>& x, int64_t i) { return {x[3 * i], x[3 * i + 1], x[3 * i + 2]}; }
+double dist2(const Vec3& a, const Vec3& b) {
+  double s = 0;
+  for (int c = 0; c < 3; ++c) s += (a[c] - b[c]) * (a[c] - b[c]);
+  return s;
+}
+Vec3 cross(const Vec3& a, const Vec3& b) {
+  return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
+}
+Vec3 normalized(Vec3 v) {
+  double n = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+  if (n < 1e-12) return {0, 0, 0};
+  return {v[0] / n, v[1] / n, v[2] / n};
+}
 
 void csr_copy(const dataset::Csr& c, std::vector<int32_t>& offsets, std::vector<int32_t>& items) {
   offsets = c.offsets;
@@ -62,6 +80,64 @@ std::vector<float> vertex_local_features(const dataset::TrainingSample& s, float
 }
 
 }  // namespace
+
+dataset::SampleOptions sample_options_for(const ModelConfig& m) {
+  dataset::SampleOptions o;
+  o.patch_size = static_cast<float>(m.patch_size);
+  o.neighbours.world_radius = static_cast<float>(m.world_radius);
+  o.neighbours.body_radius = static_cast<float>(m.body_radius);
+  o.neighbours.body_k = m.body_neighbors;
+  o.neighbours.body_query =
+      m.body_query == "first" ? dataset::BodyQuery::kFirstInIndexOrder : dataset::BodyQuery::kNearest;
+  // The model keeps valid slots only (model/README.md quirk 3), so no duplicate padding.
+  o.neighbours.official_padding = false;
+  return o;
+}
+
+void normal_frame(const double normal[3], double R[9]) {
+  const Vec3 n_in{normal[0], normal[1], normal[2]};
+  Vec3 n = normalized(n_in);
+  if (n[0] == 0 && n[1] == 0 && n[2] == 0) {
+    for (int k = 0; k < 9; ++k) R[k] = (k % 4 == 0) ? 1.0 : 0.0;
+    return;
+  }
+  Vec3 x0{1, 0, 0};
+  for (int c = 0; c < 3; ++c)
+    if (std::abs(n[c]) < 1e-7) x0[c] = 1;
+  double d = x0[0] * n[0] + x0[1] * n[1] + x0[2] * n[2];
+  Vec3 x = normalized({x0[0] - d * n[0], x0[1] - d * n[1], x0[2] - d * n[2]});
+  if (x[0] == 0 && x[1] == 0 && x[2] == 0) x = normalized(cross(n, {0, 1, 0}));  // n = ±(1,1,1)/√3 never hits this; n ∥ x0 can
+  Vec3 y = cross(n, x);
+  for (int c = 0; c < 3; ++c) R[c] = x[c], R[3 + c] = y[c], R[6 + c] = n[c];
+}
+
+void decoder_candidates(const std::vector<double>& xt, const std::vector<double>& centre,
+                        const std::vector<int32_t>& own_patch, const std::vector<int32_t>& adj_offsets,
+                        const std::vector<int32_t>& adj_patches, int k_cand, std::vector<int32_t>& offsets,
+                        std::vector<int32_t>& items) {
+  const int64_t N = static_cast<int64_t>(own_patch.size());
+  offsets.assign(1, 0);
+  items.clear();
+  std::vector<std::pair<double, int32_t>> c;
+  for (int64_t v = 0; v < N; ++v) {
+    const int32_t own = own_patch[v];
+    if (own >= 0) {
+      c.clear();
+      for (int32_t k = adj_offsets[own]; k < adj_offsets[own + 1]; ++k) {
+        const int32_t p = adj_patches[k];
+        c.emplace_back(std::sqrt(dist2(row3(xt, v), row3(centre, p))), p);
+      }
+      const std::size_t kk = std::min<std::size_t>(c.size(), static_cast<std::size_t>(k_cand));
+      std::partial_sort(c.begin(), c.begin() + kk, c.end());
+      for (std::size_t j = 0; j < kk; ++j) {
+        const int32_t p = c[j].second;
+        const double pd = std::sqrt(dist2(row3(centre, own), row3(centre, p)));
+        if (p == own || pd == 0 || c[j].first < pd) items.push_back(p);
+      }
+    }
+    offsets.push_back(static_cast<int32_t>(items.size()));
+  }
+}
 
 ModelInput<float> model_input_from_sample(const dataset::TrainingSample& s, const dataset::NormalisationStats& stats,
                                           const ModelConfig& cfg) {

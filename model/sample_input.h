@@ -12,15 +12,35 @@
 //                 normalisation);
 //   decoder       nearest body within R_b (else -1) and the candidate patches.
 // Body query order (nearest / first K) is the sample's (dataset SampleOptions); build the
-// samples with neighbours.body_query matching ModelConfig::body_query.
+// samples with sample_options_for(config).
 #include "dataset/sample.h"
 #include "dataset/stats.h"
 #include "model/model_config.h"
 #include "model/model_input.h"
 
+#include <cstdint>
+#include <vector>
+
 namespace layersnet::model {
 
 ModelInput<float> model_input_from_sample(const dataset::TrainingSample& sample, const dataset::NormalisationStats& stats,
                                           const ModelConfig& config);
+
+// Sample options matching the model config (patch size, radii, K, body query; no duplicate
+// padding): what build_sample needs for model_input_from_sample.
+dataset::SampleOptions sample_options_for(const ModelConfig& model);
+
+// Official rotation_from_normals (utils/mesh3d.py) of the unit direction of `normal`:
+// R = rows [x; y; n] (world -> local, n -> e_z), x from (1,0,0) with the |n_c| < 1e-7 rule.
+// A zero vector gives the identity. R: 9 numbers, row-major.
+void normal_frame(const double normal[3], double R[9]);
+
+// Decoder candidates (official patch_decoder.py): for each vertex, the k nearest (to x_t) patches
+// mesh-adjacent to its own patch, kept if own, or closer to the vertex than to the own
+// patch's centre. xt (N, 3), centre (P, 3), own_patch (N), adjacency CSR over P -> CSR over N.
+void decoder_candidates(const std::vector<double>& xt, const std::vector<double>& centre,
+                        const std::vector<int32_t>& own_patch, const std::vector<int32_t>& adj_offsets,
+                        const std::vector<int32_t>& adj_patches, int k, std::vector<int32_t>& offsets,
+                        std::vector<int32_t>& items);
 
 }  // namespace layersnet::model

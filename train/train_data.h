@@ -110,8 +110,6 @@ class TrainData {
   Reads reads_;
 };
 
-// Sample options matching the model config (patch size, radii, body query).
-dataset::SampleOptions sample_options_for(const ModelConfig& model);
 // FrameSelection for config.data: inputs t = first_frame .. (first_frame + max_frames - 2).
 dataset::FrameSelection frame_selection_for(const DataConfig& data);
 

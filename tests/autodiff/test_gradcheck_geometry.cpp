@@ -1,5 +1,5 @@
-// Gradient checks of the geometry ops (autodiff/ops_geometry.h) and the frames of
-// rotation_from_normals: zero rows, zero-area triangles, normals parallel to each axis.
+// Gradient checks of the geometry ops (autodiff/ops_geometry.h): zero rows, zero-area
+// triangles, rotations of normals parallel to each axis.
 #include "autodiff/ops_graph.h"
 #include "gradcheck_registry.h"
 
@@ -29,10 +29,16 @@ RowMat<double> test_normals() {
   return out;
 }
 
+// A world -> local frame of each unit normal (R n = e_z) as rows of 9 numbers; the model's own
+// frame rule (model::normal_frame) is tested with the model.
 RowMat<double> frames(const RowMat<double>& normals) {
   RowMat<double> R(normals.rows(), 9);
-  rotation_from_normals<double>({normals.data(), static_cast<std::size_t>(normals.size())},
-                                {R.data(), static_cast<std::size_t>(R.size())});
+  for (int64_t k = 0; k < normals.rows(); ++k) {
+    const Eigen::Matrix3d m =
+        Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d(normals.row(k).transpose()), Eigen::Vector3d::UnitZ())
+            .toRotationMatrix();
+    for (int c = 0; c < 9; ++c) R(k, c) = m(c / 3, c % 3);
+  }
   return R;
 }
 
@@ -200,55 +206,6 @@ GRADCHECK_TEST(RotMapApply, OneRowAndAxisFramesWithOrthonormalW) {
   const GradcheckReport rep = expect_gradcheck(OpKind::RotMapApply, there_and_back, {{W, false}, {R, false}, {x}});
   const RowMat<double> projected = x * W * W.transpose();
   EXPECT_TRUE(rep.output.isApprox(projected, 1e-12));
-}
-
-// ---- rotation_from_normals --------------------------------------------------------------
-
-template <class T>
-void expect_orthonormal_frames(double tol) {
-  const RowMat<double> nd = test_normals();
-  const RowMat<T> n = nd.cast<T>();
-  RowMat<T> R(n.rows(), 9);
-  rotation_from_normals<T>({n.data(), static_cast<std::size_t>(n.size())}, {R.data(), static_cast<std::size_t>(R.size())});
-  for (int64_t k = 0; k < n.rows(); ++k) {
-    Eigen::Matrix3d m;
-    for (int c = 0; c < 9; ++c) m(c / 3, c % 3) = double(R(k, c));
-    const Eigen::Vector3d nk = n.row(k).transpose().template cast<double>();
-    EXPECT_LT((m * m.transpose() - Eigen::Matrix3d::Identity()).norm(), tol) << "normal " << k;
-    EXPECT_NEAR(m.determinant(), 1.0, tol) << "normal " << k;
-    EXPECT_LT((m * nk - Eigen::Vector3d::UnitZ()).norm(), tol) << "normal " << k;
-    EXPECT_TRUE(m.allFinite());
-  }
-}
-
-TEST(RotationFromNormals, OrthonormalRowsAndNormalToEzInDoubleAndFloat) {
-  expect_orthonormal_frames<double>(1e-12);
-  expect_orthonormal_frames<float>(1e-6);
-}
-
-TEST(RotationFromNormals, OfficialFirstAxisRule) {
-  // n = e_z: x0 = (1, 0, 0) plus ones where |n_c| < 1e-7 -> (1, 1, 0); x = (1, 1, 0)/sqrt(2).
-  // n = e_x: x0 = (1, 1, 1) -> x = (0, 1, 1)/sqrt(2). n = (0.6, 0.8, 0): x0 = (1, 0, 1).
-  RowMat<double> n(3, 3);
-  n << 0, 0, 1, 1, 0, 0, 0.6, 0.8, 0;
-  const RowMat<double> R = frames(n);
-  const double s = std::sqrt(0.5);
-  EXPECT_TRUE(R.row(0).head(3).isApprox((RowMat<double>(1, 3) << s, s, 0).finished()));
-  EXPECT_TRUE(R.row(1).head(3).isApprox((RowMat<double>(1, 3) << 0, s, s).finished()));
-  Eigen::Vector3d x = Eigen::Vector3d(1, 0, 1) - 0.6 * Eigen::Vector3d(0.6, 0.8, 0);
-  x.normalize();
-  EXPECT_TRUE(R.row(2).head(3).transpose().isApprox(x));
-  EXPECT_TRUE(R.row(2).segment(3, 3).transpose().isApprox(Eigen::Vector3d(0.6, 0.8, 0).cross(x)));
-}
-
-TEST(RotationFromNormals, ZeroNormalGivesIdentityAndNonUnitIsNotNormalised) {
-  RowMat<double> n(2, 3);
-  n << 0, 0, 0, 0, 0, 2;  // a zero normal; a non-unit one (like the official gravity frame)
-  const RowMat<double> R = frames(n);
-  EXPECT_TRUE(R.row(0).isApprox((RowMat<double>(1, 9) << 1, 0, 0, 0, 1, 0, 0, 0, 1).finished()));
-  EXPECT_EQ(R(1, 8), 2.0);  // third row is n as given
-  std::vector<double> bad(9);
-  EXPECT_THROW(rotation_from_normals<double>(std::span<const double>(n.data(), 6), std::span<double>(bad)), CheckError);
 }
 
 }  // namespace layersnet::ad::testing

@@ -8,6 +8,8 @@
 #include "edge_kinds.h"
 #include "gradcheck_registry.h"
 
+#include <Eigen/Geometry>
+
 #include <random>
 #include <vector>
 
@@ -67,8 +69,12 @@ std::vector<GradcheckInput> layer_inputs() {
   normals.row(0) << 0, 0, 1;  // axis-parallel body normals too
   normals.row(1) << -1, 0, 0;
   for (int k = 0; k < normals.rows(); ++k) normals.row(k).normalize();
-  rotation_from_normals<double>({normals.data(), static_cast<std::size_t>(normals.size())},
-                                {rot.data(), static_cast<std::size_t>(rot.size())});
+  for (int k = 0; k < normals.rows(); ++k) {  // R n = e_z
+    const Eigen::Matrix3d m =
+        Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d(normals.row(k).transpose()), Eigen::Vector3d::UnitZ())
+            .toRotationMatrix();
+    for (int c = 0; c < 9; ++c) rot(k, c) = m(c / 3, c % 3);
+  }
   return {{random_matrix(kP, C, 201)}, {random_matrix(kP, C, 202)}, {random_matrix(rows_s, C, 203)},
           {random_matrix(kDim, 3, 204)}, {rot, false}, {random_matrix(kDim, kDim, 205)}, {random_matrix(1, kDim, 206)}};
 }

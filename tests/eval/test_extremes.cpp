@@ -14,11 +14,12 @@
 #include "eval/rollout.h"
 #include "eval/stress.h"
 #include "eval/tether.h"
+#include "dataset/sample.h"
 #include "losses/losses.h"
-#include "model/input_builder.h"
+#include "losses/sample_loss_input.h"
 #include "model/layersnet.h"
 #include "model/params_layout.h"
-#include "model/synthetic_scene.h"
+#include "model/sample_input.h"
 #include "train/checkpoint.h"
 #include "train/run_dir.h"
 #include "train/trainer.h"
@@ -362,60 +363,59 @@ void isolate(std::vector<int32_t>& offsets, std::vector<int32_t>& items, int32_t
   items = std::move(it);
 }
 
-model::SceneWindow degenerate_scene(Degenerate kind) {
-  model::SyntheticSceneOptions o;
-  o.garments = {{9, 6}, {10, 6}};
-  o.body = {12, 8};
-  model::SceneWindow s = model::make_synthetic_scene(o);
+// The data set's kind of sequence (synthetic_options) with one degenerate part, or all of
+// them, at every frame.
+dataset::Sequence degenerate_sequence(Degenerate kind) {
+  dataset::Sequence s = dataset::make_synthetic_sequence(synthetic_options());
   const bool all = kind == Degenerate::kAll;
-  auto set_vertex = [&](int v, const double* from) {
-    for (auto* x : {&s.x_tm2, &s.x_tm1, &s.x_t, &s.x_tp1})
-      for (int c = 0; c < 3; ++c) (*x)[3 * v + c] = from[c];
-  };
-  if (kind == Degenerate::kCoincident || all) {  // vertex 1 on top of vertex 0 at every frame
-    for (auto* x : {&s.x_tm2, &s.x_tm1, &s.x_t, &s.x_tp1})
-      for (int c = 0; c < 3; ++c) (*x)[3 + c] = (*x)[c];
-  }
+  const int T = s.info.num_frames, n = s.info.garments[0].num_vertices;
+  dataset::Points& g0 = s.frames.garments[0];  // frame t at rows t*n ...
+  if (kind == Degenerate::kCoincident || all)  // vertex 1 on top of vertex 0
+    for (int t = 0; t < T; ++t) g0.row(t * n + 1) = g0.row(t * n);
   if (kind == Degenerate::kZeroArea || all) {  // the second face's corners on one line
-    const int a = s.faces[3], b = s.faces[4], c = s.faces[5];
-    double mid[3];
-    for (int k = 0; k < 3; ++k) mid[k] = 0.5 * (s.x_t[3 * a + k] + s.x_t[3 * b + k]);
-    set_vertex(c, mid);
+    const auto f = s.info.garments[0].faces.row(1);
+    for (int t = 0; t < T; ++t) g0.row(t * n + f(2)) = 0.5f * (g0.row(t * n + f(0)) + g0.row(t * n + f(1)));
   }
-  if (kind == Degenerate::kFarFromBody || all) {  // every garment 50 units away: no body neighbour
-    for (auto* x : {&s.x_tm2, &s.x_tm1, &s.x_t, &s.x_tp1})
-      for (size_t i = 0; i < x->size(); i += 3) (*x)[i] += 50.0;
-  }
+  if (kind == Degenerate::kFarFromBody || all)  // every garment 50 units away: no body neighbour
+    for (auto& g : s.frames.garments) g.col(0).array() += 50.f;
   if (kind == Degenerate::kZeroWindQuaternion || all) {
-    s.has_wind = true;
-    for (double* w : {s.wind_t, s.wind_tp1}) {
-      w[0] = w[1] = w[2] = w[3] = 0;
-      w[4] = 1.0;
-    }
+    s.info.has_wind = true;
+    s.info.wind_rotation.setZero(T, 4);
+    s.info.wind_strength.setConstant(T, 400.f);
   }
   return s;
 }
 
-model::ModelInput<double> degenerate_input(const model::SceneWindow& s, const ModelConfig& c, Degenerate kind) {
-  model::ModelInput<double> in = model::build_model_input(s, c);
+struct DegenerateWindow {
+  model::ModelInput<float> input;
+  losses::LossInput<float> target;
+};
+
+// The sample at t = 6 (wind blowing) through the production road; an isolated patch is cut out
+// of the model input afterwards (no sequence makes one).
+DegenerateWindow degenerate_window(const dataset::Sequence& seq, const ModelConfig& c,
+                                   const dataset::NormalisationStats& stats, Degenerate kind) {
+  const dataset::TrainingSample sample =
+      dataset::build_sample(seq.info, seq.frames, 6, stats, nullptr, model::sample_options_for(c));
+  DegenerateWindow w{model::model_input_from_sample(sample, stats, c), losses::loss_input_from_sample(sample, seq.info)};
   if (kind == Degenerate::kIsolatedPatch || kind == Degenerate::kAll) {  // patch 0: no neighbour of any kind
-    isolate(in.mesh_offsets, in.mesh_senders, 0, true);
-    isolate(in.world_offsets, in.world_senders, 0, true);
-    isolate(in.body_offsets, in.body_tokens, 0, false);
-    in.patch_body[0] = -1;
+    isolate(w.input.mesh_offsets, w.input.mesh_senders, 0, true);
+    isolate(w.input.world_offsets, w.input.world_senders, 0, true);
+    isolate(w.input.body_offsets, w.input.body_tokens, 0, false);
+    w.input.patch_body[0] = -1;
   }
-  return in;
+  return w;
 }
 
 template <class T>
-void expect_finite_forward_and_gradients(const ModelConfig& c, const model::ModelInput<double>& in64,
-                                         const losses::LossInput<double>& target64, const ad::ParamStore<float>& p32,
+void expect_finite_forward_and_gradients(const ModelConfig& c, const model::ModelInput<float>& in32,
+                                         const losses::LossInput<float>& target32, const ad::ParamStore<float>& p32,
                                          const std::string& what) {
   ad::ParamStore<T> ps;
   model::register_params(ps, c);
   std::copy(p32.values().begin(), p32.values().end(), ps.values().begin());
-  const model::ModelInput<T> in = model::cast_input<T>(in64);
-  const losses::LossInput<T> target = losses::cast_loss_input<T>(target64);
+  const model::ModelInput<T> in = model::cast_input<T>(in32);
+  const losses::LossInput<T> target = losses::cast_loss_input<T>(target32);
   ad::Tape<T> tape;
   ps.zero_grads();
   const model::Predictions<T> pred = model::forward(tape, ps, c, in);
@@ -443,8 +443,8 @@ TEST_F(Extremes, DegenerateInputsGiveFiniteOutputsAndGradients) {
       {Degenerate::kFarFromBody, "garment far from the body"},
       {Degenerate::kZeroWindQuaternion, "all-zero wind quaternion"}, {Degenerate::kAll, "all at once"}};
   for (const auto& [kind, what] : cases) {
-    const model::SceneWindow s = degenerate_scene(kind);
-    const model::ModelInput<double> in = degenerate_input(s, c, kind);
+    const DegenerateWindow w = degenerate_window(degenerate_sequence(kind), c, stats_, kind);
+    const model::ModelInput<float>& in = w.input;
     model::validate(in);
     if (kind == Degenerate::kFarFromBody) {
       EXPECT_EQ(in.body_offsets.back(), 0) << "the far garment still has body neighbours";
@@ -455,9 +455,8 @@ TEST_F(Extremes, DegenerateInputsGiveFiniteOutputsAndGradients) {
       EXPECT_EQ(in.world_offsets[1], 0);
       EXPECT_EQ(in.body_offsets[1], 0);
     }
-    const losses::LossInput<double> target = losses::build_loss_input(s, in);
-    expect_finite_forward_and_gradients<float>(c, in, target, model_->params, std::string(what) + " (float32)");
-    expect_finite_forward_and_gradients<double>(c, in, target, model_->params, std::string(what) + " (float64)");
+    expect_finite_forward_and_gradients<float>(c, in, w.target, model_->params, std::string(what) + " (float32)");
+    expect_finite_forward_and_gradients<double>(c, in, w.target, model_->params, std::string(what) + " (float64)");
   }
 }
 

@@ -202,7 +202,7 @@ TEST(Rollout, ModelPredictorFirstStepEqualsADirectForward) {
   model::register_params(ps, c.model);
   model::init_params(ps, c.model, 3);
   // Direct: the dataset sample of the ground truth at t = 2.
-  const auto opt = sample_options_for(c.model);
+  const auto opt = model::sample_options_for(c.model);
   const auto sample = dataset::build_sample(seq.info, seq.frames, 2, st, nullptr, opt);
   const auto input = model::model_input_from_sample(sample, st, c.model);
   ad::Tape<float> tape;

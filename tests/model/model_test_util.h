@@ -1,8 +1,13 @@
 #pragma once
-// Shared fixtures for the model tests: a tiny configuration and synthetic scenes.
-#include "model/input_builder.h"
+// Shared fixtures for the model tests: a tiny configuration, a small synthetic sequence, and
+// its windows through the production road (dataset::build_sample -> model_input_from_sample,
+// losses::loss_input_from_sample).
+#include "dataset/sample.h"
+#include "dataset/stats.h"
+#include "dataset/synthetic.h"
+#include "losses/sample_loss_input.h"
 #include "model/model_config.h"
-#include "model/synthetic_scene.h"
+#include "model/sample_input.h"
 
 namespace layersnet::model::testing {
 
@@ -19,14 +24,44 @@ inline ModelConfig tiny_config() {
   return c;
 }
 
-inline SyntheticSceneOptions tiny_scene(bool wind = true, int garments = 2) {
-  SyntheticSceneOptions o;
-  o.garments = {{9, 6}, {10, 6}};
-  o.garments.resize(garments);
-  o.body = {12, 8};
-  o.cell = {3, 3};
+// Two sheets (9 x 6 and 10 x 6 vertices 0.1 apart, patches of 3 x 3 quads) 0.05 and 0.065 outside
+// a body cylinder of radius 1 (12 x 8 vertices): the garments lag the body's sway and ripple, so
+// some of their vertices touch the body and the layers touch each other. 6 frames.
+inline dataset::SyntheticOptions tiny_scene(bool wind = true, int garments = 2) {
+  dataset::SyntheticOptions o;
+  o.frames = 6;
+  o.sheets = {{9, 6, 1.05f, 0.f}, {10, 6, 1.065f, -0.05f}};
+  o.sheets.resize(garments);
+  o.body_segments = 12;
+  o.body_rings = 8;
+  o.body_radius = 1.f;
+  o.body_bottom = -0.3f;
+  o.height = 1.4f;
+  o.body_caps = false;
   o.wind = wind;
   return o;
+}
+inline constexpr int kFrame = 3;  // sample frame t of tiny_scene: the wind (if any) blows at t and t+1
+
+// One sample of a sequence, its model input and its loss target.
+struct Window {
+  dataset::TrainingSample sample;
+  ModelInput<float> input;
+  losses::LossInput<float> target;
+};
+
+inline Window window(const dataset::Sequence& seq, const dataset::NormalisationStats& stats, const ModelConfig& c,
+                     int t = kFrame) {
+  Window w;
+  w.sample = dataset::build_sample(seq.info, seq.frames, t, stats, nullptr, sample_options_for(c));
+  w.input = model_input_from_sample(w.sample, stats, c);
+  w.target = losses::loss_input_from_sample(w.sample, seq.info);
+  return w;
+}
+
+// The same with the sequence's own statistics.
+inline Window window(const dataset::Sequence& seq, const ModelConfig& c, int t = kFrame) {
+  return window(seq, dataset::compute_stats(seq), c, t);
 }
 
 }  // namespace layersnet::model::testing

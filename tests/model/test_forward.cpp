@@ -43,8 +43,7 @@ TEST(ModelParams, RotationMapsStartOrthonormal) {
 
 TEST(ModelForward, ShapesAndFiniteOutputs) {
   const ModelConfig c = testing::tiny_config();
-  const auto scene = make_synthetic_scene(testing::tiny_scene());
-  const auto in = cast_input<float>(build_model_input(scene, c));
+  const auto in = testing::window(dataset::make_synthetic_sequence(testing::tiny_scene()), c).input;
   ad::ParamStore<float> ps;
   register_params(ps, c);
   init_params(ps, c, 1);
@@ -60,7 +59,7 @@ TEST(ModelForward, ShapesAndFiniteOutputs) {
 // gradients.
 TEST(ModelForward, FactoredDecoderEqualsExplicit) {
   const ModelConfig c = testing::tiny_config();
-  const auto in = build_model_input(make_synthetic_scene(testing::tiny_scene()), c);
+  const auto in = cast_input<double>(testing::window(dataset::make_synthetic_sequence(testing::tiny_scene()), c).input);
   ad::ParamStore<double> ps;
   register_params(ps, c);
   init_params(ps, c, 4);
@@ -89,7 +88,7 @@ TEST(ModelForward, FactoredDecoderEqualsExplicit) {
 // enters the distance) and the same gradients.
 TEST(ModelForward, FusedAttentionEqualsComposite) {
   const ModelConfig c = testing::tiny_config();
-  const auto in = build_model_input(make_synthetic_scene(testing::tiny_scene()), c);
+  const auto in = cast_input<double>(testing::window(dataset::make_synthetic_sequence(testing::tiny_scene()), c).input);
   ad::ParamStore<double> ps;
   register_params(ps, c);
   init_params(ps, c, 6);

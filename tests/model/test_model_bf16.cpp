@@ -18,7 +18,7 @@ namespace {
 // the vertex and patch predictions: the network's output before integration; positions are
 // mostly x_t and would hide the difference).
 double bf16_relative_error(const ModelConfig& c, unsigned seed) {
-  const auto in = cast_input<float>(build_model_input(make_synthetic_scene(testing::tiny_scene()), c));
+  const auto in = testing::window(dataset::make_synthetic_sequence(testing::tiny_scene()), c).input;
   ad::ParamStore<float> ps;
   register_params(ps, c);
   init_params(ps, c, seed);
@@ -51,7 +51,7 @@ TEST(ModelBf16, ForwardStaysCloseToFloat) {
     std::cout << "width " << c.width << ": bf16 forward, accelerations max |diff| / max |a| = " << err << " ("
               << ad::bf16_kernel_name() << ")\n";
     EXPECT_GT(err, 1e-5);  // bf16 products were used (the same float code would agree exactly)
-    EXPECT_LT(err, 0.01);  // observed ~3e-4 (width 16) and ~2e-4 (official sizes)
+    EXPECT_LT(err, 0.01);  // observed ~1e-3 (width 16) and ~7e-4 (official sizes)
   }
   EXPECT_GT(ad::bf16_weight_cache_stats().packs, 0);
 }

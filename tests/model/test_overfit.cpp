@@ -20,10 +20,9 @@ TEST(ModelOverfit, OneSampleLossDropsTenfold) {
   const int threads = omp_get_max_threads();
   omp_set_num_threads(1);
   const auto c = testing::tiny_config();
-  const auto scene = make_synthetic_scene(testing::tiny_scene());
-  const auto in64 = build_model_input(scene, c);
-  const auto in = cast_input<float>(in64);
-  const auto target = losses::cast_loss_input<float>(losses::build_loss_input(scene, in64));
+  const auto w = testing::window(dataset::make_synthetic_sequence(testing::tiny_scene()), c);
+  const auto& in = w.input;
+  const auto& target = w.target;
   ad::ParamStore<float> ps;
   register_params(ps, c);
   init_params(ps, c, 1);

@@ -1,4 +1,5 @@
-// The dataset's training sample drives the model: conversion, forward, losses, backward.
+// The dataset's training sample drives the model: conversion, forward, losses, backward; the
+// model input's neighbour lists and frames against their definitions.
 #include "dataset/garments.h"
 #include "dataset/sample.h"
 #include "dataset/synthetic.h"
@@ -10,7 +11,11 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/LU>
+
+#include <algorithm>
 #include <cmath>
+#include <random>
 
 namespace layersnet::model {
 namespace {
@@ -111,6 +116,159 @@ TEST(SampleInput, VertexLocalFeaturesAreWhatTheirNamesSay) {
   }
   EXPECT_GT(near_body, 0);
   EXPECT_LT(near_body, in.N);  // the outer layer lies beyond R_b in parts: both branches are tested
+}
+
+
+using Mat3 = Eigen::Matrix<double, 3, 3, Eigen::RowMajor>;
+
+TEST(NormalFrame, RotationsWithTheNormalLast) {
+  std::vector<Eigen::Vector3d> normals = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}, {-1, 0, 0}, {0, 0, -1},
+                                          {1, 1e-8, 0}, {1e-9, -1e-9, 1}, {1, 1, 1}, {0, 1, 1e-6}};
+  std::mt19937_64 rng(1);
+  std::normal_distribution<double> g(0, 1);
+  for (int k = 0; k < 200; ++k) normals.push_back({g(rng), g(rng), g(rng)});
+  for (auto n : normals) {
+    n.normalize();
+    double R[9];
+    normal_frame(n.data(), R);
+    const Eigen::Map<const Mat3> M(R);
+    EXPECT_LT((M * M.transpose() - Mat3::Identity()).norm(), 1e-12) << n.transpose();
+    EXPECT_NEAR(M.determinant(), 1.0, 1e-12);
+    EXPECT_LT((M.row(2).transpose() - n).norm(), 1e-12);  // R n = e_z
+  }
+  const double zero[3] = {0, 0, 0};
+  double R[9];
+  normal_frame(zero, R);
+  EXPECT_EQ(Eigen::Map<const Mat3>(R), Mat3::Identity());
+}
+
+// Components just above the official 1e-7 rule leave x0 = (1, 0, 0) nearly parallel to n: one
+// Gram-Schmidt pass then cancels (measured: R n off e_z by 2.3e-10 for 2e-7 components), still far
+// below the float precision of ModelInput::body_rot and gravity_rot.
+TEST(NormalFrame, NearAxisNormalsWithinFloatPrecision) {
+  const std::vector<Eigen::Vector3d> normals = {{1, 2e-7, -2e-7}, {3e-7, 1, 0}, {-2e-7, 0, -1}, {1, 1e-4, 0}};
+  for (auto n : normals) {
+    n.normalize();
+    double R[9];
+    normal_frame(n.data(), R);
+    const Eigen::Map<const Mat3> M(R);
+    EXPECT_LT((M * M.transpose() - Mat3::Identity()).norm(), 1e-6) << n.transpose();
+    EXPECT_NEAR(M.determinant(), 1.0, 1e-6);
+    EXPECT_LT((M * n - Eigen::Vector3d::UnitZ()).norm(), 1e-6);
+  }
+}
+
+TEST(NormalFrame, OfficialFirstAxisRuleAndNonUnitInput) {
+  // n = e_z: x0 = (1, 0, 0) plus ones where |n_c| < 1e-7 -> (1, 1, 0); x = (1, 1, 0)/sqrt(2).
+  // n = e_x: x0 = (1, 1, 1) -> x = (0, 1, 1)/sqrt(2). n = (0.6, 0.8, 0): x0 = (1, 0, 1).
+  const double s = std::sqrt(0.5);
+  double R[9];
+  const double ez[3] = {0, 0, 1}, ex[3] = {1, 0, 0}, n3[3] = {0.6, 0.8, 0};
+  normal_frame(ez, R);
+  EXPECT_TRUE(Eigen::Vector3d(R[0], R[1], R[2]).isApprox(Eigen::Vector3d(s, s, 0)));
+  normal_frame(ex, R);
+  EXPECT_TRUE(Eigen::Vector3d(R[0], R[1], R[2]).isApprox(Eigen::Vector3d(0, s, s)));
+  normal_frame(n3, R);
+  const Eigen::Vector3d x = (Eigen::Vector3d(1, 0, 1) - 0.6 * Eigen::Vector3d(0.6, 0.8, 0)).normalized();
+  EXPECT_TRUE(Eigen::Vector3d(R[0], R[1], R[2]).isApprox(x));
+  EXPECT_TRUE(Eigen::Vector3d(R[3], R[4], R[5]).isApprox(Eigen::Vector3d(0.6, 0.8, 0).cross(x)));
+  // A non-unit vector (the gravity direction g/fps - a_root) gives the frame of its direction.
+  const double n2[3] = {1.2, 1.6, 0};
+  double R2[9];
+  normal_frame(n2, R2);
+  for (int k = 0; k < 9; ++k) EXPECT_NEAR(R2[k], R[k], 1e-15) << k;
+}
+
+TEST(SampleInput, NeighbourListsFollowTheirDefinitions) {
+  const auto c = testing::tiny_config();
+  const auto in = testing::window(dataset::make_synthetic_sequence(testing::tiny_scene()), c).input;
+  auto centre = [&](int p) { return Eigen::Vector3f(&in.patch_state[12 * p]); };
+  const float r = static_cast<float>(c.world_radius);
+  for (int i = 0; i < in.P; ++i) {
+    const auto mb = in.mesh_senders.begin() + in.mesh_offsets[i], me = in.mesh_senders.begin() + in.mesh_offsets[i + 1];
+    EXPECT_NE(std::find(mb, me, i), me) << "a patch is mesh-adjacent to itself";
+    for (int j = 0; j < in.P; ++j) {  // squared distances in float, as the grid compares them
+      const bool near = j != i && (centre(i) - centre(j)).squaredNorm() < r * r && std::find(mb, me, j) == me;
+      const auto wb = in.world_senders.begin() + in.world_offsets[i], we = in.world_senders.begin() + in.world_offsets[i + 1];
+      EXPECT_EQ(near, std::find(wb, we, j) != we) << i << " -> " << j;
+    }
+    EXPECT_LE(in.body_offsets[i + 1] - in.body_offsets[i], c.body_neighbors);
+  }
+  EXPECT_GT(in.world_senders.size(), 0u);
+  EXPECT_GT(in.body_tokens.size(), 0u);
+  // Decoder candidates: at most 4, all mesh-adjacent to the vertex's own patch.
+  for (int v = 0; v < in.N; ++v) {
+    const int own = in.own_patch[v];
+    EXPECT_LE(in.cand_offsets[v + 1] - in.cand_offsets[v], c.decoder_patch_candidates);
+    for (int k = in.cand_offsets[v]; k < in.cand_offsets[v + 1]; ++k) {
+      const auto mb = in.mesh_senders.begin() + in.mesh_offsets[own], me = in.mesh_senders.begin() + in.mesh_offsets[own + 1];
+      EXPECT_NE(std::find(mb, me, in.cand_patches[k]), me);
+    }
+  }
+  // Patch states are the means of their members' states (float sums, as the data layer's).
+  for (int p = 0; p < in.P; ++p) {
+    float sum = 0;
+    for (int k = in.p2v_offsets[p]; k < in.p2v_offsets[p + 1]; ++k) sum += in.state[12 * in.p2v_vertices[k] + 4];
+    EXPECT_FLOAT_EQ(in.patch_state[12 * p + 4], sum / static_cast<float>(in.p2v_offsets[p + 1] - in.p2v_offsets[p]));
+  }
+}
+
+// The searches use the data layer's grid / k-d tree; here the brute-force definitions:
+// body lists = the K nearest body vertices (t+1) within R_b of each patch centre, and
+// patch_body / vertex_body = the nearest body vertex if within R_b.
+TEST(SampleInput, BodyListsAndNearestFollowTheirDefinitions) {
+  const auto c = testing::tiny_config();
+  const auto seq = dataset::make_synthetic_sequence(testing::tiny_scene());
+  const auto w = testing::window(seq, c);
+  const auto& in = w.input;
+  const int64_t B = seq.info.num_body_vertices;
+  const Eigen::Vector3d root = seq.info.translation.row(testing::kFrame + 1).transpose().cast<double>();
+  auto body = [&](int64_t b) {
+    return Eigen::Vector3d(seq.body_at(testing::kFrame + 1).row(b).transpose().cast<double>() - root);
+  };
+  // Token -> body vertex: the vertex whose normalised state the token carries.
+  std::vector<int64_t> vertex_of(in.U, -1);
+  for (int64_t u = 0; u < in.U; ++u) {
+    for (int64_t b = 0; b < B; ++b)
+      if (std::equal(&in.body_norm[12 * u], &in.body_norm[12 * u] + 12, w.sample.body_state_norm.row(b).data()))
+        vertex_of[u] = b;
+    ASSERT_GE(vertex_of[u], 0) << "token " << u;
+  }
+  auto nearest = [&](const Eigen::Vector3d& q) {
+    int64_t best = 0;
+    for (int64_t b = 1; b < B; ++b)
+      if ((body(b) - q).norm() < (body(best) - q).norm()) best = b;
+    return best;
+  };
+  for (int64_t p = 0; p < in.P; ++p) {
+    const Eigen::Vector3d cp = Eigen::Vector3f(&in.patch_state[12 * p]).cast<double>();
+    std::vector<std::pair<double, int64_t>> hits;
+    for (int64_t b = 0; b < B; ++b)
+      if ((body(b) - cp).norm() < c.body_radius) hits.emplace_back((body(b) - cp).norm(), b);
+    std::sort(hits.begin(), hits.end());
+    hits.resize(std::min<std::size_t>(hits.size(), static_cast<std::size_t>(c.body_neighbors)));
+    std::vector<int64_t> want, got;
+    for (const auto& h : hits) want.push_back(h.second);
+    for (int k = in.body_offsets[p]; k < in.body_offsets[p + 1]; ++k) got.push_back(vertex_of[in.body_tokens[k]]);
+    EXPECT_EQ(got, want) << "patch " << p;
+    const int64_t nb = nearest(cp);
+    EXPECT_EQ(in.patch_body[p] >= 0, (body(nb) - cp).norm() < c.body_radius) << "patch " << p;
+    if (in.patch_body[p] >= 0) {
+      EXPECT_EQ(vertex_of[in.patch_body[p]], nb) << "patch " << p;
+    }
+  }
+  int near_vertices = 0;
+  for (int64_t v = 0; v < in.N; ++v) {
+    const Eigen::Vector3d x(in.state[12 * v], in.state[12 * v + 1], in.state[12 * v + 2]);
+    const int64_t nb = nearest(x);
+    const bool within = (body(nb) - x).norm() < c.body_radius;
+    EXPECT_EQ(in.vertex_body[v] >= 0, within) << "vertex " << v;
+    if (within) {
+      EXPECT_EQ(vertex_of[in.vertex_body[v]], nb) << "vertex " << v;
+      ++near_vertices;
+    }
+  }
+  EXPECT_GT(near_vertices, 0);
 }
 
 }  // namespace

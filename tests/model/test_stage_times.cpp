@@ -1,14 +1,15 @@
-// ForwardOptions::times (the stage-timing hook of the cost benches) and the scene variants of
-// model/scene_variants.h: timing is filled and consistent and changes no value; each removed
-// scene part really is absent from the model input and from the forward's work counts.
+// ForwardOptions::times (the stage-timing hook of the cost benches) and the scene variants that
+// `bench scene` times (synthetic options: fewer garments, no wind, body moved away): timing is
+// filled and consistent and changes no value; each variant is the full sequence minus that
+// part, and the part really is absent from the model input and from the forward's work counts.
 #include "autodiff/ops_dense.h"
 #include "model/layersnet.h"
 #include "model/params_layout.h"
-#include "model/scene_variants.h"
 #include "model_test_util.h"
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstring>
@@ -19,13 +20,16 @@ namespace {
 struct Fixture {
   ModelConfig config = testing::tiny_config();
   ad::ParamStore<float> params;
+  dataset::NormalisationStats stats = dataset::compute_stats(dataset::make_synthetic_sequence(testing::tiny_scene()));
   Fixture() {
     register_params(params, config);
     init_params(params, config, 3);
   }
+  // Every variant with the full scene's statistics.
+  ModelInput<float> input_of(const dataset::SyntheticOptions& o) const {
+    return testing::window(dataset::make_synthetic_sequence(o), stats, config).input;
+  }
 };
-
-ModelInput<float> input_of(const SceneWindow& s, const ModelConfig& c) { return cast_input<float>(build_model_input(s, c)); }
 
 std::vector<float> values(const ad::Var<float>& v) { return {v.value, v.value + v.size()}; }
 
@@ -35,7 +39,7 @@ bool same_bits(const std::vector<float>& a, const std::vector<float>& b) {
 
 TEST(StageTimes, FilledNonNegativeAndWithinTheTotal) {
   Fixture f;
-  const auto in = input_of(make_synthetic_scene(testing::tiny_scene()), f.config);
+  const auto in = f.input_of(testing::tiny_scene());
   ASSERT_GT(in.U, 0);
   ad::Tape<float> tape;
   StageTimes t;
@@ -64,7 +68,7 @@ TEST(StageTimes, FilledNonNegativeAndWithinTheTotal) {
 TEST(StageTimes, WorkCountsMatchTheInput) {
   Fixture f;
   for (bool wind : {true, false}) {
-    const auto in = input_of(make_synthetic_scene(testing::tiny_scene(wind)), f.config);
+    const auto in = f.input_of(testing::tiny_scene(wind));
     ad::Tape<float> tape;
     ad::NoRecord<float> off(tape);
     StageTimes t;
@@ -88,7 +92,7 @@ TEST(StageTimes, WorkCountsMatchTheInput) {
 // Timing reads the clock between ops only: predictions and gradients are bit-identical.
 TEST(StageTimes, TimingChangesNoValue) {
   Fixture f;
-  const auto in = input_of(make_synthetic_scene(testing::tiny_scene()), f.config);
+  const auto in = f.input_of(testing::tiny_scene());
   auto run = [&](bool timed, std::vector<float>& grads) {
     ad::Tape<float> tape;
     StageTimes t;
@@ -113,13 +117,22 @@ TEST(StageTimes, TimingChangesNoValue) {
   for (float x : on) ASSERT_TRUE(std::isfinite(x));
 }
 
+// The full sequence and a variant share every part the variant keeps, bit for bit.
+void expect_same_motion(const dataset::Sequence& a, const dataset::Sequence& b, int garments) {
+  for (int g = 0; g < garments; ++g) {
+    EXPECT_TRUE(a.info.garments[g].faces == b.info.garments[g].faces) << "garment " << g;
+    EXPECT_TRUE(a.info.garments[g].uv == b.info.garments[g].uv) << "garment " << g;
+    EXPECT_TRUE(a.frames.garments[g] == b.frames.garments[g]) << "garment " << g;
+  }
+  EXPECT_TRUE(a.info.translation == b.info.translation);
+}
+
 TEST(SceneVariants, BodyFarHasNoBodyRowsOrTokens) {
   Fixture f;
-  const auto near = make_synthetic_scene(testing::tiny_scene());
-  auto far = near;
-  const double up[3] = {0, 0, 10 * f.config.body_radius + 10};
-  move_body(far, up);
-  const auto in_near = input_of(near, f.config), in = input_of(far, f.config);
+  auto far_scene = testing::tiny_scene();
+  far_scene.body_offset = {0.f, 0.f, static_cast<float>(10 * f.config.body_radius + 10)};
+  expect_same_motion(dataset::make_synthetic_sequence(far_scene), dataset::make_synthetic_sequence(testing::tiny_scene()), 2);
+  const auto in_near = f.input_of(testing::tiny_scene()), in = f.input_of(far_scene);
   ASSERT_GT(in_near.U, 0);  // otherwise the check below is vacuous
   ASSERT_GT(in_near.body_tokens.size(), 0u);
   EXPECT_EQ(in.U, 0);
@@ -144,10 +157,11 @@ TEST(SceneVariants, BodyFarHasNoBodyRowsOrTokens) {
 
 TEST(SceneVariants, NoWindHasNoWindToken) {
   Fixture f;
-  const auto with = make_synthetic_scene(testing::tiny_scene());
-  auto calm = with;
-  drop_wind(calm);
-  const auto in_with = input_of(with, f.config), in = input_of(calm, f.config);
+  const auto with = dataset::make_synthetic_sequence(testing::tiny_scene(true));
+  const auto calm = dataset::make_synthetic_sequence(testing::tiny_scene(false));
+  expect_same_motion(calm, with, 2);
+  EXPECT_TRUE(calm.frames.body == with.frames.body);
+  const auto in_with = f.input_of(testing::tiny_scene(true)), in = f.input_of(testing::tiny_scene(false));
   EXPECT_TRUE(in_with.has_wind);
   EXPECT_FALSE(in.has_wind);
   EXPECT_TRUE(in.wind.empty());
@@ -171,25 +185,25 @@ TEST(SceneVariants, NoWindHasNoWindToken) {
 
 TEST(SceneVariants, OneGarmentIsTheFirstGarmentOfTheFullScene) {
   Fixture f;
-  const auto full = make_synthetic_scene(testing::tiny_scene());
-  const auto one = keep_first_garments(full, 1);
-  const auto solo = make_synthetic_scene(testing::tiny_scene(true, 1));
-  // Same sizes as a scene made with that garment alone (its motion differs: the generator's
-  // random stream continues into the second garment and the body).
-  EXPECT_EQ(one.N, solo.N);
-  EXPECT_EQ(one.P, solo.P);
-  EXPECT_EQ(one.faces, solo.faces);
-  EXPECT_EQ(one.adj_offsets, solo.adj_offsets);
-  EXPECT_EQ(one.adj_patches, solo.adj_patches);
-  EXPECT_EQ(one.v2p_patches, solo.v2p_patches);
-  EXPECT_EQ(one.p2v_vertices, solo.p2v_vertices);
+  const auto full = dataset::make_synthetic_sequence(testing::tiny_scene());
+  const auto one = dataset::make_synthetic_sequence(testing::tiny_scene(true, 1));
+  ASSERT_EQ(one.info.num_garments(), 1);
+  expect_same_motion(one, full, 1);
+  EXPECT_TRUE(one.frames.body == full.frames.body);
 
-  const auto in_full = input_of(full, f.config), in = input_of(one, f.config);
-  ASSERT_EQ(in.N, full.garment_offsets[1]);
+  const auto in_full = f.input_of(testing::tiny_scene()), in = f.input_of(testing::tiny_scene(true, 1));
+  ASSERT_EQ(in.N, full.info.garments[0].num_vertices);
+  ASSERT_LT(in.P, in_full.P);
   EXPECT_TRUE(std::equal(in.state.begin(), in.state.end(), in_full.state.begin()));  // same motion
+  // Its patches are the full scene's first ones (garment order).
+  EXPECT_TRUE(std::equal(in.v2p_offsets.begin(), in.v2p_offsets.end(), in_full.v2p_offsets.begin()));
+  EXPECT_TRUE(std::equal(in.v2p_patches.begin(), in.v2p_patches.end(), in_full.v2p_patches.begin()));
+  EXPECT_TRUE(std::equal(in.p2v_offsets.begin(), in.p2v_offsets.end(), in_full.p2v_offsets.begin()));
+  EXPECT_TRUE(std::equal(in.p2v_vertices.begin(), in.p2v_vertices.end(), in_full.p2v_vertices.begin()));
+  EXPECT_TRUE(std::equal(in.mesh_offsets.begin(), in.mesh_offsets.end(), in_full.mesh_offsets.begin()));
+  EXPECT_TRUE(std::equal(in.mesh_senders.begin(), in.mesh_senders.end(), in_full.mesh_senders.begin()));
   EXPECT_LT(in.world_senders.size(), in_full.world_senders.size());  // the inter-garment world edges are gone
   for (int32_t p : in.world_senders) EXPECT_LT(p, in.P);
-  EXPECT_THROW(keep_first_garments(full, 3), CheckError);
 }
 
 }  // namespace

@@ -4,6 +4,7 @@
 
 #include "dataset/error.h"
 #include "dataset/synthetic.h"
+#include "model/sample_input.h"
 
 #include <gtest/gtest.h>
 #include <unistd.h>
@@ -51,7 +52,7 @@ TEST_F(TrainDataTest, EverySampleFrameOnceAndSamplesMatchTheFullSequence) {
   const dataset::TrainingSample s = data.build(data.read_window(r.sequence, r.t, r.t), r.t);
   const dataset::Sequence full = dataset::read_sequence(manifest_.sequence_path(data.ids()[r.sequence]));
   const dataset::TrainingSample e =
-      dataset::build_sample(full.info, full.frames, r.t, stats_, nullptr, sample_options_for(config_.model));
+      dataset::build_sample(full.info, full.frames, r.t, stats_, nullptr, model::sample_options_for(config_.model));
   EXPECT_EQ(s.sequence_id, data.ids()[r.sequence]);
   EXPECT_EQ(e.frame, s.frame);
   EXPECT_EQ(e.state, s.state);
