@@ -175,7 +175,12 @@ Sequence make_synthetic_sequence(const SyntheticOptions& o) {
       const Eigen::RowVector3f lagged = root_at(o, t - 0.7f).transpose();
       for (Eigen::Index v = 0; v < rest.rows(); ++v) {
         const float ripple = 0.03f * std::sin(1.3f * t + 2.f * rest(v, 2) + phase + gi);
-        pos.row(t * rest.rows() + v) = rest.row(v) * (1.f + ripple) + lagged;
+        if (o.sheets.empty()) {
+          pos.row(t * rest.rows() + v) = rest.row(v) * (1.f + ripple) + lagged;
+        } else {  // about the sheet's mid-height: tall sheets keep their layers' heights
+          const Eigen::RowVector3f mid(0.f, 0.f, o.sheets[gi].z0 + 0.5f * (o.sheets[gi].along - 1) * o.sheet_spacing);
+          pos.row(t * rest.rows() + v) = (rest.row(v) - mid) * (1.f + ripple) + mid + lagged;
+        }
       }
     }
     seq.frames.garments.push_back(std::move(pos));

@@ -4,6 +4,7 @@
 //   garments 1..3 open tubes around it ("tee", "jacket", ...), each cut into 2 UV panels
 //            (front and back halves; the seam vertices are shared in 3-D, UVs per corner),
 //            or open cylindrical sheets of a given grid (one UV panel each), any number;
+//            both follow the body with a lag and ripple (a sheet about its mid-height);
 //   wind     optional, piecewise constant: none, then two segments of different direction.
 // Units: scene units (scale 10 per metre, as D-LAYERS), z up, gravity (0, 0, -9.8).
 // Garment g's geometry, motion and attributes do not depend on the garments after it, and

@@ -30,7 +30,7 @@ ModelInput<float> model_input_from_sample(const dataset::TrainingSample& sample,
 // padding): what build_sample needs for model_input_from_sample.
 dataset::SampleOptions sample_options_for(const ModelConfig& model);
 
-// Official rotation_from_normals (utils/mesh3d.py) of the unit direction of `normal`:
+// The official frame of a normal (utils/mesh3d.py) for the unit direction of `normal`:
 // R = rows [x; y; n] (world -> local, n -> e_z), x from (1,0,0) with the |n_c| < 1e-7 rule.
 // A zero vector gives the identity. R: 9 numbers, row-major.
 void normal_frame(const double normal[3], double R[9]);

@@ -29,15 +29,19 @@ RowMat<double> test_normals() {
   return out;
 }
 
-// A world -> local frame of each unit normal (R n = e_z) as rows of 9 numbers; the model's own
-// frame rule (model::normal_frame) is tested with the model.
+// A world -> local frame of each unit normal n as rows [x; y; n] of 9 numbers (R n = e_z): x from
+// the axis least parallel to n, orthogonalised twice. The model's own frame rule
+// (model::normal_frame) is tested with the model.
 RowMat<double> frames(const RowMat<double>& normals) {
   RowMat<double> R(normals.rows(), 9);
   for (int64_t k = 0; k < normals.rows(); ++k) {
-    const Eigen::Matrix3d m =
-        Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d(normals.row(k).transpose()), Eigen::Vector3d::UnitZ())
-            .toRotationMatrix();
-    for (int c = 0; c < 9; ++c) R(k, c) = m(c / 3, c % 3);
+    const Eigen::Vector3d n = normals.row(k).transpose();
+    Eigen::Index axis;
+    n.cwiseAbs().minCoeff(&axis);
+    Eigen::Vector3d x = Eigen::Vector3d::Unit(axis);
+    for (int pass = 0; pass < 2; ++pass) x = (x - x.dot(n) * n).normalized();
+    const Eigen::Vector3d y = n.cross(x);
+    for (int c = 0; c < 3; ++c) R(k, c) = x[c], R(k, 3 + c) = y[c], R(k, 6 + c) = n[c];
   }
   return R;
 }

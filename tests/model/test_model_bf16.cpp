@@ -51,7 +51,7 @@ TEST(ModelBf16, ForwardStaysCloseToFloat) {
     std::cout << "width " << c.width << ": bf16 forward, accelerations max |diff| / max |a| = " << err << " ("
               << ad::bf16_kernel_name() << ")\n";
     EXPECT_GT(err, 1e-5);  // bf16 products were used (the same float code would agree exactly)
-    EXPECT_LT(err, 0.01);  // observed ~1e-3 (width 16) and ~7e-4 (official sizes)
+    EXPECT_LT(err, 0.01);  // observed ~9e-4 (width 16) and ~6e-4 (official sizes)
   }
   EXPECT_GT(ad::bf16_weight_cache_stats().packs, 0);
 }
