@@ -72,9 +72,9 @@ dataset::SyntheticOptions reference_scene(const std::string& size, const ModelCo
     throw std::runtime_error("bench model: --size '" + size + "' is unknown; use small or dlayers");
   }
   o.frames = 6;
-  o.sheets = {{inner[0], inner[1], 1.235f, 0.f}, {outer[0], outer[1], 1.26f, -0.2f}};
+  const std::array<float, 2> step = {static_cast<float>(mc.patch_size / 3), static_cast<float>(mc.patch_size / 4)};
+  o.sheets = {{inner[0], inner[1], 1.235f, 0.f, step}, {outer[0], outer[1], 1.26f, -0.2f, step}};
   o.sheet_spacing = 0.05f;
-  o.sheet_uv_step = {static_cast<float>(mc.patch_size / 3), static_cast<float>(mc.patch_size / 4)};
   float zmax = 0;
   for (const auto& g : o.sheets) zmax = std::max(zmax, g.z0 + (g.along - 1) * o.sheet_spacing);
   o.body_segments = body[0];

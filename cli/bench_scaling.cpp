@@ -84,19 +84,27 @@ std::vector<T> parse_list(const std::string& list, const char* what) {
   return out;
 }
 
-// The outfit at about `target` garment vertices (see the file comment): UV step per grid step
-// so that a patch is o.patch_size scene units (metric) or o.cell x o.cell quads (vertices).
+// The outfit at about `target` garment vertices (see the file comment), each sheet's UV step
+// set so that a patch is o.cell x o.cell quads (vertices), or (metric) one of the
+// round(extent / o.patch_size) cells that tile the sheet's extent: about o.patch_size units,
+// the same count at every N.
 bench::Scene make_outfit(int64_t target, const std::string& mode, const ScalingOptions& o, const ModelConfig& mc) {
   dataset::SyntheticOptions so = bench::outfit(target);
-  float step = 0;
-  if (mode == "metric") {
-    step = static_cast<float>(so.sheet_spacing * mc.patch_size / o.patch_size);
-  } else if (mode == "vertices") {
-    step = static_cast<float>(mc.patch_size / o.cell);
-  } else {
+  if (mode != "metric" && mode != "vertices")
     throw std::runtime_error("bench scaling: --modes item '" + mode + "' is unknown; use metric and/or vertices");
+  for (std::size_t g = 0; g < so.sheets.size(); ++g) {
+    auto& sheet = so.sheets[g];
+    if (mode == "vertices") {
+      sheet.uv_step = {static_cast<float>(mc.patch_size / o.cell), static_cast<float>(mc.patch_size / o.cell)};
+      continue;
+    }
+    const double extent[2] = {kOutfit[g].around, kOutfit[g].along};
+    const int steps[2] = {sheet.around - 1, sheet.along - 1};
+    for (int k = 0; k < 2; ++k) {
+      const long cells = std::max(1L, std::lround(extent[k] / o.patch_size));
+      sheet.uv_step[k] = static_cast<float>(mc.patch_size * static_cast<double>(cells) / steps[k]);
+    }
   }
-  so.sheet_uv_step = {step, step};
   return bench::make_scene(so, mc);
 }
 

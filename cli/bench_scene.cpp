@@ -110,7 +110,7 @@ int run_bench_scene(const SceneBenchOptions& o) {
   // The outfit at --vertices with 3 x 3-quad patches, and its variants: the same sequence
   // without the outer garment, the wind, the body's nearness (20 units up), or all three.
   dataset::SyntheticOptions full = bench::outfit(o.vertices);
-  full.sheet_uv_step = {static_cast<float>(mc.patch_size / 3), static_cast<float>(mc.patch_size / 3)};
+  for (auto& g : full.sheets) g.uv_step = {static_cast<float>(mc.patch_size / 3), static_cast<float>(mc.patch_size / 3)};
   dataset::SyntheticOptions one = full, calm = full, far = full, bare = full;
   one.sheets.resize(1);
   calm.wind = false;

@@ -84,7 +84,7 @@ inline dataset::TrainingSample sample_of(const Scene& s, const ModelConfig& mc) 
 // extent (inner 5.0 x 4.0, outer 6.25 x 4.75 scene units, radii 1.235 / 1.26, first rows at 0
 // and -0.2) around a body of 106 x 65 = 6890 vertices (radius 1.2, from 0.6 below to 0.6 above
 // the garments) that never changes, meshed at about `target` garment vertices: spacing
-// h = sqrt(area / target). Wind on, 6 frames. Patches: the caller sets sheet_uv_step.
+// h = sqrt(area / target). Wind on, 6 frames. Patches: the caller sets each sheet's uv_step.
 struct OutfitGarment {
   double around, along, radius, z0;  // extent (scene units), nominal radius, first row height
 };

@@ -121,7 +121,7 @@ GarmentMesh make_sheet(const SyntheticOptions& o, const SyntheticSheet& sheet, c
     }
   std::vector<int32_t> f;
   std::vector<float> uv;
-  auto corner = [&](int i, int j) { uv.push_back(o.sheet_uv_step[0] * i), uv.push_back(o.sheet_uv_step[1] * j); };
+  auto corner = [&](int i, int j) { uv.push_back(sheet.uv_step[0] * i), uv.push_back(sheet.uv_step[1] * j); };
   for (int i = 0; i + 1 < U; ++i)
     for (int j = 0; j + 1 < V; ++j) {
       const int a = i * V + j, b = (i + 1) * V + j, c = (i + 1) * V + j + 1, d = i * V + j + 1;

@@ -22,13 +22,14 @@ namespace layersnet::dataset {
 
 // An open cylindrical sheet: `around` x `along` vertices, SyntheticOptions::sheet_spacing apart
 // (around the cylinder of `radius` and up from height z0), two triangles per grid quad. Its
-// one UV panel puts vertex (i, j) at (i, j) x sheet_uv_step, so a patch of size s holds
-// s / sheet_uv_step quads per side (e.g. step 0.04 / 3: 3 x 3 quads at the default 0.04).
+// one UV panel puts vertex (i, j) at (i uv_step[0], j uv_step[1]), so a patch of size s holds
+// s / uv_step quads per side (e.g. step 0.04 / 3: 3 x 3 quads at the default 0.04).
 struct SyntheticSheet {
   int around = 10;
   int along = 6;
   float radius = 1.5f;  // scene units
   float z0 = 0.f;       // height of the first row, scene units
+  std::array<float, 2> uv_step = {0.04f / 3, 0.04f / 3};  // UV units per grid step (around, along)
 };
 
 struct SyntheticOptions {
@@ -51,8 +52,7 @@ struct SyntheticOptions {
   // Sheets instead of tubes: when not empty, the garments are these, inner first
   // (`garments`, `rings`, `segments`, `radius`, `layer_gap`, `uv_per_unit` then do not apply).
   std::vector<SyntheticSheet> sheets;
-  float sheet_spacing = 0.1f;                       // scene units between grid neighbours
-  std::array<float, 2> sheet_uv_step = {0.04f / 3, 0.04f / 3};  // UV units per grid step (around, along)
+  float sheet_spacing = 0.1f;  // scene units between grid neighbours
   // Added to every position and to the root translation: the same scene elsewhere in the world.
   std::array<float, 3> offset = {0.f, 0.f, 0.f};
   // Added to the body only (not the root): a body away from the garments.
