@@ -2,8 +2,8 @@
 // edges at the patch size and world radius of a config or the options.
 #include "cli/command_registry.h"
 #include "eval/inspect.h"
-#include "train/config.h"
-#include "train/train_data.h"
+#include "run/config.h"
+#include "run/sample_options.h"
 
 #include <memory>
 

@@ -7,7 +7,7 @@
 #include "dataset/stats.h"
 #include "dataset/wind.h"
 #include "eval/metrics.h"
-#include "train/cloth_constraints.h"
+#include "run/cloth_constraints.h"
 
 #include <algorithm>
 #include <cstdio>

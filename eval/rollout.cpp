@@ -7,9 +7,9 @@
 
 #include "model/layersnet.h"
 #include "model/sample_input.h"
-#include "train/checkpoint.h"
-#include "train/run_dir.h"
-#include "train/train_data.h"
+#include "run/checkpoint.h"
+#include "run/run_dir.h"
+#include "run/sample_options.h"
 
 #include <chrono>
 #include <limits>

@@ -10,7 +10,7 @@
 #include "model/layersnet.h"
 #include "model/params_layout.h"
 #include "model/sample_input.h"
-#include "train/train_data.h"
+#include "run/sample_options.h"
 
 #include <algorithm>
 #include <cmath>

@@ -1,14 +1,14 @@
-// Cloth constraints (train/cloth_constraints.h): cloth that already holds them is not moved; stretched
+// Cloth constraints (run/cloth_constraints.h): cloth that already holds them is not moved; stretched
 // edges come back within the limit; vertices inside the body or the inner layer are pushed onto
 // the shell; and a model's rollout with eval.constraints keeps every frame within them.
 #include "dataset/neighbours.h"
 #include "dataset/synthetic.h"
-#include "train/cloth_constraints.h"
+#include "run/cloth_constraints.h"
 #include "eval/metrics.h"
 #include "eval/rollout.h"
 #include "eval/stress.h"
 #include "model/params_layout.h"
-#include "train/config.h"
+#include "run/config.h"
 
 #include <gtest/gtest.h>
 

@@ -19,8 +19,8 @@
 #include "model/layersnet.h"
 #include "model/params_layout.h"
 #include "model/synthetic_scene.h"
-#include "train/checkpoint.h"
-#include "train/run_dir.h"
+#include "run/checkpoint.h"
+#include "run/run_dir.h"
 #include "train/trainer.h"
 
 #include "tests/eval/cli_test_util.h"

@@ -67,7 +67,7 @@ struct EvalConfig {
   int frames = 36;  // predicted frames per sequence (official test: 36)
   double patch_tether = 0.0;  // rollouts: vertex within this × its patch's rest radius of its
                               // patch mates' centre (eval/tether.h); 0 = off (official, default)
-  // Cloth constraints after every predicted frame (train/cloth_constraints.h; not in the paper).
+  // Cloth constraints after every predicted frame (run/cloth_constraints.h; not in the paper).
   bool constraints = false;
   double strain_limit = 0.05;      // largest |edge length / rest length − 1| kept
   double fold_limit = 0.0;         // largest shortening of the far-corner distance of two adjacent triangles (0 = none)

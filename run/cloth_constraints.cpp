@@ -1,4 +1,4 @@
-#include "train/cloth_constraints.h"
+#include "run/cloth_constraints.h"
 
 #include "dataset/garments.h"
 #include "dataset/neighbours.h"

@@ -21,7 +21,7 @@
 // differences of positions, so a projected frame also feeds back consistent velocities.
 // Deterministic for any thread count (sequential passes).
 #include "dataset/sequence.h"
-#include "train/config.h"
+#include "run/config.h"
 
 #include <cstdint>
 #include <utility>
