@@ -214,6 +214,9 @@ const Schema& schema() {
     k.add("eval.strain_limit", [](Config& c) -> double& { return c.eval.strain_limit; }, "constraints: largest |edge length / rest length - 1| a rollout keeps (0 = no edge step)", {0, 0.99, {}});
     k.add("eval.fold_limit", [](Config& c) -> double& { return c.eval.fold_limit; }, "constraints: largest relative shortening of the distance between the far corners of two triangles sharing an edge (0 = no fold step)", {0, 0.99, {}});
     k.add("eval.collision_shell", [](Config& c) -> double& { return c.eval.collision_shell; }, "constraints: scene units a rollout keeps garments outside the body and the outer layer outside the inner one (0 = no collision step)", {0, 10, {}});
+    k.add("eval.body_friction", [](Config& c) -> double& { return c.eval.body_friction; }, "constraints: share of a near-body garment vertex's tangential motion relative to the body that the body takes away (0 = off, 1 = the vertex sticks)", {0, 1, {}});
+    k.add("eval.layer_friction", [](Config& c) -> double& { return c.eval.layer_friction; }, "constraints: the same as eval.body_friction for an outer-layer vertex against the inner layer (0 = off)", {0, 1, {}});
+    k.add("eval.friction_distance", [](Config& c) -> double& { return c.eval.friction_distance; }, "constraints: scene units from the body surface (along its normal) within which eval.body_friction acts", {0, 10, {}});
     k.add("eval.constraint_iterations", [](Config& c) -> int& { return c.eval.constraint_iterations; }, "constraints: projection passes per predicted frame", {1, 1000, {}});
     return k;
   }();

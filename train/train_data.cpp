@@ -33,7 +33,9 @@ void Window::feed_back(int f, const float* relative) {
   if (!constraints) return set_garments_relative(f, relative);
   dataset::Points x = Eigen::Map<const dataset::Points>(relative, info->total_garment_vertices(), 3);
   x.rowwise() += info->translation.row(f);  // world, as set_garments_relative writes it
-  constraints->apply(frames.body_at(f, info->num_body_vertices), x);
+  dataset::Points before(x.rows(), 3);  // frame f - 1 as fed: the friction step needs its motion
+  for_each_garment_coordinate(*this, f - 1, [&](float& v, std::size_t i) { before.data()[i] = v; });
+  constraints->apply(frames.body_at(f, info->num_body_vertices), x, frames.body_at(f - 1, info->num_body_vertices), before);
   for_each_garment_coordinate(*this, f, [&](float& v, std::size_t i) { v = x.data()[i]; });
 }
 
