@@ -6,7 +6,7 @@
 #include "cli/program_files.h"
 #include "dataset/stats.h"
 #include "dataset/synthetic.h"
-#include "train/config.h"
+#include "run/config.h"
 #include "train/gsl_random.h"
 #include "train/train_data.h"
 

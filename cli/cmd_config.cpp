@@ -1,7 +1,7 @@
 // `layersnet config`: prints the fully resolved configuration, or every valid key.
 #include "cli/command_registry.h"
 #include "cli/program_files.h"
-#include "train/config.h"
+#include "run/config.h"
 
 #include <cstdio>
 #include <memory>

@@ -79,7 +79,7 @@ LAYERSNET_COMMAND(eval, "Roll out checkpoints and baselines over a split; error,
                         ->check(layersnet::cli::kFiniteNonNegative);
                     sub.add_option("--constraints", o->constraints,
                                    "cloth constraints after every predicted frame (edge strain limit, collision shell; "
-                                   "train/cloth_constraints.h): on, off, or off,on for every model both ways (default: each "
+                                   "run/cloth_constraints.h): on, off, or off,on for every model both ways (default: each "
                                    "checkpoint's eval.constraints)")
                         ->delimiter(',')
                         ->check(CLI::IsMember({"on", "off"}));

@@ -4,12 +4,13 @@
 // Without --checkpoint, --baseline chooses the predictor (constant-velocity | follow-body).
 #include "cli/command_registry.h"
 #include "cli/exit_codes.h"
+#include "cli/model_option.h"
 #include "dataset/manifest.h"
 #include "dataset/stats.h"
 #include "eval/evaluate.h"
 #include "eval/export.h"
 #include "eval/rollout.h"
-#include "train/checkpoint.h"
+#include "run/checkpoint.h"
 
 #include <cstdio>
 #include <filesystem>
@@ -19,7 +20,8 @@ namespace {
 using namespace layersnet;
 
 struct ExportCliOptions {
-  std::string checkpoint;
+  std::string checkpoint;  // from `model` just before the run
+  cli::ModelOption model;
   std::string baseline = "follow-body";
   std::string dataset;
   std::string split;
@@ -80,7 +82,7 @@ int run_export(const ExportCliOptions& o) {
 LAYERSNET_COMMAND(export, "Write a rollout's predicted and ground-truth meshes (OBJ/PLY) and a PNG strip",
                   [](CLI::App& sub) {
                     auto o = std::make_shared<ExportCliOptions>();
-                    sub.add_option("--checkpoint", o->checkpoint, "checkpoint to roll out");
+                    o->model.add_to(sub, "checkpoint to roll out");
                     sub.add_option("--baseline", o->baseline, "without --checkpoint: constant-velocity | follow-body");
                     sub.add_option("--dataset", o->dataset, "data set folder (default: the checkpoint's data.dataset)");
                     sub.add_option("--split", o->split, "split to take the sequence from (default: eval.split)");
@@ -93,8 +95,9 @@ LAYERSNET_COMMAND(export, "Write a rollout's predicted and ground-truth meshes (
                     sub.add_option("--set", o->settings,
                                    "rollout setting of the checkpoint, e.g. --set eval.constraints=false (eval.* keys)");
                     return [o] {
+                      o->checkpoint = o->model.path();
                       if (o->checkpoint.empty() && o->dataset.empty()) {
-                        std::fprintf(stderr, "layersnet export: give --checkpoint or --dataset\n");
+                        std::fprintf(stderr, "layersnet export: give --checkpoint, --run or --dataset\n");
                         return cli::kExitUsage;
                       }
                       return run_export(*o);  // errors: reported by cli/main.cpp

@@ -3,7 +3,7 @@
 #include "cli/command_registry.h"
 #include "eval/inspect.h"
 #include "model/sample_input.h"
-#include "train/config.h"
+#include "run/config.h"
 
 #include <memory>
 

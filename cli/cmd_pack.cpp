@@ -3,7 +3,8 @@
 // moments are twice the weights). Every command that takes --checkpoint reads the result;
 // `train --resume` refuses it. --set changes rollout settings (eval.*) in the packed config.
 #include "cli/command_registry.h"
-#include "train/checkpoint.h"
+#include "cli/model_option.h"
+#include "run/checkpoint.h"
 
 #include <cstdio>
 #include <filesystem>
@@ -11,12 +12,14 @@
 namespace {
 
 struct PackOptions {
-  std::string checkpoint;
+  layersnet::cli::ModelOption model;
+  std::string checkpoint;  // from `model` just before the run
   std::string out;
   std::vector<std::string> settings;  // "eval.KEY=VALUE" written into the packed config
 };
 
-int run_pack(const PackOptions& o) {
+int run_pack(PackOptions& o) {
+  o.checkpoint = o.model.required_path();
   layersnet::LoadedModel m = layersnet::load_model(o.checkpoint);
   m.checkpoint.has_optimizer = false;
   m.checkpoint.state.rng.clear();
@@ -39,7 +42,7 @@ int run_pack(const PackOptions& o) {
 LAYERSNET_COMMAND(pack, "Write a checkpoint's weights, statistics and config without optimizer state (a model to ship)",
                   [](CLI::App& sub) {
                     auto o = std::make_shared<PackOptions>();
-                    sub.add_option("--checkpoint", o->checkpoint, "checkpoint to pack (e.g. runs/medium/best.h5)")->required();
+                    o->model.add_to(sub, "checkpoint to pack (e.g. runs/medium/best.h5)");
                     sub.add_option("--out", o->out, "model file to write (e.g. models/medium/model.h5)")->required();
                     sub.add_option("--set", o->settings,
                                    "rollout setting stored with the model, e.g. --set eval.constraints=true (eval.* keys only)");

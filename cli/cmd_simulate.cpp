@@ -2,6 +2,7 @@
 // --body-topology OBJ | --body-h5 F) [--checkpoint C] [--wind W] [--fps F] [--scale S] [--up z|y]
 // --out DIR`: the learned simulator on a user's outfit and motion (eval/simulate.h).
 #include "cli/command_registry.h"
+#include "cli/model_option.h"
 #include "cli/program_files.h"
 #include "eval/simulate.h"
 
@@ -18,7 +19,7 @@ using namespace layersnet;
 struct SimulateCliOptions {
   eval::SceneInputs scene;
   std::vector<std::string> garments;  // "PATH[,key=value...]"
-  std::string checkpoint;
+  cli::ModelOption model;
   std::string up = "z";
   std::vector<std::string> settings;  // "eval.KEY=VALUE"
   eval::SimulateOutputs outputs;
@@ -45,12 +46,12 @@ eval::ProgressFn progress_reporter() {
 int run_simulate(SimulateCliOptions& o) {
   for (const std::string& spec : o.garments) o.scene.garments.push_back(eval::parse_garment_spec(spec));
   o.scene.up_axis = o.up.front();
-  std::string checkpoint = o.checkpoint;
+  std::string checkpoint = o.model.path();
   if (checkpoint.empty()) {
     checkpoint = cli::find_program_file(kShippedModel).string();
     if (checkpoint.empty())
       throw std::runtime_error(std::string(kShippedModel) + " not found in " + cli::program_files_dir().string() +
-                               " (where the program's files are installed) or the working directory; pass --checkpoint");
+                               " (where the program's files are installed) or the working directory; pass --checkpoint or --run");
   }
   eval::Scene scene = eval::build_scene(o.scene);  // every input checked before the model loads
   Eigen::setNbThreads(1);  // the model's ops own the threads; nested GEMM threads only contend
@@ -91,7 +92,7 @@ LAYERSNET_COMMAND(
       sub.add_option("--body-pc2", o->scene.body.pc2, "body motion as a PC2 point cache (with --body-topology)");
       sub.add_option("--body-topology", o->scene.body.topology, "OBJ giving the faces of --body-pc2");
       sub.add_option("--body-h5", o->scene.body.h5, "the body of a D-LAYERS-H5 file (its fps, scale, up axis, root)");
-      sub.add_option("--checkpoint", o->checkpoint, std::string("model (default: the shipped ") + kShippedModel + ")");
+      o->model.add_to(sub, std::string("model (default: the shipped ") + kShippedModel + ")");
       sub.add_option("--wind", o->scene.wind,
                      "none | constant:dx,dy,dz,strength | CSV of rows frame,dx,dy,dz,strength (frames increasing, "
                      "each row holds until the next); strength as D-LAYERS (Blender wind field, e.g. 400)")

@@ -4,6 +4,7 @@
 // (eval/stress_report.h). Exits 4 when any run breaks its distance bound or strain limit.
 #include "cli/command_registry.h"
 #include "cli/exit_codes.h"
+#include "cli/model_option.h"
 #include "eval/stress_report.h"
 
 #include <Eigen/Core>
@@ -16,10 +17,12 @@ namespace {
 
 struct StressCli {
   layersnet::eval::StressOptions options;
+  layersnet::cli::ModelOption model;
   int threads = 0;
 };
 
-int run_stress(const StressCli& c) {
+int run_stress(StressCli& c) {
+  c.options.checkpoint = c.model.required_path();
   if (c.threads > 0) omp_set_num_threads(c.threads);
   Eigen::setNbThreads(1);  // the ops own the threads (as bench model); nested GEMM threads only contend
   return layersnet::eval::run_stress(c.options) ? layersnet::cli::kExitOk : layersnet::cli::kExitCheckFailed;
@@ -31,7 +34,7 @@ LAYERSNET_COMMAND(stress, "Long rollouts at extreme wind and body speed, and flo
                   [](CLI::App& sub) {
                     auto args = std::make_shared<StressCli>();
                     layersnet::eval::StressOptions* o = &args->options;
-                    sub.add_option("--checkpoint", o->checkpoint, "checkpoint to test")->required();
+                    args->model.add_to(sub, "checkpoint to test");
                     sub.add_option("--dataset", o->dataset, "data set folder (default: the checkpoint's data.dataset)");
                     sub.add_option("--sequence", o->sequence, "sequence id (default: the first test sequence)");
                     sub.add_option("--first-frame", o->first_frame,

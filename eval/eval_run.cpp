@@ -7,8 +7,8 @@
 #include "eval/evaluate.h"
 #include "eval/machine.h"
 #include "eval/report.h"
-#include "train/checkpoint.h"
-#include "train/run_dir.h"
+#include "run/checkpoint.h"
+#include "run/run_dir.h"
 
 #include <omp.h>
 

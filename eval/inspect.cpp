@@ -7,9 +7,11 @@
 #include "dataset/stats.h"
 #include "dataset/wind.h"
 #include "eval/metrics.h"
-#include "train/cloth_constraints.h"
+#include "run/cloth_constraints.h"
 
 #include <algorithm>
+#include <array>
+#include <iterator>
 #include <cstdio>
 #include <filesystem>
 #include <limits>
@@ -29,6 +31,11 @@ struct MarginTally {
   std::vector<float> body, layer;
   std::vector<float> stretch;  // edge length / rest length − 1, signed (garments with a rest shape)
   std::vector<float> fold;     // far-corner distance of adjacent triangles / its rest value − 1
+  // Motion against the body by distance band (kSlipBands, scene units from the nearest body
+  // vertex along its normal): vertex-frames, summed tangential slip |r − (r·n)n| with
+  // r = (x_t − x_{t−1}) − (h_t − h_{t−1}), and summed body motion |h_t − h_{t−1}|.
+  static constexpr float kSlipBands[] = {0.15f, 0.3f, 0.6f};
+  std::array<double, 4> slip_count{}, slip_sum{}, body_motion_sum{};
   // layout: eval::garment_layout(info); inner_faces: eval::inner_faces(layout).
   void add_frame(const SequenceInfo& info, const GarmentLayout& layout, const Faces& inner_faces,
                  const FrameWindow& w, int t) {
@@ -36,7 +43,9 @@ struct MarginTally {
     Points x(layout.num_vertices(), 3);
     for (int k = 0; k < layout.num_garments(); ++k)
       x.middleRows(layout.offsets[k], info.garments[k].num_vertices) = w.garment_at(k, t, info.garments[k].num_vertices);
-    signed_distances(x, body_x, vertex_normals(body_x, info.body_faces), body);
+    const Points body_n = vertex_normals(body_x, info.body_faces);
+    signed_distances(x, body_x, body_n, body);
+    if (t > w.first) add_slip(info, layout, w, t, x, body_x, body_n);
     for (int k = 0; k < layout.num_garments(); ++k) {
       const GarmentMesh& g = info.garments[k];
       if (g.rest.rows() != g.num_vertices) continue;
@@ -50,6 +59,39 @@ struct MarginTally {
     if (!layout.layered()) return;
     const Points inner = x.topRows(layout.num_vertices() - layout.outer_vertices());
     signed_distances(x.bottomRows(layout.outer_vertices()), inner, vertex_normals(inner, inner_faces), layer);
+  }
+  void add_slip(const SequenceInfo& info, const GarmentLayout& layout, const FrameWindow& w, int t, const Points& x,
+                const Points& body_x, const Points& body_n) {
+    const Points body_before = w.body_at(t - 1, info.num_body_vertices);
+    const NearestBody nb = nearest_body(x, body_x);
+    for (int k = 0; k < layout.num_garments(); ++k) {
+      const Points before = w.garment_at(k, t - 1, info.garments[k].num_vertices);
+      for (int v = 0; v < info.garments[k].num_vertices; ++v) {
+        const Eigen::Index i = layout.offsets[k] + v, h = nb.index[i];
+        const Eigen::RowVector3f n = body_n.row(h);
+        const Eigen::RowVector3f body_step = body_x.row(h) - body_before.row(h);
+        const Eigen::RowVector3f r = (x.row(i) - before.row(v)) - body_step;
+        const float d = (x.row(i) - body_x.row(h)).dot(n);
+        const auto band = std::upper_bound(std::begin(kSlipBands), std::end(kSlipBands), d) - std::begin(kSlipBands);
+        slip_count[band] += 1;
+        slip_sum[band] += (r - r.dot(n) * n).norm();
+        body_motion_sum[band] += body_step.norm();
+      }
+    }
+  }
+  void print_slip() const {
+    double total = 0;
+    for (double c : slip_count) total += c;
+    if (total == 0) return;
+    std::printf("ground-truth motion against the body per frame, by distance from it (eval.body_friction acts within "
+                "eval.friction_distance), scene units:\n");
+    for (std::size_t b = 0; b < slip_count.size(); ++b) {
+      if (slip_count[b] == 0) continue;
+      const float lo = b == 0 ? -std::numeric_limits<float>::infinity() : kSlipBands[b - 1];
+      const float hi = b < std::size(kSlipBands) ? kSlipBands[b] : std::numeric_limits<float>::infinity();
+      std::printf("  distance [%g, %g): %.1f%% of vertex-frames, tangential slip %.4f, body motion %.4f\n", lo, hi,
+                  100.0 * slip_count[b] / total, slip_sum[b] / slip_count[b], body_motion_sum[b] / slip_count[b]);
+    }
   }
   static void signed_distances(const Points& x, const Points& anchors, const Points& normals, std::vector<float>& out) {
     const NearestBody nb = nearest_body(x, anchors);
@@ -210,6 +252,7 @@ void inspect_dataset(const InspectOptions& o, const SampleOptions& sample_option
     MarginTally::print_ratios("edge strain (length / rest length - 1; eval.strain_limit bounds its magnitude)", tally.stretch);
     MarginTally::print_ratios("far-corner distance of triangles sharing an edge / rest - 1 (eval.fold_limit bounds "
                               "its shortening)", tally.fold);
+    tally.print_slip();
   }
 }
 

@@ -7,9 +7,8 @@
 
 #include "model/layersnet.h"
 #include "model/sample_input.h"
-#include "train/checkpoint.h"
-#include "train/run_dir.h"
-#include "train/train_data.h"
+#include "run/checkpoint.h"
+#include "run/run_dir.h"
 
 #include <chrono>
 #include <limits>
@@ -93,7 +92,7 @@ Points NetworkPredictor<T>::step(const dataset::Sequence& seq, int t, const Poin
       rollout_sample(seq, t, x_prev2, x_prev, x_now, stats_, structure_, sample_options_);
   Points x = predict_positions(tape_, params_, config_, sample, stats_);
   if (!tether_limit_.empty()) apply_tether(structure_->all, tether_limit_, x);
-  if (constraints_) constraints_->apply(seq.body_at(t + 1), x);
+  if (constraints_) constraints_->apply(seq.body_at(t + 1), x, seq.body_at(t), x_now);
   return x;
 }
 

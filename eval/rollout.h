@@ -10,11 +10,11 @@
 // Positions: world coordinates, scene units; garments concatenated in layer order (N, 3).
 #include "autodiff/params.h"
 #include "autodiff/tape.h"
-#include "train/cloth_constraints.h"
+#include "run/cloth_constraints.h"
 #include "dataset/sample.h"
 #include "dataset/sequence.h"
 #include "dataset/stats.h"
-#include "train/config.h"
+#include "run/config.h"
 
 #include <map>
 #include <memory>
@@ -79,7 +79,7 @@ Points predict_positions(ad::Tape<T>& tape, ad::ParamStore<T>& params, const Con
 // builds the dataset sample of the rollout's window (rollout_sample), the model input, runs
 // forward without recording; world x_{t+1} = predicted root-relative x + r_{t+1}, then the
 // patch tether when the config's eval.patch_tether > 0 (eval/tether.h), then the cloth
-// constraints when eval.constraints is set (train/cloth_constraints.h).
+// constraints when eval.constraints is set (run/cloth_constraints.h).
 template <class T>
 class NetworkPredictor : public Predictor {
  public:

@@ -10,7 +10,6 @@
 #include "model/layersnet.h"
 #include "model/params_layout.h"
 #include "model/sample_input.h"
-#include "train/train_data.h"
 
 #include <algorithm>
 #include <cmath>

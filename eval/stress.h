@@ -45,7 +45,7 @@
 #include "dataset/sequence.h"
 #include "dataset/stats.h"
 #include "eval/rollout.h"
-#include "train/config.h"
+#include "run/config.h"
 
 #include <string>
 #include <vector>

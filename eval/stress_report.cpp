@@ -6,7 +6,7 @@
 #include "dataset/stats.h"
 #include "eval/stress.h"
 #include "eval/tether.h"
-#include "train/checkpoint.h"
+#include "run/checkpoint.h"
 
 #include <omp.h>
 
@@ -95,7 +95,7 @@ bool run_stress(const StressOptions& o) {
   else
     std::printf("patch tether off (eval.patch_tether = 0); the data's own max offset / rest patch radius: %.3f\n", data_tether);
   if (config.eval.constraints)
-    std::printf("cloth constraints on: edge strain <= %g, collision shell %g units, %d passes per frame (train/cloth_constraints.h)\n",
+    std::printf("cloth constraints on: edge strain <= %g, collision shell %g units, %d passes per frame (run/cloth_constraints.h)\n",
                 config.eval.strain_limit, config.eval.collision_shell, config.eval.constraint_iterations);
   else
     std::printf("cloth constraints off (eval.constraints = false)\n");

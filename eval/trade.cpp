@@ -5,7 +5,7 @@
 #include "eval/machine.h"
 #include "eval/pareto.h"
 #include "model/params_layout.h"
-#include "train/config.h"
+#include "run/config.h"
 
 #include <nlohmann/json.hpp>
 #include <sys/resource.h>

@@ -3,7 +3,7 @@
 // load one (load_model: config text, parameter layout, weights, Adam moments, statistics,
 // checksum), through the same HDF5 guard. Every rejection must be an exception; a crash, hang,
 // leak or sanitizer report is a finding.
-#include "train/checkpoint.h"
+#include "run/checkpoint.h"
 
 #include <unistd.h>
 

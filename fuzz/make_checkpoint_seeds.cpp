@@ -1,9 +1,9 @@
 // Writes the seed corpus for fuzz_checkpoint: checkpoints of configs/tiny.toml, with and
 // without Adam moments and statistics. Usage: make_checkpoint_seeds DIR CONFIG
 #include "model/params_layout.h"
-#include "train/checkpoint.h"
-#include "train/config.h"
-#include "train/run_dir.h"
+#include "run/checkpoint.h"
+#include "run/config.h"
+#include "run/run_dir.h"
 
 #include <filesystem>
 

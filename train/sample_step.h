@@ -13,7 +13,7 @@
 // eval.constraints.
 #include "autodiff/params.h"
 #include "autodiff/tape.h"
-#include "train/config.h"
+#include "run/config.h"
 #include "train/train_data.h"
 
 namespace layersnet {

@@ -34,21 +34,15 @@ void Window::feed_back(int f, const float* relative) {
   if (!constraints) return set_garments_relative(f, relative);
   dataset::Points x = Eigen::Map<const dataset::Points>(relative, info->total_garment_vertices(), 3);
   x.rowwise() += info->translation.row(f);  // world, as set_garments_relative writes it
-  constraints->apply(frames.body_at(f, info->num_body_vertices), x);
+  dataset::Points before(x.rows(), 3);  // frame f - 1 as fed: the friction step needs its motion
+  for_each_garment_coordinate(*this, f - 1, [&](float& v, std::size_t i) { before.data()[i] = v; });
+  constraints->apply(frames.body_at(f, info->num_body_vertices), x, frames.body_at(f - 1, info->num_body_vertices), before);
   for_each_garment_coordinate(*this, f, [&](float& v, std::size_t i) { v = x.data()[i]; });
 }
 
 void Window::add_input_noise(int f) {
   if (input_noise.empty()) return;
   for_each_garment_coordinate(*this, f, [&](float& x, std::size_t i) { x += input_noise[i]; });
-}
-
-dataset::FrameSelection frame_selection_for(const DataConfig& d) {
-  dataset::FrameSelection s;
-  s.start_frame = d.first_frame - 2;  // sample_frames starts at start_frame + 2
-  s.first_offset = 2;
-  s.max_frames = d.max_frames > 0 ? d.max_frames + 2 : -1;
-  return s;
 }
 
 TrainData::TrainData(const dataset::DatasetManifest& manifest, const std::string& split,

@@ -11,8 +11,9 @@
 #include "dataset/sample.h"
 #include "dataset/sequence.h"
 #include "dataset/stats.h"
-#include "train/cloth_constraints.h"
-#include "train/config.h"
+#include "run/cloth_constraints.h"
+#include "run/config.h"
+#include "run/frame_selection.h"
 
 #include <cstdint>
 #include <list>
@@ -109,8 +110,5 @@ class TrainData {
   dataset::StructureCache structures_;
   Reads reads_;
 };
-
-// FrameSelection for config.data: inputs t = first_frame .. (first_frame + max_frames - 2).
-dataset::FrameSelection frame_selection_for(const DataConfig& data);
 
 }  // namespace layersnet

@@ -6,10 +6,10 @@
 #include "dataset/manifest.h"
 #include "dataset/stats.h"
 #include "model/params_layout.h"
-#include "train/checkpoint.h"
+#include "run/checkpoint.h"
 #include "train/distributed.h"
 #include "train/gsl_random.h"
-#include "train/run_dir.h"
+#include "run/run_dir.h"
 #include "train/sample_step.h"
 #include "train/train_data.h"
 

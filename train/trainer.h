@@ -31,7 +31,7 @@
 // metrics and checkpoints; a failure on any rank ends the whole job (MPI_Abort) after printing
 // it. A checkpoint resumes under any rank count: its state is that of the global batch.
 #include "autodiff/params.h"
-#include "train/config.h"
+#include "run/config.h"
 
 #include <cstdint>
 #include <functional>

@@ -8,8 +8,8 @@
 #include "dataset/synthetic.h"
 #include "eval/rollout.h"
 #include "model/params_layout.h"
-#include "train/checkpoint.h"
-#include "train/config.h"
+#include "run/checkpoint.h"
+#include "run/config.h"
 
 #include "tests/eval/cli_test_util.h"
 

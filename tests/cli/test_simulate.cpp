@@ -7,9 +7,9 @@
 #include "eval/rollout.h"
 #include "eval/simulate.h"
 #include "model/params_layout.h"
-#include "train/checkpoint.h"
-#include "train/config.h"
-#include "train/run_dir.h"
+#include "run/checkpoint.h"
+#include "run/config.h"
+#include "run/run_dir.h"
 
 #include "tests/eval/cli_test_util.h"
 

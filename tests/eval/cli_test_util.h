@@ -5,9 +5,9 @@
 #include "dataset/synthetic.h"
 #include "eval/rollout.h"
 #include "model/params_layout.h"
-#include "train/checkpoint.h"
-#include "train/config.h"
-#include "train/run_dir.h"
+#include "run/checkpoint.h"
+#include "run/config.h"
+#include "run/run_dir.h"
 
 #include <sys/wait.h>
 

@@ -1,14 +1,14 @@
-// Cloth constraints (train/cloth_constraints.h): cloth that already holds them is not moved; stretched
+// Cloth constraints (run/cloth_constraints.h): cloth that already holds them is not moved; stretched
 // edges come back within the limit; vertices inside the body or the inner layer are pushed onto
 // the shell; and a model's rollout with eval.constraints keeps every frame within them.
 #include "dataset/neighbours.h"
 #include "dataset/synthetic.h"
-#include "train/cloth_constraints.h"
+#include "run/cloth_constraints.h"
 #include "eval/metrics.h"
 #include "eval/rollout.h"
 #include "eval/stress.h"
 #include "model/params_layout.h"
-#include "train/config.h"
+#include "run/config.h"
 
 #include <gtest/gtest.h>
 
@@ -164,6 +164,45 @@ TEST(ClothConstraints, AnOuterVertexInsideTheInnerLayerEndsOnTheShell) {
   EXPECT_NEAR(signed_distance(x.row(v), x.topRows(outer_begin), faces), s.collision_shell, 1e-5);
   // The shell is the same rule the layer-collision metric counts: no collision left.
   EXPECT_EQ(count_layer_collisions(x.bottomRows(x.rows() - outer_begin), x.topRows(outer_begin), faces), 0);
+}
+
+// Contact friction: an inner-tube vertex (0.3 units off the body) that slides along the body
+// loses mu of its tangential motion relative to its nearest body vertex and keeps the normal
+// part; the outer tube (0.55 units off) and frames without the frame before are not touched.
+TEST(ClothConstraints, ContactFrictionCarriesNearBodyClothWithTheBody) {
+  const dataset::Sequence seq = tubes();
+  const Points body_before = seq.body_at(2), body = seq.body_at(3);
+  const Points x_before = garments_at(seq, 2);
+  const Points normals = dataset::vertex_normals(body, seq.info.body_faces);
+  const Eigen::Index v = 5, outer = x_before.rows() - 3;  // inner / outer garment vertices
+  Points slid = garments_at(seq, 3);
+  slid(v, 2) += 0.3f;      // slides up the cylinder: tangential to its side
+  slid(outer, 2) += 0.3f;
+  const dataset::NearestBody nb = dataset::nearest_body(slid.row(v), body);
+  const Eigen::RowVector3f n = normals.row(nb.index[0]);
+  const auto relative = [&](const Points& x) -> Eigen::RowVector3f {
+    return (x.row(v) - x_before.row(v)) - (body.row(nb.index[0]) - body_before.row(nb.index[0]));
+  };
+  const Eigen::RowVector3f r = relative(slid);
+  const Eigen::RowVector3f tangential = r - r.dot(n) * n;
+  ASSERT_GT(tangential.norm(), 0.2f);
+  for (const double mu : {1.0, 0.5}) {
+    EvalConfig s;
+    s.strain_limit = 0;
+    s.collision_shell = 0;  // friction alone
+    s.body_friction = mu;
+    s.friction_distance = 0.4;
+    Points x = slid;
+    const ConstraintMoves moves = ClothConstraints(seq.info, rest_garments(seq), s).apply(body, x, body_before, x_before);
+    EXPECT_GT(moves.friction, 0);
+    const Eigen::RowVector3f after = relative(x);
+    EXPECT_NEAR((after - after.dot(n) * n - (1.f - static_cast<float>(mu)) * tangential).norm(), 0.f, 1e-5f) << mu;
+    EXPECT_NEAR(after.dot(n), r.dot(n), 1e-5f) << mu;
+    EXPECT_EQ(x.row(outer), slid.row(outer)) << "beyond friction_distance";
+    Points unchanged = slid;
+    ClothConstraints(seq.info, rest_garments(seq), s).apply(body, unchanged);  // no frame before: no friction
+    EXPECT_EQ(unchanged, slid);
+  }
 }
 
 TEST(ClothConstraints, ANonFiniteFrameIsLeftForTheRolloutToReport) {

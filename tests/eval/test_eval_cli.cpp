@@ -6,8 +6,8 @@
 #include "eval/render.h"
 #include "eval/rollout.h"
 #include "model/params_layout.h"
-#include "train/checkpoint.h"
-#include "train/config.h"
+#include "run/checkpoint.h"
+#include "run/config.h"
 
 #include "tests/eval/cli_test_util.h"
 
@@ -159,6 +159,33 @@ TEST_F(EvalCli, RunDirectoryPicksBestElseTheNewestCheckpoint) {
   const std::string bad = run("eval --run " + (root_ / "data").string() + " --out " + (root_ / "x").string(), &code);
   EXPECT_NE(code, 0);
   EXPECT_NE(bad.find("no best.h5"), std::string::npos) << bad;
+}
+
+// pack, export and stress learn the model (and its config) from --run as eval does; giving both
+// ways, or neither where a model is needed, is a usage error before any work.
+TEST_F(EvalCli, EveryModelCommandTakesARunDirectory) {
+  const fs::path run_dir = root_ / "run_any";
+  fs::create_directories(run_dir / "checkpoints");
+  fs::copy_file(root_ / "tiny.h5", run_dir / "checkpoints" / "step_00000004.h5");
+  int code = 0;
+  const fs::path packed = root_ / "packed.h5";
+  std::string text = run("pack --run " + run_dir.string() + " --out " + packed.string(), &code);
+  ASSERT_EQ(code, 0) << text;
+  EXPECT_NE(text.find("step_00000004.h5"), std::string::npos) << text;
+  EXPECT_TRUE(fs::exists(packed));
+  text = run("export --run " + run_dir.string() + " --frames 1 --strip-frames 0 --out " + (root_ / "exp_run").string(),
+             &code);
+  ASSERT_EQ(code, 0) << text;
+  EXPECT_TRUE(fs::exists(root_ / "exp_run" / "body_0003.obj")) << text;
+  text = run("stress --run " + run_dir.string() + " --checkpoint " + (root_ / "tiny.h5").string(), &code);
+  EXPECT_EQ(code, 2) << text;
+  EXPECT_NE(text.find("excludes"), std::string::npos) << text;
+  text = run("stress --frames 4", &code);
+  EXPECT_EQ(code, 2) << text;
+  EXPECT_NE(text.find("--checkpoint FILE or --run DIR"), std::string::npos) << text;
+  text = run("pack --out " + (root_ / "none.h5").string(), &code);
+  EXPECT_EQ(code, 2) << text;
+  EXPECT_FALSE(fs::exists(root_ / "none.h5"));
 }
 
 TEST_F(EvalCli, ExportWritesMeshesAndAStrip) {

@@ -20,8 +20,8 @@
 #include "model/layersnet.h"
 #include "model/params_layout.h"
 #include "model/sample_input.h"
-#include "train/checkpoint.h"
-#include "train/run_dir.h"
+#include "run/checkpoint.h"
+#include "run/run_dir.h"
 #include "train/trainer.h"
 
 #include "tests/eval/cli_test_util.h"

@@ -2,13 +2,12 @@
 #include "dataset/synthetic.h"
 #include "eval/evaluate.h"
 #include "eval/rollout.h"
-#include "train/run_dir.h"
+#include "run/run_dir.h"
 #include "test_predictors.h"
 #include "model/layersnet.h"
 #include "model/params_layout.h"
 #include "model/sample_input.h"
-#include "train/config.h"
-#include "train/train_data.h"
+#include "run/config.h"
 
 #include <gtest/gtest.h>
 

@@ -4,7 +4,7 @@
 #include "dataset/synthetic.h"
 #include "eval/rollout.h"
 #include "model/params_layout.h"
-#include "train/config.h"
+#include "run/config.h"
 
 #include <gtest/gtest.h>
 

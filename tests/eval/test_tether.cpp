@@ -4,7 +4,7 @@
 #include "dataset/synthetic.h"
 #include "eval/rollout.h"
 #include "eval/tether.h"
-#include "train/config.h"
+#include "run/config.h"
 
 #include <gtest/gtest.h>
 

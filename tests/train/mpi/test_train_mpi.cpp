@@ -6,8 +6,8 @@
 #include "dataset/stats.h"
 #include "dataset/synthetic.h"
 #include "model/params_layout.h"
-#include "train/checkpoint.h"
-#include "train/run_dir.h"
+#include "run/checkpoint.h"
+#include "run/run_dir.h"
 #include "train/trainer.h"
 #include "tests/train/child_process.h"
 

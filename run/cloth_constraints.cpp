@@ -1,4 +1,4 @@
-#include "train/cloth_constraints.h"
+#include "run/cloth_constraints.h"
 
 #include "dataset/garments.h"
 #include "dataset/neighbours.h"
@@ -56,6 +56,29 @@ int64_t push_out(dataset::Points& x, Eigen::Index begin, Eigen::Index end, const
   return moved;
 }
 
+// Each vertex x_v (rows [begin, end)) whose nearest anchor a (within reach) has
+// (x_v − a)·n_a < within loses mu of its displacement relative to a's, tangentially to n_a:
+// x_v −= mu (r − (r·n) n), r = (x_v − x_v,before) − (a − a_before). Returns how many moved.
+int64_t drag_along(dataset::Points& x, const dataset::Points& x_before, Eigen::Index begin, Eigen::Index end,
+                   const dataset::NearestVertexIndex& index, const Eigen::Ref<const dataset::Points>& anchors,
+                   const Eigen::Ref<const dataset::Points>& anchors_before, const dataset::Points& normals,
+                   float within, float mu, float reach) {
+  if (end <= begin || anchors.rows() == 0) return 0;
+  const dataset::NearestBody nearest = index.query(x.middleRows(begin, end - begin));
+  int64_t moved = 0;
+  for (Eigen::Index v = begin; v < end; ++v) {
+    const Eigen::Index i = v - begin;
+    if (nearest.distance[i] > reach) continue;
+    const Eigen::Index a = nearest.index[i];
+    const Eigen::RowVector3f n = normals.row(a);
+    if ((x.row(v) - anchors.row(a)).dot(n) >= within) continue;
+    const Eigen::RowVector3f r = (x.row(v) - x_before.row(v)) - (anchors.row(a) - anchors_before.row(a));
+    x.row(v) -= mu * (r - r.dot(n) * n);
+    ++moved;
+  }
+  return moved;
+}
+
 }  // namespace
 
 std::vector<std::pair<int32_t, int32_t>> far_corners(const dataset::Faces& faces) {
@@ -98,15 +121,43 @@ ClothConstraints::ClothConstraints(const dataset::SequenceInfo& info, const data
 }
 
 ConstraintMoves ClothConstraints::apply(const Eigen::Ref<const dataset::Points>& body, dataset::Points& x) const {
+  return project(body, x, nullptr, nullptr);
+}
+
+ConstraintMoves ClothConstraints::apply(const Eigen::Ref<const dataset::Points>& body, dataset::Points& x,
+                                        const Eigen::Ref<const dataset::Points>& body_before,
+                                        const Eigen::Ref<const dataset::Points>& x_before) const {
+  const dataset::Points b0 = body_before, x0 = x_before;
+  return project(body, x, &b0, &x0);
+}
+
+ConstraintMoves ClothConstraints::project(const Eigen::Ref<const dataset::Points>& body, dataset::Points& x,
+                                          const dataset::Points* body_before, const dataset::Points* x_before) const {
   ConstraintMoves moves;
   if (!x.allFinite()) return moves;
   const auto shell = static_cast<float>(settings_.collision_shell);
+  const auto mu = static_cast<float>(settings_.body_friction);
+  const bool friction = (mu > 0 || settings_.layer_friction > 0) && body_before && x_before && x_before->rows() == x.rows() &&
+                        body_before->rows() == body.rows() && x_before->allFinite();
   // The body does not move between passes: its normals and k-d tree serve them all.
   std::unique_ptr<dataset::NearestVertexIndex> body_index;
   dataset::Points body_normals;
-  if (shell > 0) {
+  if (shell > 0 || friction) {
     body_index = std::make_unique<dataset::NearestVertexIndex>(body);
     body_normals = dataset::vertex_normals(body, body_faces_);
+  }
+  if (friction) {
+    const auto within = static_cast<float>(settings_.friction_distance);
+    if (mu > 0)
+      moves.friction +=
+          drag_along(x, *x_before, 0, x.rows(), *body_index, body, *body_before, body_normals, within, mu, reach_);
+    const auto mu_layer = static_cast<float>(settings_.layer_friction);
+    if (mu_layer > 0 && outer_begin_ > 0 && outer_begin_ < x.rows()) {
+      const dataset::Points inner = x.topRows(outer_begin_);  // already carried by the body
+      moves.friction += drag_along(x, *x_before, outer_begin_, x.rows(), dataset::NearestVertexIndex(inner), inner,
+                                   x_before->topRows(outer_begin_), dataset::vertex_normals(inner, inner_faces_), within,
+                                   mu_layer, reach_);
+    }
   }
   const auto s = static_cast<float>(settings_.strain_limit), f = static_cast<float>(settings_.fold_limit);
   for (int pass = 0; pass < settings_.constraint_iterations; ++pass) {

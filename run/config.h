@@ -67,12 +67,17 @@ struct EvalConfig {
   int frames = 36;  // predicted frames per sequence (official test: 36)
   double patch_tether = 0.0;  // rollouts: vertex within this × its patch's rest radius of its
                               // patch mates' centre (eval/tether.h); 0 = off (official, default)
-  // Cloth constraints after every predicted frame (train/cloth_constraints.h; not in the paper).
+  // Cloth constraints after every predicted frame (run/cloth_constraints.h; not in the paper).
   bool constraints = false;
   double strain_limit = 0.05;      // largest |edge length / rest length − 1| kept
   double fold_limit = 0.0;         // largest shortening of the far-corner distance of two adjacent triangles (0 = none)
   double collision_shell = 0.05;   // scene units kept outside the body and the inner layer (0 = none)
   int constraint_iterations = 8;   // projection passes per frame
+  // Contact friction: a garment vertex within friction_distance of the body (along its normal)
+  // keeps (1 − body_friction) of its motion relative to the body, tangentially. 0 = off.
+  double body_friction = 0.0;
+  double layer_friction = 0.0;     // the same for an outer-layer vertex against the inner layer
+  double friction_distance = 0.3;  // scene units
 };
 
 struct Config {

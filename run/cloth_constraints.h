@@ -14,6 +14,11 @@
 //   4. does the same for every outer-layer vertex against the nearest inner-layer vertex and
 //      the inner mesh's normal there.
 // The collision steps come last, so a frame ends outside the body and the inner layer.
+// Before the passes, when the frame before is given and body_friction μ > 0, contact friction:
+//   0. every garment vertex whose nearest body vertex h (frame t+1) lies within `reach` and
+//      (x − h)·n < friction_distance loses μ of its displacement relative to h's, tangentially:
+//      x −= μ (r − (r·n) n), r = (x − x_t) − (h − h_t). Blender's cloth touching the body moves
+//      with it (docs/decisions.md, "Contact friction"); the network alone lets it slide.
 // Why: the network's vertex branch integrates each vertex's offset from its patch, and in a
 // self-fed rollout these offsets drift frame by frame into stretched, crumpled cloth that sinks
 // into the body and the layer below (docs/decisions.md, "Cloth constraints"); real cloth
@@ -21,7 +26,7 @@
 // differences of positions, so a projected frame also feeds back consistent velocities.
 // Deterministic for any thread count (sequential passes).
 #include "dataset/sequence.h"
-#include "train/config.h"
+#include "run/config.h"
 
 #include <cstdint>
 #include <utility>
@@ -35,6 +40,7 @@ struct ConstraintMoves {
   int64_t folds = 0;         // far-corner corrections (over all passes)
   int64_t body = 0;          // vertices pushed out of the body (over all passes)
   int64_t layer = 0;         // outer vertices pushed out of the inner layer (over all passes)
+  int64_t friction = 0;      // vertices the contact friction moved
 };
 
 // The two far corners (local indices) of every pair of triangles sharing an edge, each pair once.
@@ -50,8 +56,15 @@ class ClothConstraints {
   // Projects x (N, 3, world, layer order) in place against the body of frame t (B, 3). A frame
   // with a non-finite value is left as it is (the rollout reports the divergence).
   ConstraintMoves apply(const Eigen::Ref<const dataset::Points>& body, dataset::Points& x) const;
+  // The same with the frame before (body_before (B, 3), x_before (N, 3), world), which the
+  // contact friction needs; without it (or with eval.body_friction 0) there is no friction step.
+  ConstraintMoves apply(const Eigen::Ref<const dataset::Points>& body, dataset::Points& x,
+                        const Eigen::Ref<const dataset::Points>& body_before,
+                        const Eigen::Ref<const dataset::Points>& x_before) const;
 
  private:
+  ConstraintMoves project(const Eigen::Ref<const dataset::Points>& body, dataset::Points& x,
+                          const dataset::Points* body_before, const dataset::Points* x_before) const;
   EvalConfig settings_;
   float reach_ = 0;                                 // scene units
   std::vector<std::pair<int32_t, int32_t>> edges_;  // rows of x

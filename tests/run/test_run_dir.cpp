@@ -1,5 +1,5 @@
 // The run directory's layout: which checkpoint stands for a run.
-#include "train/run_dir.h"
+#include "run/run_dir.h"
 
 #include <gtest/gtest.h>
 #include <unistd.h>

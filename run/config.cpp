@@ -1,4 +1,4 @@
-#include "train/config.h"
+#include "run/config.h"
 
 #include <toml++/toml.h>
 
@@ -210,10 +210,13 @@ const Schema& schema() {
     k.add("eval.split", [](Config& c) -> std::string& { return c.eval.split; }, "split to evaluate", {0, 0, {"train", "val", "test"}});
     k.add("eval.frames", [](Config& c) -> int& { return c.eval.frames; }, "predicted frames per sequence", positive);
     k.add("eval.patch_tether", [](Config& c) -> double& { return c.eval.patch_tether; }, "rollouts keep each vertex within this many rest patch radii of its patch centre (0 = off, the default; eval/tether.h)", {0, 1e6, {}});
-    k.add("eval.constraints", [](Config& c) -> bool& { return c.eval.constraints; }, "rollouts project every predicted frame onto the cloth constraints: edge strain limit, collision shell (train/cloth_constraints.h; not in the paper)");
+    k.add("eval.constraints", [](Config& c) -> bool& { return c.eval.constraints; }, "rollouts project every predicted frame onto the cloth constraints: edge strain limit, collision shell (run/cloth_constraints.h; not in the paper)");
     k.add("eval.strain_limit", [](Config& c) -> double& { return c.eval.strain_limit; }, "constraints: largest |edge length / rest length - 1| a rollout keeps (0 = no edge step)", {0, 0.99, {}});
     k.add("eval.fold_limit", [](Config& c) -> double& { return c.eval.fold_limit; }, "constraints: largest relative shortening of the distance between the far corners of two triangles sharing an edge (0 = no fold step)", {0, 0.99, {}});
     k.add("eval.collision_shell", [](Config& c) -> double& { return c.eval.collision_shell; }, "constraints: scene units a rollout keeps garments outside the body and the outer layer outside the inner one (0 = no collision step)", {0, 10, {}});
+    k.add("eval.body_friction", [](Config& c) -> double& { return c.eval.body_friction; }, "constraints: share of a near-body garment vertex's tangential motion relative to the body that the body takes away (0 = off, 1 = the vertex sticks)", {0, 1, {}});
+    k.add("eval.layer_friction", [](Config& c) -> double& { return c.eval.layer_friction; }, "constraints: the same as eval.body_friction for an outer-layer vertex against the inner layer (0 = off)", {0, 1, {}});
+    k.add("eval.friction_distance", [](Config& c) -> double& { return c.eval.friction_distance; }, "constraints: scene units from the body surface (along its normal) within which eval.body_friction acts", {0, 10, {}});
     k.add("eval.constraint_iterations", [](Config& c) -> int& { return c.eval.constraint_iterations; }, "constraints: projection passes per predicted frame", {1, 1000, {}});
     return k;
   }();

@@ -18,7 +18,7 @@
 // Writes go to "<path>.tmp", are flushed and fsync'ed, then renamed over <path>: a crash at
 // any moment leaves either the old or the new checkpoint, never a torn one.
 #include "autodiff/params.h"
-#include "train/config.h"
+#include "run/config.h"
 
 #include <cstdint>
 #include <map>

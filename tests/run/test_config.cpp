@@ -1,5 +1,5 @@
 // Config files: defaults, overrides, includes, --set, and the errors a user meets.
-#include "train/config.h"
+#include "run/config.h"
 
 #include <gtest/gtest.h>
 

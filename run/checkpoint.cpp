@@ -1,4 +1,4 @@
-#include "train/checkpoint.h"
+#include "run/checkpoint.h"
 
 #include "dataset/h5.h"
 #include "dataset/h5_guard.h"

@@ -1,5 +1,5 @@
 // Checkpoints: bit-exact round trip, atomic replacement, and refusal of what does not fit.
-#include "train/checkpoint.h"
+#include "run/checkpoint.h"
 
 #include "model/params_layout.h"
 
