@@ -260,6 +260,11 @@ TEST(ClothConstraints, OffInThePapersConfigOnInTheProjectsModels) {
   EXPECT_FALSE(load_config({configs + "paper.toml"}).eval.constraints);
   EXPECT_TRUE(load_config({configs + "default.toml"}).eval.constraints);
   EXPECT_TRUE(load_config({configs + "medium.toml"}).eval.constraints);
+  // Contact friction likewise: off unless a project config asks for it.
+  EXPECT_EQ(Config{}.eval.body_friction, 0.0);
+  EXPECT_EQ(load_config({configs + "paper.toml"}).eval.body_friction, 0.0);
+  EXPECT_EQ(load_config({configs + "default.toml"}).eval.body_friction, 1.0);
+  EXPECT_EQ(load_config({configs + "medium.toml"}).eval.body_friction, 1.0);
 }
 
 }  // namespace
