@@ -14,6 +14,7 @@
 #include "autodiff/ops_dense.h"
 #include "cli/command_registry.h"
 #include "dataset/file_io.h"
+#include "eval/machine.h"
 
 #include <Eigen/Core>
 #include <nlohmann/json.hpp>
@@ -36,6 +37,7 @@
 
 namespace {
 using namespace layersnet::ad;
+using layersnet::eval::median;
 
 struct LinearBenchOptions {
   std::string threads = "1,2";
@@ -59,11 +61,6 @@ struct Result {
   double bf16_rel_err = 0;                         // max |y_bf16 - y_float| / max |y_float|
   double cpu_fwd0_ms = 0, cpu_bf16_ms = 0;          // process CPU time (all threads), medians
 };
-
-double median(std::vector<double> t) {
-  std::sort(t.begin(), t.end());
-  return t[t.size() / 2];
-}
 
 // CPU time of the whole process (every thread), ms: less sensitive than wall time to other
 // jobs on a shared machine (waiting for a core costs no CPU time; OpenMP waits passively).
@@ -183,8 +180,7 @@ std::vector<int> parse_threads(const std::string& list) {
 // The machine may be shared: say how busy it was (a load above the core count inflates
 // every time, and the ratios get noisy).
 void print_load(const char* when) {
-  double load[3] = {0, 0, 0};
-  if (getloadavg(load, 3) > 0) std::printf("load average %s: %.2f (1 min), %d cores\n", when, load[0], omp_get_num_procs());
+  std::printf("load average %s: %.2f (1 min), %d cores\n", when, layersnet::eval::load_average_1min(), omp_get_num_procs());
 }
 
 int run_bench(const LinearBenchOptions& o) {

@@ -90,12 +90,7 @@ dataset::SyntheticOptions reference_scene(const std::string& size, const ModelCo
 
 using bench::median;
 using bench::now_ms;
-double load_average() {
-  std::ifstream f("/proc/loadavg");
-  double l = 0;
-  f >> l;
-  return l;
-}
+double load_average() { return eval::load_average_1min(); }
 double vm_hwm_mib() {
   std::ifstream f("/proc/self/status");
   std::string line;

@@ -280,7 +280,7 @@ nlohmann::json row_json(const Row& r) {
 }
 
 void write_png(const std::string& path, const std::map<std::pair<std::string, int>, std::vector<Row>>& blocks, bool train) {
-  if (std::system("command -v gnuplot > /dev/null 2>&1") != 0) {
+  if (!eval::gnuplot_available()) {
     std::printf("gnuplot not found (scripts/debian-packages.txt lists it): no PNG\n");
     return;
   }
@@ -323,8 +323,7 @@ void write_png(const std::string& path, const std::map<std::pair<std::string, in
     << "plot " << plot << "\n";
   g.close();
   d.close();
-  if (std::system(("gnuplot '" + script + "'").c_str()) != 0)
-    std::printf("gnuplot failed on %s\n", script.c_str());
+  if (!eval::run_gnuplot(script, script + ".log")) std::printf("gnuplot failed on %s (its output: %s.log)\n", script.c_str(), script.c_str());
   else
     std::printf("wrote %s (data %s, script %s)\n", path.c_str(), dat.c_str(), script.c_str());
 }

@@ -7,6 +7,7 @@
 #include "dataset/sample.h"
 #include "dataset/stats.h"
 #include "dataset/synthetic.h"
+#include "eval/machine.h"
 #include "model/layersnet.h"
 #include "model/sample_input.h"
 
@@ -25,22 +26,9 @@ inline double now_ms() {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 
-inline double median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  const std::size_t n = v.size();
-  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
-
-// The three load averages of /proc/loadavg, "a b c".
-inline std::string uptime_load() {
-  std::ifstream f("/proc/loadavg");
-  double a = 0, b = 0, c = 0;
-  f >> a >> b >> c;
-  char buf[64];
-  std::snprintf(buf, sizeof buf, "%.2f %.2f %.2f", a, b, c);
-  return buf;
-}
+// The reports' median of timings and load averages (eval/machine.h), one definition for all.
+using eval::median;
+inline std::string uptime_load() { return eval::load_averages(); }
 
 // Per-field medians of the stage times (ms); the work counts are the first sample's.
 inline model::StageTimes median_times(const std::vector<model::StageTimes>& v) {
