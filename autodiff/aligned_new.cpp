@@ -10,7 +10,8 @@
 // same seed + threads give the same bits, and --resume continues bit-exactly.
 //
 // Replacing the global allocation functions is standard C++ ([replacement.functions]); this
-// object file is linked into any program that calls layersnet::train (see trainer.cpp).
+// object file is linked into any program that builds a tape (autodiff/arena.cpp refers to it),
+// so training, evaluation, the tests and a library user's program all get the same bits.
 #include <cstdlib>
 #include <new>
 
@@ -30,7 +31,7 @@ void* aligned_or_throw(std::size_t n) {
 }  // namespace
 
 namespace layersnet {
-// Referenced from trainer.cpp so that the linker keeps this object file.
+// Referenced from arena.cpp so that the linker keeps this object file.
 int aligned_new_anchor = 0;
 }  // namespace layersnet
 

@@ -29,7 +29,7 @@ version=$(sed -n 's/^project(layersnet VERSION \([0-9.]*\).*/\1/p' CMakeLists.tx
 sed "s/@PROJECT_VERSION@/${version:-0.0.0}/" cli/version.h.in > "$OUT/generated/layersnet_version.h"
 CXXFLAGS+=(-I"$OUT/generated")
 READER_SOURCES=(dataset/*.cpp)
-CHECKPOINT_SOURCES=(dataset/*.cpp autodiff/params.cpp autodiff/arena.cpp model/params_layout.cpp run/checkpoint.cpp run/config.cpp run/run_dir.cpp)
+CHECKPOINT_SOURCES=(dataset/*.cpp autodiff/params.cpp autodiff/arena.cpp autodiff/aligned_new.cpp model/params_layout.cpp run/checkpoint.cpp run/config.cpp run/run_dir.cpp)
 SAN=(-fsanitize=fuzzer,address,undefined -fno-sanitize-recover=undefined)
 if [[ ! -x "$OUT/fuzz_reader" || -n "$(find dataset fuzz -newer "$OUT/fuzz_reader" -type f | head -1)" ]]; then
   echo "building $OUT/fuzz_reader (clang++, -fsanitize=fuzzer,address,undefined)"

@@ -32,8 +32,6 @@
 
 namespace layersnet {
 
-extern int aligned_new_anchor;  // train/aligned_new.cpp: 64-byte aligned heap (bit-exact resume)
-
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
 
@@ -686,7 +684,6 @@ double Run::validate_rollouts() {
 }  // namespace
 
 TrainSummary train(const Config& config, const TrainOptions& options) {
-  aligned_new_anchor = 1;
   if (options.run_dir.empty()) throw std::runtime_error("train: no run directory given (--run DIR)");
   const Ranks& ranks = Ranks::world();
   Run run(config, options);

@@ -3,6 +3,10 @@
 #include "autodiff/params.h"
 #include "gradcheck_registry.h"
 
+#include <cstdint>
+#include <memory>
+#include <vector>
+
 namespace layersnet::ad::testing {
 
 // A step of fixed shape; returns the loss-free output so the test can run backward on it.
@@ -115,6 +119,18 @@ TEST(ParamStore, NameTableAndFlatBuffers) {
     EXPECT_NE(std::string(e.what()).find("closest: 'encoder.layers.0.attn.q_proj."), std::string::npos) << e.what();
   }
   EXPECT_THROW(params.add("late", 1, 1), CheckError);
+}
+
+// A program with a tape gets the 64-byte aligned operator new (autodiff/aligned_new.cpp): with
+// malloc's 16-byte alignment, Eigen's reductions would sum in an address-dependent order and the
+// last bits of a result would depend on the heap's history.
+TEST(AlignedHeap, EveryBufferStartsOnACacheLine) {
+  std::vector<std::unique_ptr<std::vector<float>>> keep;  // live together: distinct addresses
+  for (std::size_t n : {1u, 3u, 5u, 17u, 33u, 101u, 1001u, 4099u}) {
+    keep.push_back(std::make_unique<std::vector<float>>(n, 1.f));
+    EXPECT_EQ(reinterpret_cast<std::uintptr_t>(keep.back()->data()) % 64, 0u) << n << " floats";
+    EXPECT_EQ(reinterpret_cast<std::uintptr_t>(keep.back().get()) % 64, 0u);
+  }
 }
 
 }  // namespace layersnet::ad::testing
