@@ -35,25 +35,32 @@ bool project_pair(dataset::Points& x, std::pair<int32_t, int32_t> pair, float mi
   return true;
 }
 
-// Moves each vertex x_v (rows [begin, end)) whose nearest anchor a (within reach; `index` holds
-// the anchors) has (x_v − a)·n_a < shell onto the shell along n_a; returns how many moved.
+// Calls f(v, a) for each vertex v in rows [begin, end) of x whose nearest anchor a (`index`
+// holds the anchors) lies within reach; returns how many calls returned true.
+template <class F>
+int64_t for_each_anchored(const dataset::Points& x, Eigen::Index begin, Eigen::Index end,
+                          const dataset::NearestVertexIndex& index, float reach, F&& f) {
+  if (end <= begin) return 0;
+  const dataset::NearestBody nearest = index.query(x.middleRows(begin, end - begin));
+  int64_t moved = 0;
+  for (Eigen::Index v = begin; v < end; ++v)
+    if (nearest.distance[v - begin] <= reach) moved += f(v, Eigen::Index{nearest.index[v - begin]});
+  return moved;
+}
+
+// Moves each vertex x_v (rows [begin, end)) whose nearest anchor a (within reach) has
+// (x_v − a)·n_a < shell onto the shell along n_a; returns how many moved.
 int64_t push_out(dataset::Points& x, Eigen::Index begin, Eigen::Index end, const dataset::NearestVertexIndex& index,
                  const Eigen::Ref<const dataset::Points>& anchors, const dataset::Points& normals, float shell,
                  float reach) {
-  if (end <= begin || anchors.rows() == 0) return 0;
-  const dataset::NearestBody nearest = index.query(x.middleRows(begin, end - begin));
-  int64_t moved = 0;
-  for (Eigen::Index v = begin; v < end; ++v) {
-    const Eigen::Index i = v - begin;
-    if (nearest.distance[i] > reach) continue;
-    const Eigen::RowVector3f n = normals.row(nearest.index[i]);
-    const float depth = shell - (x.row(v) - anchors.row(nearest.index[i])).dot(n);
-    if (depth > kTolerance * shell) {  // a vertex already on the shell stays unmoved
-      x.row(v) += depth * n;
-      ++moved;
-    }
-  }
-  return moved;
+  if (anchors.rows() == 0) return 0;
+  return for_each_anchored(x, begin, end, index, reach, [&](Eigen::Index v, Eigen::Index a) {
+    const Eigen::RowVector3f n = normals.row(a);
+    const float depth = shell - (x.row(v) - anchors.row(a)).dot(n);
+    if (depth <= kTolerance * shell) return false;  // a vertex already on the shell stays unmoved
+    x.row(v) += depth * n;
+    return true;
+  });
 }
 
 // Each vertex x_v (rows [begin, end)) whose nearest anchor a (within reach) has
@@ -63,20 +70,14 @@ int64_t drag_along(dataset::Points& x, const dataset::Points& x_before, Eigen::I
                    const dataset::NearestVertexIndex& index, const Eigen::Ref<const dataset::Points>& anchors,
                    const Eigen::Ref<const dataset::Points>& anchors_before, const dataset::Points& normals,
                    float within, float mu, float reach) {
-  if (end <= begin || anchors.rows() == 0) return 0;
-  const dataset::NearestBody nearest = index.query(x.middleRows(begin, end - begin));
-  int64_t moved = 0;
-  for (Eigen::Index v = begin; v < end; ++v) {
-    const Eigen::Index i = v - begin;
-    if (nearest.distance[i] > reach) continue;
-    const Eigen::Index a = nearest.index[i];
+  if (anchors.rows() == 0) return 0;
+  return for_each_anchored(x, begin, end, index, reach, [&](Eigen::Index v, Eigen::Index a) {
     const Eigen::RowVector3f n = normals.row(a);
-    if ((x.row(v) - anchors.row(a)).dot(n) >= within) continue;
+    if ((x.row(v) - anchors.row(a)).dot(n) >= within) return false;
     const Eigen::RowVector3f r = (x.row(v) - x_before.row(v)) - (anchors.row(a) - anchors_before.row(a));
     x.row(v) -= mu * (r - r.dot(n) * n);
-    ++moved;
-  }
-  return moved;
+    return true;
+  });
 }
 
 }  // namespace
