@@ -8,20 +8,17 @@
 #include "losses/sample_loss_input.h"
 #include "model/model_config.h"
 #include "model/sample_input.h"
+#include "run/config.h"
+
+#include <string>
 
 namespace layersnet::model::testing {
 
-// Small enough for a double-precision whole-model gradient check in well under a second.
+// The tests' one tiny model: the [model] section of configs/tiny.toml, which the trainer and
+// command-line tests train too; small enough for a double-precision whole-model gradient check
+// in well under a second.
 inline ModelConfig tiny_config() {
-  ModelConfig c;
-  c.width = 16;
-  c.heads = 4;
-  c.layers = 2;
-  c.ffn_width = 24;
-  c.decoder_width = 20;
-  c.body_neighbors = 4;
-  c.decoder_ret_channels = 4;  // 3k <= width
-  return c;
+  return load_config({std::string(LAYERSNET_SOURCE_DIR) + "/configs/tiny.toml"}).model;
 }
 
 // Two sheets (9 x 6 and 10 x 6 vertices 0.1 apart, patches of 3 x 3 quads) 0.05 and 0.065 outside

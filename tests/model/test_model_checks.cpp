@@ -116,7 +116,8 @@ TEST(ModelOrthogonality, ExactParametrisationHoldsForAnyParameter) {
 }
 
 // orthogonality_floor is the penalty the loss computes at the orthonormal initialisation
-// (official sizes 333, our default k = 8: 312, tiny sizes), and 0 where the loss has no penalty.
+// (official sizes 333, our default k = 8: 312, tiny sizes: 1 layer x 1 group x (head dim 8 - 3) +
+// (d 16 - 3k 12) = 9), and 0 where the loss has no penalty.
 TEST(ModelOrthogonality, FloorEqualsThePenaltyAtTheOrthonormalInitialisation) {
   ModelConfig official;
   official.decoder_ret_channels = 1;
@@ -125,7 +126,7 @@ TEST(ModelOrthogonality, FloorEqualsThePenaltyAtTheOrthonormalInitialisation) {
   ModelConfig exact = testing::tiny_config();
   exact.orthogonality = "exact";
   const std::pair<ModelConfig, double> cases[] = {
-      {official, 333}, {ModelConfig{}, 312}, {testing::tiny_config(), 2 * 2 * (4 - 3) + (16 - 12)}, {vanilla, 0}, {exact, 0}};
+      {official, 333}, {ModelConfig{}, 312}, {testing::tiny_config(), 1 * 1 * (8 - 3) + (16 - 12)}, {vanilla, 0}, {exact, 0}};
   const LossConfig lc;  // every term on; the penalty's own value is logged apart from them
   for (const auto& [c, expected] : cases) {
     SCOPED_TRACE("width " + std::to_string(c.width) + " k " + std::to_string(c.decoder_ret_channels) + " " +

@@ -2,7 +2,7 @@
 // garment layers, statistics computed by the data layer) the model drives the training
 // loss down with Adam, cycling over every training window of the sequence.
 //
-// The test: tiny config, 5000 Adam steps (lr 2e-2, cosine decay), bound 100x (measured 153x, ~10 s).
+// The test: configs/tiny.toml's model, 5000 Adam steps (lr 2e-2, cosine decay), bound 100x (measured 173x, ~4 s).
 // With the official rank-3 decoder map (model.decoder_ret_channels = 1) the same run levels off
 // near 44x: that bottleneck, not the data, bounded the fit (model/README.md).
 // Other runs are the same code with environment knobs: LAYERSNET_OVERFIT_STEPS,
