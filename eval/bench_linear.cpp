@@ -37,8 +37,8 @@
 
 namespace {
 
-using layersnet::eval::LinearBenchOptions;
 using namespace layersnet::ad;
+using layersnet::eval::LinearBenchOptions;
 using layersnet::eval::median;
 
 
@@ -178,7 +178,11 @@ void print_load(const char* when) {
   std::printf("load average %s: %.2f (1 min), %d cores\n", when, layersnet::eval::load_average_1min(), omp_get_num_procs());
 }
 
-int run_impl(const LinearBenchOptions& o) {
+}  // namespace
+
+namespace layersnet::eval {
+
+int run_bench_linear(const LinearBenchOptions& o) {
   print_load("before");
   const std::vector<Shape> shapes = {{80000, 268, 268}, {20000, 128, 128}};
   std::vector<Result> results;
@@ -261,12 +265,6 @@ int run_impl(const LinearBenchOptions& o) {
   }
   return 0;
 }
-
-}  // namespace
-
-namespace layersnet::eval {
-
-int run_bench_linear(const LinearBenchOptions& o) { return run_impl(o); }
 
 }  // namespace layersnet::eval
 

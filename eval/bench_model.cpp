@@ -37,9 +37,9 @@
 
 namespace {
 
-using layersnet::eval::BenchModelOptions;
 
 using namespace layersnet;
+using eval::BenchModelOptions;
 namespace fs = std::filesystem;
 
 
@@ -159,7 +159,11 @@ Reference run_reference(const BenchModelOptions& o, const fs::path& script, int 
   return r;
 }
 
-int run_impl(const BenchModelOptions& o) {
+}  // namespace
+
+namespace layersnet::eval {
+
+int run_bench_model(const BenchModelOptions& o) {
   // Same malloc tuning as the reference's default (--malloc heap): freed tape buffers stay in
   // the heap instead of being munmap'd and page-faulted in again every step (perf: ~17 % of
   // a small-scene training step was page faults, clear_page and munmap without it).
@@ -329,12 +333,6 @@ int run_impl(const BenchModelOptions& o) {
   }
   return 0;
 }
-
-}  // namespace
-
-namespace layersnet::eval {
-
-int run_bench_model(const BenchModelOptions& o) { return run_impl(o); }
 
 }  // namespace layersnet::eval
 

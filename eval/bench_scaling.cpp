@@ -45,9 +45,9 @@
 
 namespace {
 
-using layersnet::eval::ScalingOptions;
 
 using namespace layersnet;
+using eval::ScalingOptions;
 
 
 using bench::kOutfit;
@@ -318,7 +318,11 @@ void write_png(const std::string& path, const std::map<std::pair<std::string, in
     std::printf("wrote %s (data %s, script %s)\n", path.c_str(), dat.c_str(), script.c_str());
 }
 
-int run_impl(const ScalingOptions& o) {
+}  // namespace
+
+namespace layersnet::eval {
+
+int run_bench_scaling(const ScalingOptions& o) {
   mallopt(M_MMAP_MAX, 0), mallopt(M_TRIM_THRESHOLD, -1), mallopt(M_ARENA_MAX, 1);  // as bench model
   const auto sizes = parse_list<int64_t>(o.sizes, "--sizes");
   const auto threads = parse_list<int>(o.threads, "--threads");
@@ -380,12 +384,6 @@ int run_impl(const ScalingOptions& o) {
   if (!o.png.empty()) write_png(o.png, blocks, !o.no_train);
   return 0;
 }
-
-}  // namespace
-
-namespace layersnet::eval {
-
-int run_bench_scaling(const ScalingOptions& o) { return run_impl(o); }
 
 }  // namespace layersnet::eval
 

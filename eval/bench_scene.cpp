@@ -43,7 +43,6 @@
 
 namespace {
 
-using layersnet::eval::SceneBenchOptions;
 
 using namespace layersnet;
 
@@ -95,7 +94,11 @@ Expected expected_saving(const model::StageTimes& f, const model::StageTimes& v,
   return e;
 }
 
-int run_impl(const SceneBenchOptions& o) {
+}  // namespace
+
+namespace layersnet::eval {
+
+int run_bench_scene(const SceneBenchOptions& o) {
   mallopt(M_MMAP_MAX, 0), mallopt(M_TRIM_THRESHOLD, -1), mallopt(M_ARENA_MAX, 1);  // as bench model
   omp_set_num_threads(o.threads);
   Eigen::setNbThreads(1);
@@ -230,12 +233,6 @@ int run_impl(const SceneBenchOptions& o) {
   }
   return 0;
 }
-
-}  // namespace
-
-namespace layersnet::eval {
-
-int run_bench_scene(const SceneBenchOptions& o) { return run_impl(o); }
 
 }  // namespace layersnet::eval
 
