@@ -66,7 +66,7 @@ int64_t push_out(dataset::Points& x, Eigen::Index begin, Eigen::Index end, const
 // Each vertex x_v (rows [begin, end)) whose nearest anchor a (within reach) has
 // (x_v − a)·n_a < within loses mu of its displacement relative to a's, tangentially to n_a:
 // x_v −= mu (r − (r·n) n), r = (x_v − x_v,before) − (a − a_before). Returns how many moved.
-int64_t drag_along(dataset::Points& x, const dataset::Points& x_before, Eigen::Index begin, Eigen::Index end,
+int64_t drag_along(dataset::Points& x, const Eigen::Ref<const dataset::Points>& x_before, Eigen::Index begin, Eigen::Index end,
                    const dataset::NearestVertexIndex& index, const Eigen::Ref<const dataset::Points>& anchors,
                    const Eigen::Ref<const dataset::Points>& anchors_before, const dataset::Points& normals,
                    float within, float mu, float reach) {
@@ -128,12 +128,11 @@ ConstraintMoves ClothConstraints::apply(const Eigen::Ref<const dataset::Points>&
 ConstraintMoves ClothConstraints::apply(const Eigen::Ref<const dataset::Points>& body, dataset::Points& x,
                                         const Eigen::Ref<const dataset::Points>& body_before,
                                         const Eigen::Ref<const dataset::Points>& x_before) const {
-  const dataset::Points b0 = body_before, x0 = x_before;
-  return project(body, x, &b0, &x0);
+  return project(body, x, &body_before, &x_before);
 }
 
 ConstraintMoves ClothConstraints::project(const Eigen::Ref<const dataset::Points>& body, dataset::Points& x,
-                                          const dataset::Points* body_before, const dataset::Points* x_before) const {
+                                          const Eigen::Ref<const dataset::Points>* body_before, const Eigen::Ref<const dataset::Points>* x_before) const {
   ConstraintMoves moves;
   if (!x.allFinite()) return moves;
   const auto shell = static_cast<float>(settings_.collision_shell);

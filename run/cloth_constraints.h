@@ -64,7 +64,7 @@ class ClothConstraints {
 
  private:
   ConstraintMoves project(const Eigen::Ref<const dataset::Points>& body, dataset::Points& x,
-                          const dataset::Points* body_before, const dataset::Points* x_before) const;
+                          const Eigen::Ref<const dataset::Points>* body_before, const Eigen::Ref<const dataset::Points>* x_before) const;
   EvalConfig settings_;
   float reach_ = 0;                                 // scene units
   std::vector<std::pair<int32_t, int32_t>> edges_;  // rows of x
