@@ -44,8 +44,9 @@ struct MarginTally {
     for (int k = 0; k < layout.num_garments(); ++k)
       x.middleRows(layout.offsets[k], info.garments[k].num_vertices) = w.garment_at(k, t, info.garments[k].num_vertices);
     const Points body_n = vertex_normals(body_x, info.body_faces);
-    signed_distances(x, body_x, body_n, body);
-    if (t > w.first) add_slip(info, layout, w, t, x, body_x, body_n);
+    const NearestBody on_body = nearest_body(x, body_x);  // one search for the margins and the slip
+    signed_distances(x, body_x, body_n, on_body, body);
+    if (t > w.first) add_slip(info, layout, w, t, x, body_x, body_n, on_body);
     for (int k = 0; k < layout.num_garments(); ++k) {
       const GarmentMesh& g = info.garments[k];
       if (g.rest.rows() != g.num_vertices) continue;
@@ -58,12 +59,12 @@ struct MarginTally {
     }
     if (!layout.layered()) return;
     const Points inner = x.topRows(layout.num_vertices() - layout.outer_vertices());
-    signed_distances(x.bottomRows(layout.outer_vertices()), inner, vertex_normals(inner, inner_faces), layer);
+    const Points outer = x.bottomRows(layout.outer_vertices());
+    signed_distances(outer, inner, vertex_normals(inner, inner_faces), nearest_body(outer, inner), layer);
   }
   void add_slip(const SequenceInfo& info, const GarmentLayout& layout, const FrameWindow& w, int t, const Points& x,
-                const Points& body_x, const Points& body_n) {
+                const Points& body_x, const Points& body_n, const NearestBody& nb) {
     const Points body_before = w.body_at(t - 1, info.num_body_vertices);
-    const NearestBody nb = nearest_body(x, body_x);
     for (int k = 0; k < layout.num_garments(); ++k) {
       const Points before = w.garment_at(k, t - 1, info.garments[k].num_vertices);
       for (int v = 0; v < info.garments[k].num_vertices; ++v) {
@@ -93,8 +94,9 @@ struct MarginTally {
                   100.0 * slip_count[b] / total, slip_sum[b] / slip_count[b], body_motion_sum[b] / slip_count[b]);
     }
   }
-  static void signed_distances(const Points& x, const Points& anchors, const Points& normals, std::vector<float>& out) {
-    const NearestBody nb = nearest_body(x, anchors);
+  // nb: the nearest anchor of each row of x.
+  static void signed_distances(const Points& x, const Points& anchors, const Points& normals, const NearestBody& nb,
+                               std::vector<float>& out) {
     for (Eigen::Index i = 0; i < x.rows(); ++i)
       out.push_back((x.row(i) - anchors.row(nb.index[i])).dot(normals.row(nb.index[i])));
   }
