@@ -20,7 +20,6 @@ namespace {
 using namespace layersnet;
 
 struct ExportCliOptions {
-  std::string checkpoint;  // from `model` just before the run
   cli::ModelOption model;
   std::string baseline = "follow-body";
   std::string dataset;
@@ -34,8 +33,9 @@ struct ExportCliOptions {
 };
 
 int run_export(const ExportCliOptions& o) {
+  const std::string checkpoint = o.model.path();  // empty: a baseline
   Config base;
-  if (!o.checkpoint.empty()) base = parse_config_text(read_checkpoint_config(o.checkpoint), o.checkpoint);
+  if (!checkpoint.empty()) base = parse_config_text(read_checkpoint_config(checkpoint), checkpoint);
   const std::string root = o.dataset.empty() ? base.data.dataset : o.dataset;
   const dataset::DatasetManifest manifest = dataset::read_manifest(root);
   const std::string split = o.split.empty() ? base.eval.split : o.split;
@@ -46,11 +46,11 @@ int run_export(const ExportCliOptions& o) {
     id = ids.front();
   }
   std::unique_ptr<eval::Predictor> predictor;
-  if (!o.checkpoint.empty()) {
+  if (!checkpoint.empty()) {
     std::unique_ptr<dataset::NormalisationStats> fallback;
     if (std::filesystem::exists(manifest.stats_path()))
       fallback = std::make_unique<dataset::NormalisationStats>(dataset::read_stats(manifest.stats_path()));
-    auto model = eval::load_model_predictor(o.checkpoint, o.checkpoint, fallback.get());
+    auto model = eval::load_model_predictor(checkpoint, checkpoint, fallback.get());
     model->apply_eval_settings(o.settings);
     predictor = std::move(model);
   } else if (o.baseline == "constant-velocity") {
@@ -95,8 +95,7 @@ LAYERSNET_COMMAND(export, "Write a rollout's predicted and ground-truth meshes (
                     sub.add_option("--set", o->settings,
                                    "rollout setting of the checkpoint, e.g. --set eval.constraints=false (eval.* keys)");
                     return [o] {
-                      o->checkpoint = o->model.path();
-                      if (o->checkpoint.empty() && o->dataset.empty()) {
+                      if (!o->model.given() && o->dataset.empty()) {
                         std::fprintf(stderr, "layersnet export: give --checkpoint, --run or --dataset\n");
                         return cli::kExitUsage;
                       }

@@ -13,14 +13,13 @@ namespace {
 
 struct PackOptions {
   layersnet::cli::ModelOption model;
-  std::string checkpoint;  // from `model` just before the run
   std::string out;
   std::vector<std::string> settings;  // "eval.KEY=VALUE" written into the packed config
 };
 
-int run_pack(PackOptions& o) {
-  o.checkpoint = o.model.required_path();
-  layersnet::LoadedModel m = layersnet::load_model(o.checkpoint);
+int run_pack(const PackOptions& o) {
+  const std::string checkpoint = o.model.required_path();
+  layersnet::LoadedModel m = layersnet::load_model(checkpoint);
   m.checkpoint.has_optimizer = false;
   m.checkpoint.state.rng.clear();
   if (!o.settings.empty()) {
@@ -31,7 +30,7 @@ int run_pack(PackOptions& o) {
   if (!parent.empty()) std::filesystem::create_directories(parent);
   layersnet::write_checkpoint(o.out, m.params, m.checkpoint);
   std::printf("packed %s -> %s (%zu weights, %.2f MB; epoch %lld, %lld updates, best validation error %.6g)\n",
-              o.checkpoint.c_str(), o.out.c_str(), m.params.values().size(),
+              checkpoint.c_str(), o.out.c_str(), m.params.values().size(),
               static_cast<double>(std::filesystem::file_size(o.out)) / 1e6, static_cast<long long>(m.checkpoint.state.epoch),
               static_cast<long long>(m.checkpoint.state.global_step), m.checkpoint.state.best_val_error);
   return 0;
