@@ -76,7 +76,6 @@ dataset::SyntheticOptions reference_scene(const std::string& size, const ModelCo
 
 using bench::median;
 using bench::now_ms;
-double load_average() { return eval::load_average_1min(); }
 double vm_hwm_mib() {
   std::ifstream f("/proc/self/status");
   std::string line;
@@ -262,11 +261,11 @@ int run_bench_model(const BenchModelOptions& o) {
       Eigen::setNbThreads(t);  // the plain GEMM reference uses every thread
       u.gemm_gflops.push_back(gemm_rate(std::max<Eigen::Index>(8000, 4 * in.N)));
       std::printf("  pass %d threads %d: ours train %.1f ms infer %.1f ms (load %.2f)", pass + 1, t,
-                  u.train_ms.back(), u.infer_ms.back(), load_average());
+                  u.train_ms.back(), u.infer_ms.back(), eval::load_average_1min());
       if (with_ref) {
         refs[t].push_back(run_reference(o, script, t));
         const auto& r = refs[t].back();
-        if (r.ok) std::printf(" | torch train %.1f ms infer %.1f ms (load %.2f)", r.train_ms, r.infer_ms, load_average());
+        if (r.ok) std::printf(" | torch train %.1f ms infer %.1f ms (load %.2f)", r.train_ms, r.infer_ms, eval::load_average_1min());
       }
       std::printf("\n");
       std::fflush(stdout);
@@ -308,7 +307,7 @@ int run_bench_model(const BenchModelOptions& o) {
     // ratio > 1: we are faster
     const double s_tr = rtr > 0 ? rtr / tr : 0, s_inf = rinf > 0 ? rinf / inf : 0;
     std::printf("%7d %10.1f %10.1f %7.2f %10.1f %10.1f %7.2f %9.1f %9.1f %9.1f %8.2f %9.0f %9.0f %6.2f\n", t, tr, rtr,
-                s_tr, inf, rinf, s_inf, gf_tr, gf_inf, gemm, gemm > 0 ? gf_tr / gemm : 0, peak, rpeak, load_average());
+                s_tr, inf, rinf, s_inf, gf_tr, gf_inf, gemm, gemm > 0 ? gf_tr / gemm : 0, peak, rpeak, eval::load_average_1min());
     out["rows"].push_back({{"threads", t},
                            {"train_ms", tr},
                            {"torch_train_ms", rtr},
@@ -324,7 +323,7 @@ int run_bench_model(const BenchModelOptions& o) {
                            {"torch_peak_rss_mib", rpeak},
                            {"passes_train_ms", u.train_ms},
                            {"passes_infer_ms", u.infer_ms},
-                           {"load_average", load_average()}});
+                           {"load_average", eval::load_average_1min()}});
   }
   std::printf("ratio = torch time / our time (> 1: we are faster); best-of-pass medians; GFLOP/s from the "
               "reference's FLOP count (train = 3 x forward); peak_MiB = our VmHWM (whole run)\n");

@@ -54,7 +54,6 @@ using bench::kOutfit;
 using bench::median;
 using bench::median_times;
 using bench::now_ms;
-using bench::uptime_load;
 template <class T>
 std::vector<T> parse_list(const std::string& list, const char* what) {
   std::vector<T> out;
@@ -332,7 +331,7 @@ int run_bench_scaling(const ScalingOptions& o) {
   std::printf("bench scaling: sizes %s, threads %s, %d interleaved passes x %d iterations (+%d warm-up); model d=%d, %d layers, R=%g, R_b=%g, "
               "K=%d, decoder RET channels k=%d; body 6890 vertices fixed; OMP_WAIT_POLICY=%s\nload (uptime) at start: %s\n",
               o.sizes.c_str(), o.threads.c_str(), o.passes, o.iters, o.warmup, mc.width, mc.layers, mc.world_radius,
-              mc.body_radius, mc.body_neighbors, mc.decoder_ret_channels, wait ? wait : "(default)", uptime_load().c_str());
+              mc.body_radius, mc.body_neighbors, mc.decoder_ret_channels, wait ? wait : "(default)", eval::load_averages().c_str());
   std::vector<Case> cases;
   double area = 0;
   for (const auto& g : kOutfit) area += g.around * g.along;
@@ -356,7 +355,7 @@ int run_bench_scaling(const ScalingOptions& o) {
   for (int pass = 0; pass < o.passes; ++pass) {
     for (auto& c : cases)
       for (int t : threads) measure(c, mc, t, pass == 0 ? o.warmup : 0, o.iters, !o.no_train, ps, adam, tape);
-    std::printf("  pass %d of %d done (load %s)\n", pass + 1, o.passes, uptime_load().c_str());
+    std::printf("  pass %d of %d done (load %s)\n", pass + 1, o.passes, eval::load_averages().c_str());
     std::fflush(stdout);
   }
   std::map<std::pair<std::string, int>, std::vector<Row>> blocks;
@@ -373,10 +372,10 @@ int run_bench_scaling(const ScalingOptions& o) {
                 key.second);
     print_block(rows, !o.no_train);
   }
-  std::printf("\nload (uptime) at end: %s\n", uptime_load().c_str());
+  std::printf("\nload (uptime) at end: %s\n", eval::load_averages().c_str());
   if (!o.json.empty()) {
     nlohmann::json j = {{"sizes", sizes}, {"patch_size", o.patch_size}, {"cell", o.cell}, {"passes", o.passes}, {"iters", o.iters},
-                        {"omp_wait_policy", wait ? wait : ""}, {"load_end", uptime_load()}, {"rows", nlohmann::json::array()}};
+                        {"omp_wait_policy", wait ? wait : ""}, {"load_end", eval::load_averages()}, {"rows", nlohmann::json::array()}};
     for (const auto& [key, rows] : blocks)
       for (const auto& r : rows) j["rows"].push_back(row_json(r));
     layersnet::io::write_file_atomic(o.json, j.dump(1) + "\n");

@@ -50,7 +50,6 @@ using namespace layersnet;
 using bench::median;
 using bench::median_times;
 using bench::now_ms;
-using bench::uptime_load;
 using eval::quantile;
 
 struct Config {
@@ -136,7 +135,7 @@ int run_bench_scene(const SceneBenchOptions& o) {
   std::printf("bench scene: ~%lld garment vertices, %d thread(s), %d interleaved passes x %d iterations (+%d warm-up), "
               "model d=%d, %d layers, K=%d, decoder RET channels k=%d, OMP_WAIT_POLICY=%s\nload (uptime) at start: %s\n",
               (long long)o.vertices, o.threads, o.passes, o.iters, o.warmup, mc.width, mc.layers, mc.body_neighbors,
-              mc.decoder_ret_channels, wait ? wait : "(default)", uptime_load().c_str());
+              mc.decoder_ret_channels, wait ? wait : "(default)", eval::load_averages().c_str());
   for (int pass = 0; pass < o.passes; ++pass) {
     for (auto& c : cs) {
       for (int it = 0; it < (pass == 0 ? o.warmup : 0) + o.iters; ++it) {
@@ -157,7 +156,7 @@ int run_bench_scene(const SceneBenchOptions& o) {
         c.train.push_back(t_end - t0), c.adam.push_back(t_end - t_adam), c.stages.push_back(st);
       }
     }
-    std::printf("  pass %d done (load %s)\n", pass + 1, uptime_load().c_str());
+    std::printf("  pass %d done (load %s)\n", pass + 1, eval::load_averages().c_str());
     std::fflush(stdout);
   }
   for (auto& c : cs) c.med = median_times(c.stages);
@@ -226,8 +225,8 @@ int run_bench_scene(const SceneBenchOptions& o) {
   std::printf("T = body + wind + gravity tokens; E_inter = patch -> token edges; expected = full run's stage time x "
               "share of the stage's rows that the configuration lacks (rows counted by the forward)\nload (uptime) at "
               "end: %s\n",
-              uptime_load().c_str());
-  out["load_end"] = uptime_load();
+              eval::load_averages().c_str());
+  out["load_end"] = eval::load_averages();
   if (!o.json.empty()) {
     layersnet::io::write_file_atomic(o.json, out.dump(1) + "\n");
   }

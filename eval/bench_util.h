@@ -26,9 +26,7 @@ inline double now_ms() {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 
-// The reports' median of timings and load averages (eval/machine.h), one definition for all.
-using eval::median;
-inline std::string uptime_load() { return eval::load_averages(); }
+using eval::median;  // the reports' median of timings (eval/machine.h)
 
 // Per-field medians of the stage times (ms); the work counts are the first sample's.
 inline model::StageTimes median_times(const std::vector<model::StageTimes>& v) {
