@@ -52,13 +52,11 @@ int make(const MemoryOptions& o) {
   so.segments = 64;
   so.body_rings = 100;
   so.body_segments = 64;
-  so.height = 0.147f * 99 / 0.8f;
   so.uv_per_unit = 0.1f;
   so.wind = true;
   if (o.make_gb < 0.1) {  // a small data set for examples and quick checks
     so.frames = 40;
     so.rings = so.body_rings = 20;
-    so.height = 0.147f * 19 / 0.8f;
   }
   if (o.dlayers_size) {  // 2 x 10,000 garment vertices and a 6,890-vertex body (SMPL), as D-LAYERS
     so.frames = 40;
@@ -66,8 +64,8 @@ int make(const MemoryOptions& o) {
     so.segments = 80;
     so.body_rings = 106;
     so.body_segments = 65;
-    so.height = 0.147f * 124 / 0.8f;
   }
+  so.height = 0.147f * static_cast<float>(so.rings - 1) / 0.8f;  // rows 0.147 units apart (the tube spans 0.8 of its height)
   const Sequence probe = make_synthetic_sequence(so);
   const double per_sequence = static_cast<double>(probe.info.bytes_per_frame()) * so.frames;
   const int n = std::max(3, static_cast<int>(o.make_gb * (1 << 30) / per_sequence + 0.999));
