@@ -2,6 +2,7 @@
 #include "eval/evaluate.h"
 
 #include "dataset/h5.h"
+#include "dataset/neighbours.h"
 #include "eval/machine.h"
 #include "eval/stress.h"
 
@@ -55,11 +56,19 @@ SequenceResult score_rollout(const dataset::Sequence& seq, const Rollout& r, con
   double inner = 0, outer = 0, h = 0, lo = 0, la = 0, ln = 0;
   const GarmentEdges edges = garment_edges(seq);
   std::vector<double> strains;  // every edge of every frame, for the sequence's p99
+  std::array<double, kBodyDistanceBands> band_sum{};
   bool finite = true;
   for (size_t k = 0; k < r.frames.size(); ++k) {
     const int t = r.first_frame + static_cast<int>(k);
     const Points truth = garments_at(seq, t);
     const FrameMetrics m = frame_metrics(L, r.frames[k], truth, seq.body_at(t), seq.info.body_faces, o);
+    const dataset::NearestBody near = dataset::nearest_body(truth, seq.body_at(t));
+    for (Eigen::Index v = 0; v < truth.rows(); ++v) {
+      const double metres = near.distance[static_cast<std::size_t>(v)] / seq.info.scale;
+      const int band = metres < kBodyDistanceBandEdgesM[0] ? 0 : metres < kBodyDistanceBandEdgesM[1] ? 1 : 2;
+      band_sum[band] += (r.frames[k].row(v) - truth.row(v)).cast<double>().norm();
+      ++s.band_vertex_frames[band];
+    }
     if (r.frames[k].allFinite()) {
       const std::vector<double> e = edge_strains(edges, r.frames[k]);
       s.strain_p99_curve.push_back(quantile(e, 0.99));
@@ -78,6 +87,8 @@ SequenceResult score_rollout(const dataset::Sequence& seq, const Rollout& r, con
     la += m.l_rate_all / n;
     ln += m.l_rate_outer_near / n;
   }
+  for (int b = 0; b < kBodyDistanceBands; ++b)
+    s.band_error[b] = s.band_vertex_frames[b] > 0 ? band_sum[b] / static_cast<double>(s.band_vertex_frames[b]) : 0.0;
   s.inner_error = inner;
   s.h_rate = h;
   if (finite) {
@@ -185,12 +196,18 @@ Summary summarise(const MethodResult& m) {
   std::vector<double> err, inner, outer, h, lo, la, ln, strain_mean, strain_p99, steps;
   std::map<std::string, std::vector<double>> by_type, by_subset;
   std::vector<std::vector<double>> curve, strain_curve;
+  std::array<double, kBodyDistanceBands> band_sum_mm{};
+  std::array<int64_t, kBodyDistanceBands> band_count{};
   for (const SequenceResult& r : m.sequences) {
     if (r.diverged_at >= 0 || !std::isfinite(r.error)) {
       ++s.diverged;
       continue;
     }
     const double mm = r.mm();
+    for (int b = 0; b < kBodyDistanceBands; ++b) {
+      band_sum_mm[b] += r.band_error[b] * mm * static_cast<double>(r.band_vertex_frames[b]);
+      band_count[b] += r.band_vertex_frames[b];
+    }
     err.push_back(r.error * mm);
     inner.push_back(r.inner_error * mm);
     h.push_back(100 * r.h_rate);
@@ -231,6 +248,12 @@ Summary summarise(const MethodResult& m) {
   for (const auto& [k, v] : by_subset) s.by_subset_mm[k] = mean_std(v);
   for (const auto& v : curve) s.curve_mm.push_back(mean_std(v).mean);
   for (const auto& v : strain_curve) s.strain_p99_curve_percent.push_back(mean_std(v).mean);
+  const double all_vertex_frames = static_cast<double>(band_count[0] + band_count[1] + band_count[2]);
+  for (int b = 0; b < kBodyDistanceBands; ++b) {
+    s.band_mm[b] = band_count[b] > 0 ? band_sum_mm[b] / static_cast<double>(band_count[b])
+                                     : std::numeric_limits<double>::quiet_NaN();
+    s.band_share[b] = all_vertex_frames > 0 ? static_cast<double>(band_count[b]) / all_vertex_frames : 0.0;
+  }
   if (!steps.empty()) {
     std::nth_element(steps.begin(), steps.begin() + static_cast<std::ptrdiff_t>(steps.size() / 2), steps.end());
     s.median_step_ms = steps[steps.size() / 2];

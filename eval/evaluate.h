@@ -19,11 +19,18 @@
 #include "eval/metrics.h"
 #include "eval/rollout.h"
 
+#include <array>
 #include <map>
 #include <string>
 #include <vector>
 
 namespace layersnet::eval {
+
+// Bands of the ground truth's distance from the body (nearest body vertex) at each frame, in
+// metres: cloth on the body [0, 0.03), near it [0.03, 0.06), free beyond. 0.03 m is where
+// contact friction acts; the split shows whether the error is contact or free-cloth dynamics.
+inline constexpr std::array<double, 2> kBodyDistanceBandEdgesM = {0.03, 0.06};
+inline constexpr int kBodyDistanceBands = 3;
 
 struct SequenceResult {
   std::string id;
@@ -37,6 +44,10 @@ struct SequenceResult {
   std::vector<double> error_curve;    // (n,) per rollout frame
   std::vector<double> garment_error;  // (G,)
   double inner_error = 0, outer_error = -1;
+  // Per body-distance band (kBodyDistanceBandEdgesM): mean error over the band's vertex-frames
+  // (scene units; 0 when empty) and how many vertex-frames fell in it.
+  std::array<double, kBodyDistanceBands> band_error{};
+  std::array<int64_t, kBodyDistanceBands> band_vertex_frames{};
   // Rates in [0, 1], means over frames (-1: no layers):
   double h_rate = 0, l_rate_outer = -1, l_rate_all = -1, l_rate_outer_near = -1;
   // Edge strain (ratio) over all edges x rollout frames; NaN once a prediction is non-finite:
@@ -132,6 +143,9 @@ struct Summary {
   std::map<std::string, MeanStd> by_subset_mm;  // T, T+W, L, L+W
   std::vector<double> curve_mm;                 // mean over sequences per rollout frame
   std::vector<double> strain_p99_curve_percent; // the same of the per-frame strain p99
+  // Per body-distance band: error pooled over every vertex-frame of every sequence in the band
+  // (mm; NaN when none) and the band's share of all vertex-frames.
+  std::array<double, kBodyDistanceBands> band_mm{}, band_share{};
   double median_step_ms = 0;                    // over every step of every sequence
   int diverged = 0;  // sequences with a non-finite prediction: left out of every number above
 };

@@ -108,6 +108,16 @@ bool plot(const std::filesystem::path& dir, const std::vector<MethodResult>& met
   return run_gnuplot(dir / "plots.gp", dir / "gnuplot.log");
 }
 
+// Band b of kBodyDistanceBandEdgesM in metres: [lower, upper], upper -1 for the open last band.
+std::array<double, 2> band_bounds(int b) {
+  return {b == 0 ? 0.0 : kBodyDistanceBandEdgesM[b - 1], b < kBodyDistanceBands - 1 ? kBodyDistanceBandEdgesM[b] : -1.0};
+}
+
+std::string band_label(int b) {
+  const auto [lo, hi] = band_bounds(b);
+  return hi < 0 ? fmt(">= %g m", lo) : fmt("%g", lo) + fmt("–%g m", hi);
+}
+
 std::vector<std::string> all_types(const std::vector<MethodResult>& methods) {
   std::set<std::string> t;
   for (const auto& m : methods)
@@ -169,7 +179,9 @@ std::string report_json(const std::vector<MethodResult>& methods, const ReportCo
                "vertices (official aggregate); strain_*: |edge length / rest length - 1| over every garment edge and rollout "
                "frame, a ratio per sequence (mean, p99 = 99th percentile by linear interpolation; strain_p99_curve: "
                "per frame), *_percent in percent over sequences; start ramp: first_frame = the file's rest_frames + "
-               "ramp_frames, fixed: input_frame = start_frame";
+               "ramp_frames, fixed: input_frame = start_frame; error_by_body_distance / band_*: bands of the ground truth's "
+               "distance to its nearest body vertex (band_m in metres, upper -1 = open), error pooled over the band's "
+               "vertex-frames, share of all vertex-frames";
   j["methods"] = json::array();
   for (const auto& m : methods) {
     const Summary s = summarise(m);
@@ -186,6 +198,10 @@ std::string report_json(const std::vector<MethodResult>& methods, const ReportCo
                {"strain_mean_percent", ms_json(s.strain_mean_percent)},
                {"strain_p99_percent", ms_json(s.strain_p99_percent)},
                {"strain_p99_curve_percent", s.strain_p99_curve_percent}};
+    js["error_by_body_distance"] = json::array();
+    for (int b = 0; b < kBodyDistanceBands; ++b)
+      js["error_by_body_distance"].push_back({{"band_m", band_bounds(b)}, {"error_mm", s.band_mm[b]},
+                                              {"share", s.band_share[b]}});
     for (const auto& [k, v] : s.by_type_mm) js["by_type_mm"][k] = ms_json(v);
     for (const auto& [k, v] : s.by_subset_mm) js["by_subset_mm"][k] = ms_json(v);
     jm["summary"] = js;
@@ -194,12 +210,15 @@ std::string report_json(const std::vector<MethodResult>& methods, const ReportCo
       std::vector<double> curve, garments;
       for (double e : r.error_curve) curve.push_back(e * r.mm());
       for (double e : r.garment_error) garments.push_back(e * r.mm());
+      std::vector<double> band_mm;
+      for (double e : r.band_error) band_mm.push_back(e * r.mm());
       jm["sequences"].push_back({{"id", r.id}, {"subsets", r.subsets}, {"garment_types", r.garment_types},
                                  {"scale", r.scale}, {"first_frame", r.first_frame},
                                  {"input_frame", r.first_frame - 1}, {"start", r.after_ramp ? "ramp" : "fixed"},
                                  {"error_units", r.error},
                                  {"error_mm", r.error * r.mm()}, {"error_curve_mm", curve},
                                  {"garment_error_mm", garments}, {"inner_mm", r.inner_error * r.mm()},
+                                 {"band_error_mm", band_mm}, {"band_vertex_frames", r.band_vertex_frames},
                                  {"outer_mm", r.outer_error < 0 ? -1.0 : r.outer_error * r.mm()},
                                  {"h_rate", r.h_rate}, {"l_rate_outer", r.l_rate_outer}, {"l_rate_all", r.l_rate_all},
                                  {"l_rate_outer_near", r.l_rate_outer_near}, {"strain_mean", r.strain_mean},
@@ -254,6 +273,22 @@ std::string report_markdown(const std::vector<MethodResult>& methods, const Repo
     const Summary s = summarise(m);
     o << "| " << m.name << " | " << pm(s.strain_mean_percent, "%.2f") << " | " << pm(s.strain_p99_percent, "%.2f")
       << " |\n";
+  }
+  o << "\n## Error by the ground truth's distance from the body, mm (share of vertex-frames)\n\n"
+       "Each vertex-frame falls in a band by the ground truth's distance to its nearest body vertex; the error is "
+       "pooled over every vertex-frame of the band in every sequence. Cloth on the body follows the body (and the "
+       "contact friction); free cloth is driven by its own dynamics and the wind.\n\n| method |";
+  for (int b = 0; b < kBodyDistanceBands; ++b) o << " " << band_label(b) << " |";
+  o << "\n|---|";
+  for (int b = 0; b < kBodyDistanceBands; ++b) o << "---|";
+  o << "\n";
+  for (const auto& m : methods) {
+    if (m.kind == "ground truth") continue;
+    const Summary s = summarise(m);
+    o << "| " << m.name << " |";
+    for (int b = 0; b < kBodyDistanceBands; ++b)
+      o << " " << fmt("%.1f", s.band_mm[b]) << " (" << fmt("%.0f", 100 * s.band_share[b]) << " %) |";
+    o << "\n";
   }
   o << "\n";
   const auto types = all_types(methods);

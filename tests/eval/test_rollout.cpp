@@ -172,6 +172,40 @@ TEST(Rollout, ReplayScoresARecordingAndRefusesOneThatDoesNotMatch) {
   std::filesystem::remove_all(dir);
 }
 
+// The truth, with every vertex that lies at least 0.06 m from the body (brute force over the
+// body's vertices) moved by 0.5 units along x.
+struct ShiftFreeCloth : Predictor {
+  std::string name() const override { return "free cloth shifted"; }
+  Points step(const dataset::Sequence& seq, int t, const Points&, const Points&, const Points&) override {
+    Points x = garments_at(seq, t + 1);
+    const Points body = seq.body_at(t + 1);
+    for (Eigen::Index v = 0; v < x.rows(); ++v)
+      if ((body.rowwise() - x.row(v)).rowwise().norm().minCoeff() / seq.info.scale >= 0.06) x(v, 0) += 0.5f;
+    return x;
+  }
+};
+
+TEST(Rollout, ErrorIsSplitByTheTruthsDistanceFromTheBody) {
+  const dataset::Sequence seq = sequence(2, 8);
+  ShiftFreeCloth shift;
+  const SequenceResult s = score_rollout(seq, rollout(shift, seq, 2, 4), {});
+  const int64_t vertex_frames = 4 * seq.info.total_garment_vertices();
+  EXPECT_EQ(s.band_vertex_frames[0] + s.band_vertex_frames[1] + s.band_vertex_frames[2], vertex_frames);
+  ASSERT_GT(s.band_vertex_frames[2], 0) << "the test needs free cloth";
+  ASSERT_GT(s.band_vertex_frames[0] + s.band_vertex_frames[1], 0) << "the test needs cloth near the body";
+  EXPECT_EQ(s.band_error[0], 0.0);
+  EXPECT_EQ(s.band_error[1], 0.0);
+  EXPECT_NEAR(s.band_error[2], 0.5, 1e-6);
+  // The overall error is the bands' vertex-weighted mean.
+  EXPECT_NEAR(s.error, 0.5 * static_cast<double>(s.band_vertex_frames[2]) / static_cast<double>(vertex_frames), 1e-6);
+  MethodResult m;
+  m.sequences = {s, s};
+  const Summary sum = summarise(m);
+  EXPECT_NEAR(sum.band_mm[2], 0.5 * s.mm(), 1e-6);
+  EXPECT_NEAR(sum.band_share[0] + sum.band_share[1] + sum.band_share[2], 1.0, 1e-12);
+  EXPECT_NEAR(sum.band_share[2], static_cast<double>(s.band_vertex_frames[2]) / static_cast<double>(vertex_frames), 1e-12);
+}
+
 TEST(Rollout, StatsRoundTripThroughCheckpointNames) {
   dataset::NormalisationStats st;
   st.velocity.mean = Eigen::Vector3d(1, 2, 3);
