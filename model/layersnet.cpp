@@ -311,9 +311,10 @@ std::vector<T> frames_of(const ModelInput<T>& in, const std::vector<int32_t>& id
 
 // Acceleration in the local frame (rows of a_local) -> world (Rᵀ a), de-normalised with the
 // velocity statistics (official), then v = v_base + a, x = x_base + v. base: (n, 6) [x, v].
+// base_delta (n, 6), when given: the zero-valued gradient path of the base (StateDelta).
 template <class T>
 Var<T> integrate(ad::Tape<T>& tape, const ModelInput<T>& in, const Var<T>& a_local, const Var<T>& R, bool rotate,
-                 const std::vector<T>& base) {
+                 const std::vector<T>& base, const Var<T>& base_delta = {}) {
   const int64_t n = a_local.rows;
   Var<T> a = rotate ? ad::rotate3(tape, R, a_local, /*transpose=*/true) : a_local;
   const std::vector<T> sd(in.std12.begin() + 3, in.std12.begin() + 6), mu(in.mean12.begin() + 3, in.mean12.begin() + 6);
@@ -321,14 +322,46 @@ Var<T> integrate(ad::Tape<T>& tape, const ModelInput<T>& in, const Var<T>& a_loc
   std::vector<T> bx(n * 3), bv(n * 3);
   for (int64_t i = 0; i < n; ++i)
     for (int c = 0; c < 3; ++c) bx[3 * i + c] = base[6 * i + c], bv[3 * i + c] = base[6 * i + 3 + c];
-  const Var<T> v = ad::add(tape, a, constant(tape, bv, n, 3));
-  const Var<T> x = ad::add(tape, v, constant(tape, bx, n, 3));
+  Var<T> base_x = constant(tape, bx, n, 3), base_v = constant(tape, bv, n, 3);
+  if (base_delta.value) {
+    base_x = ad::add(tape, base_x, ad::slice_cols(tape, base_delta, 0, 3));
+    base_v = ad::add(tape, base_v, ad::slice_cols(tape, base_delta, 3, 6));
+  }
+  const Var<T> v = ad::add(tape, a, base_v);
+  const Var<T> x = ad::add(tape, v, base_x);
   return ad::concat_cols(tape, {x, v, a});
+}
+
+// The gradient path of a garment state s (N, 12) given to forward(): δ = s − sg(s), zero in
+// value, and what the input derives linearly from the state, for the vertices (N, 12) and the
+// patches (P, 12, the mean over member vertices). Adding them changes no value but lets d/ds
+// through the patch embedding input, the decoder's relative states and the integration bases.
+template <class T>
+struct StateDelta {
+  Var<T> vertex, patch;
+  bool active() const { return vertex.value != nullptr; }
+};
+
+template <class T>
+StateDelta<T> state_delta(ad::Tape<T>& tape, const ModelInput<T>& in, const Var<T>& state) {
+  StateDelta<T> d;
+  if (!state.value) return d;
+  LAYERSNET_CHECK(state.rows == in.N && state.cols == 12,
+                  "forward: the garment state is (" << state.rows << ", " << state.cols << "), the input has N = " << in.N
+                                                    << " vertices of 12 state columns");
+  d.vertex = ad::sub(tape, state, constant(tape, std::vector<T>(state.value, state.value + state.size()), in.N, 12));
+  std::vector<T> inv_members(in.P);
+  for (int64_t p = 0; p < in.P; ++p)
+    inv_members[p] = T(1) / static_cast<T>(std::max(1, in.p2v_offsets[p + 1] - in.p2v_offsets[p]));
+  d.patch = ad::mul(tape, ad::segment_sum(tape, ad::gather_rows(tape, d.vertex, in.p2v_vertices), in.p2v_offsets),
+                    constant(tape, inv_members, in.P, 1));
+  return d;
 }
 
 template <class T>
 Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfig& cfg, const ModelDims& m,
-                      const ModelInput<T>& in, const Var<T>& emb, const Var<T>& body_x, const ForwardOptions& opt) {
+                      const ModelInput<T>& in, const Var<T>& emb, const Var<T>& body_x, const ForwardOptions& opt,
+                      const StateDelta<T>& delta) {
   const int64_t N = in.N, P = in.P, d = m.d, U = in.U;
   const bool ret = cfg.rotation_equivalent;
   // Body features with a zero row for "no body vertex within R_b" (index U).
@@ -380,7 +413,21 @@ Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
           rel[12 * k + 3 * blk + c] = ret ? R[3 * c] * dlt[0] + R[3 * c + 1] * dlt[1] + R[3 * c + 2] * dlt[2] : dlt[c];
       }
     }
-  const Var<T> rel_v = constant(tape, rel, Ec, 12);
+  Var<T> rel_v = constant(tape, rel, Ec, 12);
+  if (delta.active()) {  // d(s_v − s_p), rotated by R_v per 3-vector as rel is
+    const Var<T> d_rel = ad::sub(tape, ad::gather_rows(tape, delta.vertex, cand_vertex),
+                                 ad::gather_rows(tape, delta.patch, in.cand_patches));
+    if (ret) {
+      std::vector<T> R_blocks(Ec * 4 * 9);
+      for (int64_t k = 0; k < Ec; ++k)
+        for (int blk = 0; blk < 4; ++blk) std::copy_n(&Re[9 * k], 9, &R_blocks[9 * (4 * k + blk)]);
+      rel_v = ad::add(tape, rel_v,
+                      ad::reshape(ad::rotate3(tape, constant(tape, R_blocks, Ec * 4, 9), ad::reshape(d_rel, Ec * 4, 3)),
+                                  Ec, 12));
+    } else {
+      rel_v = ad::add(tape, rel_v, d_rel);
+    }
+  }
   // The vertex's local features per candidate row, each 3-vector in the vertex's frame (RET).
   const bool local = cfg.vertex_local_features;
   LAYERSNET_CHECK(!local || in.vertex_local.size() == static_cast<std::size_t>(N * kVertexLocalDim),
@@ -456,7 +503,8 @@ Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
   }
   std::vector<T> base_p(P * 6);
   for (int64_t i = 0; i < P; ++i) std::copy_n(&in.patch_state[12 * i], 6, &base_p[6 * i]);
-  const Var<T> pred_patch = integrate(tape, in, a_p, Rp, ret, base_p);
+  const Var<T> d_base_p = delta.active() ? ad::slice_cols(tape, delta.patch, 0, 6) : Var<T>{};
+  const Var<T> pred_patch = integrate(tape, in, a_p, Rp, ret, base_p, d_base_p);
 
   std::vector<T> inv_count(N);
   for (int64_t v = 0; v < N; ++v)
@@ -465,7 +513,10 @@ Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
   std::vector<T> base_v(N * 6);  // s_v − s_own: the vertex relative to its own patch
   for (int64_t v = 0; v < N; ++v)
     for (int c = 0; c < 6; ++c) base_v[6 * v + c] = in.state[12 * v + c] - in.patch_state[12 * in.own_patch[v] + c];
-  const Var<T> pred_rel = integrate(tape, in, a_v, Rv, ret, base_v);
+  const Var<T> d_base_v =
+      delta.active() ? ad::sub(tape, ad::slice_cols(tape, delta.vertex, 0, 6), ad::gather_rows(tape, d_base_p, in.own_patch))
+                     : Var<T>{};
+  const Var<T> pred_rel = integrate(tape, in, a_v, Rv, ret, base_v, d_base_v);
   Predictions<T> out;
   out.vertex = ad::add(tape, pred_rel, ad::gather_rows(tape, pred_patch, in.own_patch));
   out.patch = pred_patch;
@@ -491,7 +542,7 @@ void count_work(const ModelInput<T>& in, const Graph<T>& gr, StageTimes& t) {
 
 template <class T>
 Predictions<T> forward(ad::Tape<T>& tape, ad::ParamStore<T>& params, const ModelConfig& cfg, const ModelInput<T>& in,
-                       const ForwardOptions& options) {
+                       const ForwardOptions& options, const Var<T>& garment_state) {
   StageTimes* times = options.times;
   if (times) *times = StageTimes{};
   StageClock total_clock(times, &StageTimes::total_ms);
@@ -505,7 +556,14 @@ Predictions<T> forward(ad::Tape<T>& tape, ad::ParamStore<T>& params, const Model
 
   // ---- token encoders ---------------------------------------------------------------------------------
   StageClock encoder_clock(times, &StageTimes::encoder_ms);
-  const Var<T> patch_x = mlp(tape, p, "embed.input", 2, true, constant(tape, in.patch_norm, P, 12));
+  const StateDelta<T> delta = state_delta(tape, in, garment_state);
+  Var<T> patch_in = constant(tape, in.patch_norm, P, 12);
+  if (delta.active()) {  // patch_norm = (patch mean − μ) / σ
+    std::vector<T> inv_std(12);
+    for (int c = 0; c < 12; ++c) inv_std[c] = T(1) / in.std12[c];
+    patch_in = ad::add(tape, patch_in, ad::mul(tape, delta.patch, constant(tape, inv_std, 1, 12)));
+  }
+  const Var<T> patch_x = mlp(tape, p, "embed.input", 2, true, patch_in);
   const Var<T> attr_x = mlp(tape, p, "embed.attr", 2, true, constant(tape, in.attr, A, 5));
   StageClock body_clock(U > 0 ? times : nullptr, &StageTimes::encoder_body_ms);  // stays 0 without body tokens
   const Var<T> body_x = U > 0 ? mlp(tape, p, "embed.input", 2, true, constant(tape, in.body_norm, U, 12)) : Var<T>{};
@@ -531,7 +589,7 @@ Predictions<T> forward(ad::Tape<T>& tape, ad::ParamStore<T>& params, const Model
 
   // ---- decoder ---------------------------------------------------------------------------------------------
   StageClock decoder_clock(times, &StageTimes::decoder_ms);
-  return decode(tape, p, cfg, m, in, rows_of(st.X, 0, P), body_x, options);
+  return decode(tape, p, cfg, m, in, rows_of(st.X, 0, P), body_x, options, delta);
 }
 
 template <class T>
@@ -542,8 +600,8 @@ Var<T> rotation_map(ad::Tape<T>& tape, ad::ParamStore<T>& params, const ModelCon
 template Var<float> rotation_map(ad::Tape<float>&, ad::ParamStore<float>&, const ModelConfig&, const std::string&);
 template Var<double> rotation_map(ad::Tape<double>&, ad::ParamStore<double>&, const ModelConfig&, const std::string&);
 template Predictions<float> forward(ad::Tape<float>&, ad::ParamStore<float>&, const ModelConfig&,
-                                    const ModelInput<float>&, const ForwardOptions&);
+                                    const ModelInput<float>&, const ForwardOptions&, const Var<float>&);
 template Predictions<double> forward(ad::Tape<double>&, ad::ParamStore<double>&, const ModelConfig&,
-                                     const ModelInput<double>&, const ForwardOptions&);
+                                     const ModelInput<double>&, const ForwardOptions&, const Var<double>&);
 
 }  // namespace layersnet::model

@@ -87,9 +87,16 @@ struct ForwardOptions {
 // One forward. `params` must come from register_params(config). With the tape recording,
 // backward of anything computed from the predictions reaches every parameter that
 // contributed; with NoRecord it is inference only.
+// garment_state (N, 12), optional: the state [x̃_t, v_t, x̃_{t−1}, v_{t−1}] that `input` was
+// built from, as a tape variable (e.g. made from the previous step's predictions). Every value
+// still comes from `input`; the backward also reaches garment_state through what the input
+// derives linearly from it: the patch means and their normalised embedding input, the decoder's
+// relative states and the integration bases. The neighbourhoods, nearest body vertices and
+// vertex_local features count as constants. Training through self-fed steps uses it.
 template <class T>
 Predictions<T> forward(ad::Tape<T>& tape, ad::ParamStore<T>& params, const ModelConfig& config,
-                       const ModelInput<T>& input, const ForwardOptions& options = {});
+                       const ModelInput<T>& input, const ForwardOptions& options = {},
+                       const ad::Var<T>& garment_state = {});
 
 // The RET map W (d, 3) named `name` as the forward uses it: the parameter itself with
 // model.orthogonality = "penalty" (official; the loss adds ‖WWᵀ−I‖² + ‖WᵀW−I‖²), or, with

@@ -1,5 +1,6 @@
 #include "train/sample_step.h"
 
+#include "autodiff/ops_dense.h"
 #include "losses/losses.h"
 #include "losses/sample_loss_input.h"
 #include "model/layersnet.h"
@@ -17,6 +18,12 @@ double seconds_since(std::chrono::steady_clock::time_point start) {
 }
 
 }  // namespace
+
+ad::Var<float> next_garment_state(ad::Tape<float>& tape, const model::Predictions<float>& pred,
+                                  const ad::Var<float>& state) {
+  const ad::Var<float> x = ad::slice_cols(tape, pred.vertex, 0, 3), x_before = ad::slice_cols(tape, state, 0, 3);
+  return ad::concat_cols(tape, {x, ad::sub(tape, x, x_before), x_before, ad::slice_cols(tape, state, 3, 6)});
+}
 
 LossParts& LossParts::operator+=(const LossParts& o) {
   total += o.total, vertex += o.vertex, patch += o.patch, normal += o.normal;
@@ -43,20 +50,41 @@ SampleOutcome train_sample(const TrainData& data, Window& window, int t, int sel
                            ad::Tape<float>& tape, ad::ParamStore<float>& params) {
   using clock = std::chrono::steady_clock;
   SampleOutcome out;
+  const int recorded = std::min(config.train.bptt_steps, self_fed);
   std::vector<float> predicted;
-  for (int f = t - self_fed; f < t; ++f) {
-    auto start = clock::now();
-    const dataset::TrainingSample s = data.build(window, f);
-    const model::ModelInput<float> input = model::model_input_from_sample(s, data.stats(), config.model);
+  auto build_input = [&](int f) {
+    const auto start = clock::now();
+    dataset::TrainingSample s = data.build(window, f);
+    model::ModelInput<float> input = model::model_input_from_sample(s, data.stats(), config.model);
     out.build_seconds += seconds_since(start);
-    start = clock::now();
+    return std::pair{std::move(s), std::move(input)};
+  };
+  // Self-fed steps before the recorded ones: inference only.
+  for (int f = t - self_fed; f < t - recorded; ++f) {
+    const auto [s, input] = build_input(f);
+    const auto start = clock::now();
     tape.reset();
     {
       ad::NoRecord<float> off(tape);
-      const auto pred = model::forward(tape, params, config.model, input);
-      const auto x_next = model::next_positions(pred);
+      const auto x_next = model::next_positions(model::forward(tape, params, config.model, input));
       predicted.assign(x_next.data(), x_next.data() + x_next.size());
     }
+    out.model_seconds += seconds_since(start);
+    window.feed_back(f + 1, predicted.data());
+  }
+  tape.reset();
+  params.zero_grads();
+  // Recorded self-fed steps: each step's garment state is made on the tape from the step
+  // before's prediction, so the loss's gradient flows back through them.
+  ad::Var<float> state;  // (N, 12) input state of the coming step; empty = a constant input
+  for (int f = t - recorded; f < t; ++f) {
+    const auto [s, input] = build_input(f);
+    const auto start = clock::now();
+    const auto pred = model::forward(tape, params, config.model, input, {}, state);
+    if (!state.value) state = tape.constant(input.state.data(), input.N, 12);
+    state = next_garment_state(tape, pred, state);
+    const auto x_next = model::next_positions(pred);
+    predicted.assign(x_next.data(), x_next.data() + x_next.size());
     out.model_seconds += seconds_since(start);
     window.feed_back(f + 1, predicted.data());
   }
@@ -67,9 +95,7 @@ SampleOutcome train_sample(const TrainData& data, Window& window, int t, int sel
   const losses::LossInput<float> target = losses::loss_input_from_sample(s, *window.info);
   out.build_seconds += seconds_since(start);
   start = clock::now();
-  tape.reset();
-  params.zero_grads();
-  const auto pred = model::forward(tape, params, config.model, input);
+  const auto pred = model::forward(tape, params, config.model, input, {}, state);
   const auto terms = losses::compute_losses(tape, params, config.model, config.loss, target, pred);
   out.loss = {terms.total.scalar(), terms.vertex,          terms.patch,         terms.normal,
               terms.collision_body, terms.collision_layer, terms.orthogonality, terms.edge_strain};

@@ -13,6 +13,7 @@
 // eval.constraints.
 #include "autodiff/params.h"
 #include "autodiff/tape.h"
+#include "model/layersnet.h"
 #include "run/config.h"
 #include "train/train_data.h"
 
@@ -35,11 +36,19 @@ struct SampleOutcome {
   double model_seconds = 0;  // forward + losses + backward
 };
 
-// Runs the self-fed rollout (T_n = self_fed steps from t − self_fed, no recording), then the
-// recorded step at t on that state plus window.input_noise: params.grads() is zeroed and
-// receives d loss / d params. `window` must hold frames t − self_fed − 2 .. t + 1; its garment frames are overwritten.
+// Runs the self-fed rollout (T_n = self_fed steps from t − self_fed), then the loss step at t
+// on that state plus window.input_noise: params.grads() is zeroed and receives d loss / d params.
+// The last min(train.bptt_steps, self_fed) self-fed steps are recorded, and the gradient also
+// flows through their predictions into the loss step's input (backpropagation through time);
+// the earlier ones run without recording. `window` must hold frames t − self_fed − 2 .. t + 1;
+// its garment frames are overwritten.
 SampleOutcome train_sample(const TrainData& data, Window& window, int t, int self_fed, const Config& config,
                            ad::Tape<float>& tape, ad::ParamStore<float>& params);
+
+// The next input's garment state [x̃_{t+1}, v_{t+1}, x̃_t, v_t] (N, 12) on the tape: x̃_{t+1} the
+// predicted positions (root-relative), the rest from this input's state (N, 12).
+ad::Var<float> next_garment_state(ad::Tape<float>& tape, const model::Predictions<float>& pred,
+                                  const ad::Var<float>& state);
 
 // Mean per-vertex Euclidean error ‖x̂_{t+1} − x_{t+1}‖ (scene units) of one step from the
 // ground-truth state at t, without recording (params are only read).

@@ -23,11 +23,13 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <numeric>
 #include <random>
 #include <sstream>
 #include <thread>
@@ -328,6 +330,62 @@ TEST_F(TrainerTest, RolloutConstraintsProjectTheFedBackFrames) {
   ASSERT_EQ(w_on.size(), w_off.size());
   EXPECT_NE(std::memcmp(w_on.data(), w_off.data(), w_on.size() * sizeof(float)), 0)
       << "projecting the self-fed frames changed nothing in training";
+}
+
+// train.bptt_steps: the loss's gradient flows back through the recorded self-fed steps. The loss
+// value is the same with and without it (the forward values come from the same inputs), and
+// the gradient is the loss's whole derivative: central differences of the loss over the
+// parameters, each loss computed by the same self-fed rollout, agree with it far better than
+// with the gradient of the final step alone.
+TEST_F(TrainerTest, GradientThroughSelfFedStepsMatchesFiniteDifferences) {
+  const std::string data = make_dataset(1, 1, 10);
+  const Config truncated = tiny_config(data, {"train.threads=1"}),
+               through = tiny_config(data, {"train.threads=1", "train.bptt_steps=2"});
+  const dataset::DatasetManifest manifest = dataset::read_manifest(data);
+  const dataset::NormalisationStats stats = dataset::read_stats(manifest.stats_path());
+  TrainData train_data(manifest, "train", stats, truncated);
+  ad::ParamStore<float> params;
+  model::register_params(params, truncated.model);
+  model::init_params(params, truncated.model, 3);
+  ad::Tape<float> tape;
+  const int self_fed = 2, t = train_data.first_t(0) + self_fed + 2;
+  // The loss of the sample after `self_fed` self-fed steps, and its gradient in params.grads().
+  auto loss = [&](const Config& c) {
+    Window w = train_data.read_window(0, t - self_fed, t);
+    const SampleOutcome o = train_sample(train_data, w, t, self_fed, c, tape, params);
+    EXPECT_TRUE(o.loss_finite && o.grad_finite);
+    return o.loss.total;
+  };
+  const double l_truncated = loss(truncated);
+  const std::vector<float> g_truncated(params.grads().begin(), params.grads().end());
+  const double l_through = loss(through);
+  const std::vector<float> g_through(params.grads().begin(), params.grads().end());
+  EXPECT_EQ(l_through, l_truncated) << "recording the self-fed steps changed the loss";
+  // The parameters where the two gradients differ most.
+  std::vector<std::size_t> order(g_through.size());
+  std::iota(order.begin(), order.end(), std::size_t{0});
+  std::partial_sort(order.begin(), order.begin() + 8, order.end(), [&](std::size_t a, std::size_t b) {
+    return std::abs(g_through[a] - g_truncated[a]) > std::abs(g_through[b] - g_truncated[b]);
+  });
+  double err_through = 0, err_truncated = 0, difference = 0;
+  for (int k = 0; k < 8; ++k) {
+    const std::size_t i = order[static_cast<std::size_t>(k)];
+    float& theta = params.values()[i];
+    const float keep = theta, eps = 1e-2f * std::max(1.f, std::abs(keep));
+    theta = keep + eps;
+    const double up = loss(truncated);
+    theta = keep - eps;
+    const double down = loss(truncated);
+    theta = keep;
+    const double fd = (up - down) / (2.0 * static_cast<double>(eps));
+    err_through += std::pow(g_through[i] - fd, 2);
+    err_truncated += std::pow(g_truncated[i] - fd, 2);
+    difference += std::pow(g_through[i] - g_truncated[i], 2);
+    std::printf("param %zu: finite difference %.6g, through %.6g, truncated %.6g\n", i, fd, g_through[i], g_truncated[i]);
+  }
+  ASSERT_GT(std::sqrt(difference), 1e-3) << "the self-fed steps do not change the gradient: nothing to test";
+  EXPECT_LT(std::sqrt(err_through), 0.1 * std::sqrt(err_truncated))
+      << "the gradient through the self-fed steps is not the loss's derivative";
 }
 
 // train.init_from starts a new run from another run's weights (a full checkpoint or a packed
