@@ -76,11 +76,25 @@ SampleOutcome train_sample(const TrainData& data, Window& window, int t, int sel
   params.zero_grads();
   // Recorded self-fed steps: each step's garment state is made on the tape from the step
   // before's prediction, so the loss's gradient flows back through them.
+  // With train.bptt_score_every_step each of them is also scored against its own ground truth
+  // (the window still holds it when the step's sample is built), and the loss is the mean.
   ad::Var<float> state;  // (N, 12) input state of the coming step; empty = a constant input
+  ad::Var<float> step_losses;  // sum of the scored recorded steps' totals
+  LossParts parts;
+  int scored = 0;
+  auto add_loss = [&](const losses::LossTerms<float>& terms) {
+    step_losses = step_losses.value ? ad::add(tape, step_losses, terms.total) : terms.total;
+    parts += {terms.total.scalar(), terms.vertex,          terms.patch,         terms.normal,
+              terms.collision_body, terms.collision_layer, terms.orthogonality, terms.edge_strain};
+    ++scored;
+  };
   for (int f = t - recorded; f < t; ++f) {
     const auto [s, input] = build_input(f);
     const auto start = clock::now();
     const auto pred = model::forward(tape, params, config.model, input, {}, state);
+    if (config.train.bptt_score_every_step)
+      add_loss(losses::compute_losses(tape, params, config.model, config.loss,
+                                      losses::loss_input_from_sample(s, *window.info), pred));
     if (!state.value) state = tape.constant(input.state.data(), input.N, 12);
     state = next_garment_state(tape, pred, state);
     const auto x_next = model::next_positions(pred);
@@ -96,12 +110,12 @@ SampleOutcome train_sample(const TrainData& data, Window& window, int t, int sel
   out.build_seconds += seconds_since(start);
   start = clock::now();
   const auto pred = model::forward(tape, params, config.model, input, {}, state);
-  const auto terms = losses::compute_losses(tape, params, config.model, config.loss, target, pred);
-  out.loss = {terms.total.scalar(), terms.vertex,          terms.patch,         terms.normal,
-              terms.collision_body, terms.collision_layer, terms.orthogonality, terms.edge_strain};
-  out.loss_finite = std::isfinite(out.loss.total);
+  add_loss(losses::compute_losses(tape, params, config.model, config.loss, target, pred));
+  const ad::Var<float> objective = scored > 1 ? ad::scale(tape, step_losses, 1.f / static_cast<float>(scored)) : step_losses;
+  out.loss = parts.scaled(1.0 / scored);
+  out.loss_finite = std::isfinite(objective.scalar());
   if (out.loss_finite) {
-    tape.backward(terms.total);
+    tape.backward(objective);
     for (const float g : params.grads())
       if (!std::isfinite(g)) {
         out.grad_finite = false;

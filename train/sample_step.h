@@ -40,7 +40,8 @@ struct SampleOutcome {
 // on that state plus window.input_noise: params.grads() is zeroed and receives d loss / d params.
 // The last min(train.bptt_steps, self_fed) self-fed steps are recorded, and the gradient also
 // flows through their predictions into the loss step's input (backpropagation through time);
-// the earlier ones run without recording. `window` must hold frames t − self_fed − 2 .. t + 1;
+// with train.bptt_score_every_step the loss is the mean of theirs and the final step's. The
+// earlier ones run without recording. `window` must hold frames t − self_fed − 2 .. t + 1;
 // its garment frames are overwritten.
 SampleOutcome train_sample(const TrainData& data, Window& window, int t, int self_fed, const Config& config,
                            ad::Tape<float>& tape, ad::ParamStore<float>& params);

@@ -332,15 +332,17 @@ TEST_F(TrainerTest, RolloutConstraintsProjectTheFedBackFrames) {
       << "projecting the self-fed frames changed nothing in training";
 }
 
-// train.bptt_steps: the loss's gradient flows back through the recorded self-fed steps. The loss
-// value is the same with and without it (the forward values come from the same inputs), and
-// the gradient is the loss's whole derivative: central differences of the loss over the
-// parameters, each loss computed by the same self-fed rollout, agree with it far better than
-// with the gradient of the final step alone.
+// train.bptt_steps: the loss's gradient flows back through the recorded self-fed steps. Scoring
+// the final step only, the loss value is the same with and without it (the forward values come
+// from the same inputs), and the gradient is the loss's whole derivative: central differences
+// of the loss over the parameters, each loss computed by the same self-fed rollout, agree with
+// it far better than with the gradient of the final step alone. Scoring every recorded step,
+// the gradient of that mean loss matches its central differences too.
 TEST_F(TrainerTest, GradientThroughSelfFedStepsMatchesFiniteDifferences) {
   const std::string data = make_dataset(1, 1, 10);
   const Config truncated = tiny_config(data, {"train.threads=1"}),
-               through = tiny_config(data, {"train.threads=1", "train.bptt_steps=2"});
+               through = tiny_config(data, {"train.threads=1", "train.bptt_steps=2", "train.bptt_score_every_step=false"}),
+               every_step = tiny_config(data, {"train.threads=1", "train.bptt_steps=2"});
   const dataset::DatasetManifest manifest = dataset::read_manifest(data);
   const dataset::NormalisationStats stats = dataset::read_stats(manifest.stats_path());
   TrainData train_data(manifest, "train", stats, truncated);
@@ -386,6 +388,28 @@ TEST_F(TrainerTest, GradientThroughSelfFedStepsMatchesFiniteDifferences) {
   ASSERT_GT(std::sqrt(difference), 1e-3) << "the self-fed steps do not change the gradient: nothing to test";
   EXPECT_LT(std::sqrt(err_through), 0.1 * std::sqrt(err_truncated))
       << "the gradient through the self-fed steps is not the loss's derivative";
+
+  const double l_every = loss(every_step);
+  EXPECT_NE(l_every, l_through) << "scoring every recorded step left the loss unchanged";
+  const std::vector<float> g_every(params.grads().begin(), params.grads().end());
+  std::partial_sort(order.begin(), order.begin() + 8, order.end(),
+                    [&](std::size_t a, std::size_t b) { return std::abs(g_every[a]) > std::abs(g_every[b]); });
+  double err_every = 0, norm_every = 0;
+  for (int k = 0; k < 8; ++k) {
+    const std::size_t i = order[static_cast<std::size_t>(k)];
+    float& theta = params.values()[i];
+    const float keep = theta, eps = 1e-2f * std::max(1.f, std::abs(keep));
+    theta = keep + eps;
+    const double up = loss(every_step);
+    theta = keep - eps;
+    const double down = loss(every_step);
+    theta = keep;
+    const double fd = (up - down) / (2.0 * static_cast<double>(eps));
+    err_every += std::pow(g_every[i] - fd, 2);
+    norm_every += std::pow(fd, 2);
+    std::printf("param %zu: finite difference %.6g, every step %.6g\n", i, fd, g_every[i]);
+  }
+  EXPECT_LT(std::sqrt(err_every), 0.05 * std::sqrt(norm_every)) << "the mean loss's gradient is not its derivative";
 }
 
 // train.init_from starts a new run from another run's weights (a full checkpoint or a packed
