@@ -36,7 +36,7 @@ struct TrainConfig {
   std::vector<int> rollout_steps = {0, 1, 2, 3, 4, 5, 7, 7, 8, 9};  // max T_n per epoch (last repeats)
   int bptt_steps = 0;                   // self-fed steps the loss's gradient flows back through (the
                                         // last ones before the recorded step; 0 = none, official)
-  bool bptt_score_every_step = true;    // with bptt_steps: the loss is the mean over those steps and
+  bool bptt_score_every_step = false;   // with bptt_steps: the loss is the mean over those steps and
                                         // the final one, each against its ground truth (else the
                                         // final step's only)
   double input_noise = 0.0;             // std of Gaussian noise on the input garment positions at t

@@ -341,8 +341,8 @@ TEST_F(TrainerTest, RolloutConstraintsProjectTheFedBackFrames) {
 TEST_F(TrainerTest, GradientThroughSelfFedStepsMatchesFiniteDifferences) {
   const std::string data = make_dataset(1, 1, 10);
   const Config truncated = tiny_config(data, {"train.threads=1"}),
-               through = tiny_config(data, {"train.threads=1", "train.bptt_steps=2", "train.bptt_score_every_step=false"}),
-               every_step = tiny_config(data, {"train.threads=1", "train.bptt_steps=2"});
+               through = tiny_config(data, {"train.threads=1", "train.bptt_steps=2"}),
+               every_step = tiny_config(data, {"train.threads=1", "train.bptt_steps=2", "train.bptt_score_every_step=true"});
   const dataset::DatasetManifest manifest = dataset::read_manifest(data);
   const dataset::NormalisationStats stats = dataset::read_stats(manifest.stats_path());
   TrainData train_data(manifest, "train", stats, truncated);
