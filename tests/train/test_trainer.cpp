@@ -85,6 +85,14 @@ class TrainerTest : public ::testing::Test {
     return o;
   }
 
+  // The model of `config` with its parameters initialised (seed 3).
+  static ad::ParamStore<float> initialised_params(const Config& config) {
+    ad::ParamStore<float> p;
+    model::register_params(p, config.model);
+    model::init_params(p, config.model, 3);
+    return p;
+  }
+
   // The parameters of a run's newest checkpoint.
   static std::vector<float> final_weights(const fs::path& run, const Config& config, int64_t* step = nullptr) {
     const auto all = list_checkpoints(run.string());
@@ -243,9 +251,7 @@ TEST_F(TrainerTest, RolloutValidationFeedsPredictionsBackAndPicksBestByIt) {
   const dataset::DatasetManifest manifest = dataset::read_manifest(data);
   const dataset::NormalisationStats stats = dataset::read_stats(manifest.stats_path());
   TrainData val(manifest, "val", stats, c);
-  ad::ParamStore<float> params;
-  model::register_params(params, c.model);
-  model::init_params(params, c.model, 3);
+  ad::ParamStore<float> params = initialised_params(c);
   ad::Tape<float> tape;
   const int t0 = val.first_t(0);
   Window w1 = val.read_window(0, t0, t0);
@@ -346,9 +352,7 @@ TEST_F(TrainerTest, GradientThroughSelfFedStepsMatchesFiniteDifferences) {
   const dataset::DatasetManifest manifest = dataset::read_manifest(data);
   const dataset::NormalisationStats stats = dataset::read_stats(manifest.stats_path());
   TrainData train_data(manifest, "train", stats, truncated);
-  ad::ParamStore<float> params;
-  model::register_params(params, truncated.model);
-  model::init_params(params, truncated.model, 3);
+  ad::ParamStore<float> params = initialised_params(truncated);
   ad::Tape<float> tape;
   const int self_fed = 2, t = train_data.first_t(0) + self_fed + 2;
   // The loss of the sample after `self_fed` self-fed steps, and its gradient in params.grads().
@@ -358,28 +362,34 @@ TEST_F(TrainerTest, GradientThroughSelfFedStepsMatchesFiniteDifferences) {
     EXPECT_TRUE(o.loss_finite && o.grad_finite);
     return o.loss.total;
   };
+  // d loss / d params[i] by central differences of the whole rollout's loss.
+  auto central_difference = [&](std::size_t i, const Config& c) {
+    float& theta = params.values()[i];
+    const float keep = theta, eps = 1e-2f * std::max(1.f, std::abs(keep));
+    theta = keep + eps;
+    const double up = loss(c);
+    theta = keep - eps;
+    const double down = loss(c);
+    theta = keep;
+    return (up - down) / (2.0 * static_cast<double>(eps));
+  };
+  // The 8 parameter indices of largest `size(i)`.
+  auto largest = [&](auto size) {
+    std::vector<std::size_t> order(params.values().size());
+    std::iota(order.begin(), order.end(), std::size_t{0});
+    std::partial_sort(order.begin(), order.begin() + 8, order.end(),
+                      [&](std::size_t a, std::size_t b) { return size(a) > size(b); });
+    order.resize(8);
+    return order;
+  };
   const double l_truncated = loss(truncated);
   const std::vector<float> g_truncated(params.grads().begin(), params.grads().end());
   const double l_through = loss(through);
   const std::vector<float> g_through(params.grads().begin(), params.grads().end());
   EXPECT_EQ(l_through, l_truncated) << "recording the self-fed steps changed the loss";
-  // The parameters where the two gradients differ most.
-  std::vector<std::size_t> order(g_through.size());
-  std::iota(order.begin(), order.end(), std::size_t{0});
-  std::partial_sort(order.begin(), order.begin() + 8, order.end(), [&](std::size_t a, std::size_t b) {
-    return std::abs(g_through[a] - g_truncated[a]) > std::abs(g_through[b] - g_truncated[b]);
-  });
   double err_through = 0, err_truncated = 0, difference = 0;
-  for (int k = 0; k < 8; ++k) {
-    const std::size_t i = order[static_cast<std::size_t>(k)];
-    float& theta = params.values()[i];
-    const float keep = theta, eps = 1e-2f * std::max(1.f, std::abs(keep));
-    theta = keep + eps;
-    const double up = loss(truncated);
-    theta = keep - eps;
-    const double down = loss(truncated);
-    theta = keep;
-    const double fd = (up - down) / (2.0 * static_cast<double>(eps));
+  for (const std::size_t i : largest([&](std::size_t j) { return std::abs(g_through[j] - g_truncated[j]); })) {
+    const double fd = central_difference(i, truncated);  // the same loss values, cheaper
     err_through += std::pow(g_through[i] - fd, 2);
     err_truncated += std::pow(g_truncated[i] - fd, 2);
     difference += std::pow(g_through[i] - g_truncated[i], 2);
@@ -392,19 +402,9 @@ TEST_F(TrainerTest, GradientThroughSelfFedStepsMatchesFiniteDifferences) {
   const double l_every = loss(every_step);
   EXPECT_NE(l_every, l_through) << "scoring every recorded step left the loss unchanged";
   const std::vector<float> g_every(params.grads().begin(), params.grads().end());
-  std::partial_sort(order.begin(), order.begin() + 8, order.end(),
-                    [&](std::size_t a, std::size_t b) { return std::abs(g_every[a]) > std::abs(g_every[b]); });
   double err_every = 0, norm_every = 0;
-  for (int k = 0; k < 8; ++k) {
-    const std::size_t i = order[static_cast<std::size_t>(k)];
-    float& theta = params.values()[i];
-    const float keep = theta, eps = 1e-2f * std::max(1.f, std::abs(keep));
-    theta = keep + eps;
-    const double up = loss(every_step);
-    theta = keep - eps;
-    const double down = loss(every_step);
-    theta = keep;
-    const double fd = (up - down) / (2.0 * static_cast<double>(eps));
+  for (const std::size_t i : largest([&](std::size_t j) { return std::abs(g_every[j]); })) {
+    const double fd = central_difference(i, every_step);
     err_every += std::pow(g_every[i] - fd, 2);
     norm_every += std::pow(fd, 2);
     std::printf("param %zu: finite difference %.6g, every step %.6g\n", i, fd, g_every[i]);
