@@ -65,14 +65,27 @@ void make_body(const SyntheticOptions& o, Points& rest, Faces& faces) {
   faces = Eigen::Map<Faces>(f.data(), static_cast<Eigen::Index>(f.size() / 3), 3);
 }
 
+// A garment from its rest shape (V, 3) and flat triangle lists: 3 vertex ids and 3 UV corners
+// (u, v) per face, a panel per face; random attributes drawn from `rng`.
+GarmentMesh assemble_garment(const std::string& name, const std::string& type, const Points& rest,
+                             std::vector<int32_t>& f, std::vector<float>& uv, std::vector<int32_t> panel,
+                             uint64_t& rng) {
+  GarmentMesh g;
+  g.name = name;
+  g.type = type;
+  g.num_vertices = static_cast<int>(rest.rows());
+  g.faces = Eigen::Map<Faces>(f.data(), static_cast<Eigen::Index>(f.size() / 3), 3);
+  g.uv = Eigen::Map<Uvs>(uv.data(), static_cast<Eigen::Index>(uv.size() / 2), 2);
+  g.panel = std::move(panel);
+  g.rest = rest;
+  g.attributes = random_attributes(rng);
+  return g;
+}
+
 // Open tube of `rings` x `segments` vertices; two UV panels split at angle 0 and pi.
 GarmentMesh make_tube(const SyntheticOptions& o, float radius, const std::string& name,
                       const std::string& type, uint64_t& rng, Points& rest) {
   const int R = std::max(o.rings, 2), S = std::max(o.segments / 2 * 2, 4);
-  GarmentMesh g;
-  g.name = name;
-  g.type = type;
-  g.num_vertices = R * S;
   rest.resize(R * S, 3);
   for (int r = 0; r < R; ++r)
     for (int s = 0; s < S; ++s) {
@@ -97,22 +110,13 @@ GarmentMesh make_tube(const SyntheticOptions& o, float radius, const std::string
       panel.push_back(p);
       panel.push_back(p);
     }
-  g.faces = Eigen::Map<Faces>(f.data(), static_cast<Eigen::Index>(f.size() / 3), 3);
-  g.uv = Eigen::Map<Uvs>(uv.data(), static_cast<Eigen::Index>(uv.size() / 2), 2);
-  g.panel = panel;
-  g.rest = rest;
-  g.attributes = random_attributes(rng);
-  return g;
+  return assemble_garment(name, type, rest, f, uv, std::move(panel), rng);
 }
 
 // Open cylindrical sheet (SyntheticSheet): vertex (i, j) is row i * along + j; one UV panel.
 GarmentMesh make_sheet(const SyntheticOptions& o, const SyntheticSheet& sheet, const std::string& name,
                        const std::string& type, uint64_t& rng, Points& rest) {
   const int U = std::max(sheet.around, 2), V = std::max(sheet.along, 2);
-  GarmentMesh g;
-  g.name = name;
-  g.type = type;
-  g.num_vertices = U * V;
   rest.resize(U * V, 3);
   for (int i = 0; i < U; ++i)
     for (int j = 0; j < V; ++j) {
@@ -129,12 +133,8 @@ GarmentMesh make_sheet(const SyntheticOptions& o, const SyntheticSheet& sheet, c
       corner(i, j), corner(i + 1, j), corner(i + 1, j + 1);
       corner(i, j), corner(i + 1, j + 1), corner(i, j + 1);
     }
-  g.faces = Eigen::Map<Faces>(f.data(), static_cast<Eigen::Index>(f.size() / 3), 3);
-  g.uv = Eigen::Map<Uvs>(uv.data(), static_cast<Eigen::Index>(uv.size() / 2), 2);
-  g.panel.assign(f.size() / 3, 0);
-  g.rest = rest;
-  g.attributes = random_attributes(rng);
-  return g;
+  const std::size_t faces = f.size() / 3;
+  return assemble_garment(name, type, rest, f, uv, std::vector<int32_t>(faces, 0), rng);
 }
 
 }  // namespace

@@ -349,7 +349,7 @@ StateDelta<T> state_delta(ad::Tape<T>& tape, const ModelInput<T>& in, const Var<
   LAYERSNET_CHECK(state.rows == in.N && state.cols == 12,
                   "forward: the garment state is (" << state.rows << ", " << state.cols << "), the input has N = " << in.N
                                                     << " vertices of 12 state columns");
-  d.vertex = ad::sub(tape, state, constant(tape, std::vector<T>(state.value, state.value + state.size()), in.N, 12));
+  d.vertex = ad::sub(tape, state, tape.constant(state.value, in.N, 12));
   std::vector<T> inv_members(in.P);
   for (int64_t p = 0; p < in.P; ++p)
     inv_members[p] = T(1) / static_cast<T>(std::max(1, in.p2v_offsets[p + 1] - in.p2v_offsets[p]));
@@ -380,14 +380,17 @@ Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
     Wt = transpose_of(tape, W);                                          // (3k, d)
   }
   // (I_k ⊗ R_i) z_i for every row i: z (n, 3k) read as n·k 3-vectors, R_host (n, 9).
-  auto rotate_blocks = [&](const std::vector<T>& R_host, const Var<T>& z) {
-    const int64_t n = z.rows, k = cfg.decoder_ret_channels;
+  auto rotate_k_blocks = [&](const std::vector<T>& R_host, const Var<T>& z, int64_t k) {
+    const int64_t n = z.rows;
     if (k == 1) return ad::rotate3(tape, constant(tape, R_host, n, 9), z);
     std::vector<T> R_rep(n * k * 9);
     for (int64_t i = 0; i < n; ++i)
       for (int64_t j = 0; j < k; ++j) std::copy_n(&R_host[9 * i], 9, &R_rep[9 * (i * k + j)]);
     const Var<T> y = ad::rotate3(tape, constant(tape, R_rep, n * k, 9), ad::reshape(z, n * k, 3));
     return ad::reshape(y, n, 3 * k);
+  };
+  auto rotate_blocks = [&](const std::vector<T>& R_host, const Var<T>& z) {
+    return rotate_k_blocks(R_host, z, cfg.decoder_ret_channels);
   };
 
   const std::vector<T> Rp_host = frames_of(in, in.patch_body);
@@ -417,16 +420,7 @@ Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
   if (delta.active()) {  // d(s_v − s_p), rotated by R_v per 3-vector as rel is
     const Var<T> d_rel = ad::sub(tape, ad::gather_rows(tape, delta.vertex, cand_vertex),
                                  ad::gather_rows(tape, delta.patch, in.cand_patches));
-    if (ret) {
-      std::vector<T> R_blocks(Ec * 4 * 9);
-      for (int64_t k = 0; k < Ec; ++k)
-        for (int blk = 0; blk < 4; ++blk) std::copy_n(&Re[9 * k], 9, &R_blocks[9 * (4 * k + blk)]);
-      rel_v = ad::add(tape, rel_v,
-                      ad::reshape(ad::rotate3(tape, constant(tape, R_blocks, Ec * 4, 9), ad::reshape(d_rel, Ec * 4, 3)),
-                                  Ec, 12));
-    } else {
-      rel_v = ad::add(tape, rel_v, d_rel);
-    }
+    rel_v = ad::add(tape, rel_v, ret ? rotate_k_blocks(Re, d_rel, 4) : d_rel);
   }
   // The vertex's local features per candidate row, each 3-vector in the vertex's frame (RET).
   const bool local = cfg.vertex_local_features;

@@ -17,13 +17,15 @@ double seconds_since(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
-}  // namespace
-
+// The next input's garment state [x̃_{t+1}, v_{t+1}, x̃_t, v_t] (N, 12) on the tape: x̃_{t+1} the
+// predicted positions (root-relative), the rest from this input's state (N, 12).
 ad::Var<float> next_garment_state(ad::Tape<float>& tape, const model::Predictions<float>& pred,
                                   const ad::Var<float>& state) {
   const ad::Var<float> x = ad::slice_cols(tape, pred.vertex, 0, 3), x_before = ad::slice_cols(tape, state, 0, 3);
   return ad::concat_cols(tape, {x, ad::sub(tape, x, x_before), x_before, ad::slice_cols(tape, state, 3, 6)});
 }
+
+}  // namespace
 
 LossParts& LossParts::operator+=(const LossParts& o) {
   total += o.total, vertex += o.vertex, patch += o.patch, normal += o.normal;

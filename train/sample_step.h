@@ -13,7 +13,6 @@
 // eval.constraints.
 #include "autodiff/params.h"
 #include "autodiff/tape.h"
-#include "model/layersnet.h"
 #include "run/config.h"
 #include "train/train_data.h"
 
@@ -45,11 +44,6 @@ struct SampleOutcome {
 // its garment frames are overwritten.
 SampleOutcome train_sample(const TrainData& data, Window& window, int t, int self_fed, const Config& config,
                            ad::Tape<float>& tape, ad::ParamStore<float>& params);
-
-// The next input's garment state [x̃_{t+1}, v_{t+1}, x̃_t, v_t] (N, 12) on the tape: x̃_{t+1} the
-// predicted positions (root-relative), the rest from this input's state (N, 12).
-ad::Var<float> next_garment_state(ad::Tape<float>& tape, const model::Predictions<float>& pred,
-                                  const ad::Var<float>& state);
 
 // Mean per-vertex Euclidean error ‖x̂_{t+1} − x_{t+1}‖ (scene units) of one step from the
 // ground-truth state at t, without recording (params are only read).

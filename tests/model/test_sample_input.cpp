@@ -121,21 +121,23 @@ TEST(SampleInput, VertexLocalFeaturesAreWhatTheirNamesSay) {
 
 using Mat3 = Eigen::Matrix<double, 3, 3, Eigen::RowMajor>;
 
+// normal_frame(n) is a rotation R (orthonormal, det 1) with R n = e_z, each within `tol`.
+void expect_rotation_to_z(const Eigen::Vector3d& n, double tol) {
+  double R[9];
+  normal_frame(n.data(), R);
+  const Eigen::Map<const Mat3> M(R);
+  EXPECT_LT((M * M.transpose() - Mat3::Identity()).norm(), tol) << n.transpose();
+  EXPECT_NEAR(M.determinant(), 1.0, tol) << n.transpose();
+  EXPECT_LT((M * n - Eigen::Vector3d::UnitZ()).norm(), tol) << n.transpose();
+}
+
 TEST(NormalFrame, RotationsWithTheNormalLast) {
   std::vector<Eigen::Vector3d> normals = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}, {-1, 0, 0}, {0, 0, -1},
                                           {1, 1e-8, 0}, {1e-9, -1e-9, 1}, {1, 1, 1}, {0, 1, 1e-6}};
   std::mt19937_64 rng(1);
   std::normal_distribution<double> g(0, 1);
   for (int k = 0; k < 200; ++k) normals.push_back({g(rng), g(rng), g(rng)});
-  for (auto n : normals) {
-    n.normalize();
-    double R[9];
-    normal_frame(n.data(), R);
-    const Eigen::Map<const Mat3> M(R);
-    EXPECT_LT((M * M.transpose() - Mat3::Identity()).norm(), 1e-12) << n.transpose();
-    EXPECT_NEAR(M.determinant(), 1.0, 1e-12);
-    EXPECT_LT((M.row(2).transpose() - n).norm(), 1e-12);  // R n = e_z
-  }
+  for (const auto& n : normals) expect_rotation_to_z(n.normalized(), 1e-12);
   const double zero[3] = {0, 0, 0};
   double R[9];
   normal_frame(zero, R);
@@ -147,15 +149,7 @@ TEST(NormalFrame, RotationsWithTheNormalLast) {
 // below the float precision of ModelInput::body_rot and gravity_rot.
 TEST(NormalFrame, NearAxisNormalsWithinFloatPrecision) {
   const std::vector<Eigen::Vector3d> normals = {{1, 2e-7, -2e-7}, {3e-7, 1, 0}, {-2e-7, 0, -1}, {1, 1e-4, 0}};
-  for (auto n : normals) {
-    n.normalize();
-    double R[9];
-    normal_frame(n.data(), R);
-    const Eigen::Map<const Mat3> M(R);
-    EXPECT_LT((M * M.transpose() - Mat3::Identity()).norm(), 1e-6) << n.transpose();
-    EXPECT_NEAR(M.determinant(), 1.0, 1e-6);
-    EXPECT_LT((M * n - Eigen::Vector3d::UnitZ()).norm(), 1e-6);
-  }
+  for (const auto& n : normals) expect_rotation_to_z(n.normalized(), 1e-6);
 }
 
 TEST(NormalFrame, OfficialFirstAxisRuleAndNonUnitInput) {
