@@ -37,6 +37,8 @@ LAYERSNET_COMMAND(inspect, "Summarise a D-LAYERS-H5 data set (sequences, garment
                     sub.add_option("--patch-size", opts->patch_size, "UV patch size (default: the config's, else 0.04)");
                     sub.add_flag("--margins", opts->options.margins,
                                  "measure the training split's ground-truth collision distances (for loss.collision_eps)");
+                    sub.add_flag("--pins", opts->options.pins,
+                                 "measure how closely pinned vertices carried with the body (eval.pins) follow the ground truth");
                     sub.add_option("--world-radius", opts->world_radius,
                                    "patch-to-patch world-edge radius, scene units (default: the config's, else 0.4)");
                     return [opts] { return run_inspect(*opts); };

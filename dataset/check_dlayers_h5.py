@@ -259,6 +259,10 @@ def check_garment(p, g, T):
         p.add(f"{where}/panel", "negative panel index")
     if "rest" in g:
         dataset(p, g, "rest", "f", (n, 3), coordinates=True)
+    if "pin" in g:
+        pin = dataset(p, g, "pin", "f", (n,))
+        if pin is not None and len(pin) and (pin.min() < 0 or pin.max() > 1):
+            p.add(f"{where}/pin", f"weights must lie in [0, 1] (found {pin.min():g} to {pin.max():g})")
     t = attr(p, g, "type", "str")
     if t is not None and not t:
         p.add(where, "attribute 'type' is empty")

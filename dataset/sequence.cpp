@@ -210,6 +210,14 @@ GarmentMesh read_garment(hid_t garments, const std::string& name, SequenceInfo& 
     check_extent(rest, at(info.path, gp + "/rest"));
     m.rest = to_points(std::move(rest));
   }
+  if (h5::has_link(g.get(), "pin")) {
+    const Where wpin = at(info.path, gp + "/pin");
+    m.pin = read_float_array(g.get(), "pin", wpin, {m.num_vertices});
+    const auto bad = std::find_if(m.pin.begin(), m.pin.end(), [](float w) { return !(w >= 0.f && w <= 1.f); });
+    if (bad != m.pin.end())
+      wpin.fail("weight " + std::to_string(*bad) + " of vertex " + std::to_string(bad - m.pin.begin()) +
+                " is outside [0, 1]");
+  }
   const Where wg = at(info.path, gp);
   m.type = h5::read_string_attr(g.get(), "type", wg);
   if (m.type.find_first_not_of(" \t\n") == std::string::npos) wg.fail("attribute 'type' is empty");

@@ -41,6 +41,8 @@ struct GarmentAttributes {
   float self_friction = 60.f;      // 40..80
 };
 
+inline constexpr float kPinnedWeight = 0.5f;
+
 // The static (frame-independent) part of one garment.
 struct GarmentMesh {
   std::string name;          // HDF5 group name
@@ -50,6 +52,10 @@ struct GarmentMesh {
   Uvs uv;                    // (F*3, 2): corner c of face f is row 3f+c
   std::vector<int32_t> panel;  // (F,) UV island of each face, >= 0
   Points rest;               // (N, 3) T-pose template, or 0 rows when the file has none
+  // (N,) weight 0..1 of the simulator's pin group, or empty when the file has none. A vertex of
+  // weight >= kPinnedWeight is attached to the body (a waistband, a top edge).
+  std::vector<float> pin;
+  bool pinned(int v) const { return !pin.empty() && pin[static_cast<size_t>(v)] >= kPinnedWeight; }
   GarmentAttributes attributes;
   int num_faces() const { return static_cast<int>(faces.rows()); }
 };

@@ -68,6 +68,9 @@ void validate_sequence(const Sequence& seq, const std::string& file) {
       if (p < 0) fail(gp + "/panel", "negative panel ids (must be 0-based)");
     if (g.rest.rows() != 0 && g.rest.rows() != g.num_vertices) fail(gp + "/rest", "must have N rows");
     check_coordinates(g.rest.data(), g.rest.size(), file, gp + "/rest");
+    if (!g.pin.empty() && static_cast<int>(g.pin.size()) != g.num_vertices) fail(gp + "/pin", "must have N weights");
+    for (float w : g.pin)
+      if (!(w >= 0.f && w <= 1.f)) fail(gp + "/pin", "weights must lie in [0, 1]");
     if (g.type.find_first_not_of(" \t\n") == std::string::npos) fail(gp, "attribute 'type' is empty");
     const auto& a = g.attributes;
     for (const float v : {a.tension_stiffness, a.bending_stiffness, a.mass, a.self_friction})
@@ -120,6 +123,7 @@ void write_sequence_contents(hid_t r, const Sequence& seq, const SequenceWriteOp
     h5::write_floats(gg.get(), "uv", g.uv.data(), {F, 3, 2}, plain);
     h5::write_ints(gg.get(), "panel", g.panel.data(), {F}, plain);
     if (g.rest.rows() > 0) h5::write_floats(gg.get(), "rest", g.rest.data(), {N, 3}, plain);
+    if (!g.pin.empty()) h5::write_floats(gg.get(), "pin", g.pin.data(), {N}, plain);
     h5::write_string_attr(gg.get(), "type", g.type);
     h5::write_float_attr(gg.get(), "tension_stiffness", g.attributes.tension_stiffness);
     h5::write_float_attr(gg.get(), "bending_stiffness", g.attributes.bending_stiffness);

@@ -7,6 +7,7 @@
 #include "dataset/stats.h"
 #include "dataset/wind.h"
 #include "eval/metrics.h"
+#include "eval/rollout.h"
 #include "run/cloth_constraints.h"
 
 #include <algorithm>
@@ -175,6 +176,38 @@ void print_wind(const SequenceInfo& info) {
   std::printf("\n");
 }
 
+// Pinned vertices carried with the body from `first` to the last frame, each frame from the
+// carried frame before (as in a rollout; the other vertices from the ground truth), against the
+// ground truth's: distances in scene units, one per pinned vertex-frame.
+std::vector<float> carried_pin_errors(const Sequence& seq, int first) {
+  EvalConfig pins_only;
+  pins_only.strain_limit = 0;
+  pins_only.fold_limit = 0;
+  pins_only.collision_shell = 0;
+  pins_only.body_friction = 0;
+  pins_only.layer_friction = 0;
+  pins_only.pins = true;
+  const ClothConstraints carry(seq.info, rest_garments(seq), seq.body_at(0), garments_at(seq, 0), pins_only);
+  std::vector<Eigen::Index> rows;
+  Eigen::Index offset = 0;
+  for (const GarmentMesh& g : seq.info.garments) {
+    for (int v = 0; v < g.num_vertices; ++v)
+      if (g.pinned(v)) rows.push_back(offset + v);
+    offset += g.num_vertices;
+  }
+  std::vector<float> errors;
+  if (rows.empty()) return errors;
+  Points carried = garments_at(seq, first);
+  for (int t = first; t + 1 < seq.info.num_frames; ++t) {
+    const Points truth = garments_at(seq, t + 1);
+    Points x = truth;
+    carry.apply(seq.body_at(t + 1), x, seq.body_at(t), carried);
+    for (Eigen::Index r : rows) errors.push_back((x.row(r) - truth.row(r)).norm());
+    carried = std::move(x);
+  }
+  return errors;
+}
+
 }  // namespace
 
 void inspect_dataset(const InspectOptions& o, const SampleOptions& sample_options) {
@@ -212,10 +245,11 @@ void inspect_dataset(const InspectOptions& o, const SampleOptions& sample_option
         patches += p.num_patches;
         types.insert(g.type);
         if (!o.brief)
-          std::printf("    garment %-16s type %-22s N %6d  F %6d  panels %3d  patches %5d  (tension %.3g, bending %.3g, "
-                      "mass %.3g, self-friction %.3g)\n",
+          std::printf("    garment %-16s type %-22s N %6d  F %6d  panels %3d  patches %5d  pinned %4d  (tension %.3g, "
+                      "bending %.3g, mass %.3g, self-friction %.3g)\n",
                       g.name.c_str(), g.type.c_str(), g.num_vertices, g.num_faces(),
                       static_cast<int>(std::set<int32_t>(g.panel.begin(), g.panel.end()).size()), p.num_patches,
+                      static_cast<int>(std::count_if(g.pin.begin(), g.pin.end(), [](float w) { return w >= kPinnedWeight; })),
                       g.attributes.tension_stiffness, g.attributes.bending_stiffness, g.attributes.mass,
                       g.attributes.self_friction);
       }
@@ -255,6 +289,37 @@ void inspect_dataset(const InspectOptions& o, const SampleOptions& sample_option
     MarginTally::print_ratios("far-corner distance of triangles sharing an edge / rest - 1 (eval.fold_limit bounds "
                               "its shortening)", tally.fold);
     tally.print_slip();
+  }
+  if (o.pins) {
+    std::printf("pinned vertices carried with the body (eval.pins) from the first frame after the ramp to the last, "
+                "distance from the ground truth's, mm:\n");
+    for (const char* split : {"train", "val", "test"}) {
+      std::vector<float> all;
+      int sequences = 0;
+      for (const auto& id : m.split(split)) {
+        const Sequence seq = read_sequence(m.sequence_path(id));
+        const std::vector<float> e = carried_pin_errors(seq, std::max(2, std::min(seq.info.settled_frame(), seq.info.num_frames - 2)));
+        if (e.empty()) continue;
+        ++sequences;
+        const double mm = 1000.0 / seq.info.scale;
+        for (float d : e) all.push_back(static_cast<float>(d * mm));
+        if (!o.brief) {
+          double sum = 0;
+          for (float d : e) sum += d;
+          std::printf("    %-12s %-5s mean %.1f  max %.1f\n", id.c_str(), split, sum / static_cast<double>(e.size()) * mm,
+                      *std::max_element(e.begin(), e.end()) * mm);
+        }
+      }
+      if (all.empty()) {
+        std::printf("  %-5s no pinned vertices\n", split);
+        continue;
+      }
+      double sum = 0;
+      for (float d : all) sum += d;
+      std::sort(all.begin(), all.end());
+      std::printf("  %-5s %d sequences: mean %.1f, p50 %.1f, p99 %.1f, max %.1f\n", split, sequences,
+                  sum / static_cast<double>(all.size()), all[all.size() / 2], all[all.size() * 99 / 100], all.back());
+    }
   }
 }
 

@@ -6,7 +6,9 @@
 // frame only unless --check, which reads every frame and checks every value against the spec.
 // --margins measures the ground truth's collision distances as the collision loss sees them,
 // to choose loss.collision_eps and eval.collision_shell from the data, and the ground truth's
-// edge strain, to choose eval.strain_limit.
+// edge strain, to choose eval.strain_limit. --pins carries each sequence's pinned vertices with
+// the body as the cloth constraints do (eval.pins), from the first frame after the ramp to the
+// last, and measures how far they end up from the ground truth's.
 #include "dataset/sample.h"
 
 #include <string>
@@ -18,6 +20,7 @@ struct InspectOptions {
   bool check = false;    // read every frame and check every value
   bool brief = false;    // totals only
   bool margins = false;  // the training split's ground-truth collision distances and strain
+  bool pins = false;     // how closely pinned vertices carried with the body follow the ground truth
 };
 
 // Prints the summary; patches and world edges at `sample_options` (patch size, world radius).

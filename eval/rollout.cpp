@@ -75,7 +75,7 @@ void NetworkPredictor<T>::begin(const dataset::Sequence& seq) {
   tether_limit_.clear();
   if (config_.eval.patch_tether > 0) tether_limit_ = tether_limits(seq, *structure_, config_.eval.patch_tether);
   constraints_.reset();
-  if (config_.eval.constraints) constraints_ = std::make_unique<const ClothConstraints>(seq.info, rest_garments(seq), config_.eval);
+  if (config_.eval.constraints) constraints_ = std::make_unique<const ClothConstraints>(seq.info, rest_garments(seq), seq.body_at(0), garments_at(seq, 0), config_.eval);
 }
 
 template <class T>

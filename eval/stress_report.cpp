@@ -94,10 +94,16 @@ bool run_stress(const StressOptions& o) {
                 config.eval.patch_tether, first, source.info.num_frames - 1, data_tether);
   else
     std::printf("patch tether off (eval.patch_tether = 0); the data's own max offset / rest patch radius: %.3f\n", data_tether);
-  if (config.eval.constraints)
-    std::printf("cloth constraints on: edge strain <= %g, collision shell %g units, %d passes per frame (run/cloth_constraints.h)\n",
-                config.eval.strain_limit, config.eval.collision_shell, config.eval.constraint_iterations);
-  else
+  if (config.eval.constraints) {
+    int pinned = 0;
+    for (const dataset::GarmentMesh& g : source.info.garments)
+      for (int v = 0; v < g.num_vertices; ++v) pinned += g.pinned(v);
+    std::printf("cloth constraints on: edge strain <= %g, collision shell %g units, %d passes per frame, body friction %g "
+                "within %g units, %d pinned vertices %s (run/cloth_constraints.h)\n",
+                config.eval.strain_limit, config.eval.collision_shell, config.eval.constraint_iterations,
+                config.eval.body_friction, config.eval.friction_distance, pinned,
+                config.eval.pins ? "carried with the body" : "left free (eval.pins = false)");
+  } else
     std::printf("cloth constraints off (eval.constraints = false)\n");
   // The strain limit comes from the whole data set's ground truth, not the one source: any
   // sequence's real cloth may stretch that much.

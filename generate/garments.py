@@ -227,6 +227,44 @@ def tube_garment(name, kind, rings, panels):
     return b.finish(name, kind, pin)
 
 
+def top_ring_pin(rest, faces, up=2, tol=1e-3):
+    """The pin weights of a garment of this module, recovered from its rest shape: every
+    kind pins exactly its top ring (the tubes' first row, the trousers' waist). Weight 1
+    within `tol` scene units of the highest rest coordinate along axis `up`, else 0.
+    Returns (pin, None), or (None, why) when those vertices are not one closed boundary
+    loop of the mesh (then the garment was not built here)."""
+    rest, faces = np.asarray(rest, np.float64), np.asarray(faces, np.int64)
+    h = rest[:, up]
+    top = np.nonzero(h >= h.max() - tol)[0]
+    if len(top) < 3:
+        return None, f"{len(top)} vertices at the top (within {tol:g}), a ring needs at least 3"
+    # Boundary edges belong to one face; the top ring must be one whole loop of them.
+    e = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+    uniq, count = np.unique(e, axis=0, return_counts=True)
+    nbr = {}
+    for a, b in uniq[count == 1]:
+        nbr.setdefault(int(a), []).append(int(b))
+        nbr.setdefault(int(b), []).append(int(a))
+    start = int(top[np.argmax(h[top])])
+    loop, prev, v = [start], -1, start
+    while True:
+        if len(nbr.get(v, ())) != 2:
+            return None, f"top vertex {v} is not on a simple boundary loop"
+        nxt = nbr[v][0] if nbr[v][0] != prev else nbr[v][1]
+        if nxt == start:
+            break
+        loop.append(nxt)
+        prev, v = v, nxt
+        if len(loop) > len(rest):
+            return None, "boundary walk does not close"
+    if set(loop) != set(top.tolist()):
+        return None, (f"{len(top)} vertices at the top, but the top boundary loop has "
+                      f"{len(loop)} vertices")
+    pin = np.zeros(len(rest))
+    pin[top] = 1.0
+    return pin, None
+
+
 def pants_garment(name, profile, z_waist, z_crotch, z_hem, offset, spacing, cols=40):
     """Trousers: a hip tube from the waist to the crotch that splits into two leg tubes.
     The crotch seam is a chain of vertices from front centre to back centre shared by

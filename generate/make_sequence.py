@@ -349,7 +349,7 @@ def main():
     for i, g in enumerate(garments):
         gar.append({"name": g.name, "type": g.kind, "vertices": cloth_v[:, offs[i]:offs[i + 1]],
                     "faces": g.faces, "uv": g.uv, "panel": g.panel, "rest": g.verts,
-                    "attrs": layer_attrs[i]})
+                    "pin": g.pin, "attrs": layer_attrs[i]})
     if mirror:
         # Mirror x: a mirrored motion with mirrored garments is as physical as the original.
         flip = np.array([-1.0, 1.0, 1.0])

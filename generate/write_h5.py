@@ -13,8 +13,8 @@ _GZ = dict(compression="gzip", compression_opts=1, shuffle=True)
 def write_sequence(path, seq):
     """seq: dict with fps, gravity (3,), scale, body {vertices (T,B,3), faces (Fb,3),
     translation (T,3), friction}, garments [ {name, type, vertices (T,N,3), faces (F,3),
-    uv (F,3,2), panel (F,), rest (N,3), attrs {...}} ] inner -> outer, wind {rotation (T,4),
-    strength (T,)}, extra_attrs {...} (scalars / strings stored on the root)."""
+    uv (F,3,2), panel (F,), rest (N,3), optional pin (N,) 0..1, attrs {...}} ] inner -> outer,
+    wind {rotation (T,4), strength (T,)}, extra_attrs {...} (scalars / strings stored on the root)."""
     tmp = path + ".tmp"
     with h5py.File(tmp, "w") as f:
         f.attrs["format"] = "dlayers-h5"
@@ -42,6 +42,10 @@ def write_sequence(path, seq):
             gg.create_dataset("uv", data=gar["uv"].astype(np.float32))
             gg.create_dataset("panel", data=gar["panel"].astype(np.int32))
             gg.create_dataset("rest", data=gar["rest"].astype(np.float32))
+            if gar.get("pin") is not None:
+                pin = np.asarray(gar["pin"], np.float32)
+                assert pin.shape == gar["vertices"].shape[1:2], "pin needs one weight per vertex"
+                gg.create_dataset("pin", data=pin)
             gg.attrs["type"] = gar["type"]
             for k, v in gar["attrs"].items():
                 gg.attrs[k] = float(v)

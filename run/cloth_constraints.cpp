@@ -3,6 +3,8 @@
 #include "dataset/garments.h"
 #include "dataset/neighbours.h"
 
+#include <Eigen/SVD>
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -20,41 +22,119 @@ constexpr float kReachMetres = 0.05f;
 
 constexpr float kUnbounded = std::numeric_limits<float>::infinity();
 
-// Moves both ends of the pair (a, b) equally until its length lies in [min_length, max_length];
-// returns whether it moved (not when within kTolerance × rest of the range, or degenerate).
+// Moves the free ends of the pair (a, b), equally when both are free, until its length lies in
+// [min_length, max_length]; returns whether it moved (not when within kTolerance × rest of the
+// range, degenerate, or both ends pinned). pinned: (N,) 1 = the vertex does not move.
 bool project_pair(dataset::Points& x, std::pair<int32_t, int32_t> pair, float min_length, float max_length,
-                  float rest) {
+                  float rest, const std::vector<uint8_t>& pinned) {
   const auto [a, b] = pair;
+  const float free_a = pinned[static_cast<size_t>(a)] ? 0.f : 1.f, free_b = pinned[static_cast<size_t>(b)] ? 0.f : 1.f;
+  if (free_a + free_b == 0.f) return false;
   const Eigen::RowVector3f d = x.row(b) - x.row(a);
   const float length = d.norm();
   const float target = std::clamp(length, min_length, max_length);
   if (std::abs(length - target) <= kTolerance * rest || length == 0.f) return false;
-  const Eigen::RowVector3f half = 0.5f * (length - target) / length * d;
-  x.row(a) += half;
-  x.row(b) -= half;
+  const Eigen::RowVector3f correction = (length - target) / length / (free_a + free_b) * d;
+  x.row(a) += free_a * correction;
+  x.row(b) -= free_b * correction;
   return true;
 }
 
-// Calls f(v, a) for each vertex v in rows [begin, end) of x whose nearest anchor a (`index`
-// holds the anchors) lies within reach; returns how many calls returned true.
+// Rigid motion (rotation R, translation c; y ≈ R x + c) that carries the points `from` onto `to`
+// in the least-squares sense (Kabsch; no reflection), in double for the 3×3 SVD.
+struct RigidMotion {
+  Eigen::Matrix3d rotation = Eigen::Matrix3d::Identity();
+  Eigen::Vector3d translation = Eigen::Vector3d::Zero();
+};
+RigidMotion fit_rigid_motion(const Eigen::Ref<const dataset::Points>& from, const Eigen::Ref<const dataset::Points>& to,
+                             const std::vector<int32_t>& rows) {
+  Eigen::Vector3d mean_from = Eigen::Vector3d::Zero(), mean_to = Eigen::Vector3d::Zero();
+  for (int32_t r : rows) {
+    mean_from += from.row(r).transpose().cast<double>();
+    mean_to += to.row(r).transpose().cast<double>();
+  }
+  mean_from /= static_cast<double>(rows.size());
+  mean_to /= static_cast<double>(rows.size());
+  Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();
+  for (int32_t r : rows)
+    covariance += (from.row(r).transpose().cast<double>() - mean_from) * (to.row(r).cast<double>() - mean_to.transpose());
+  const Eigen::JacobiSVD<Eigen::Matrix3d> svd(covariance, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Eigen::Matrix3d flip = Eigen::Matrix3d::Identity();
+  flip(2, 2) = (svd.matrixV() * svd.matrixU().transpose()).determinant() < 0 ? -1.0 : 1.0;
+  RigidMotion m;
+  m.rotation = svd.matrixV() * flip * svd.matrixU().transpose();
+  m.translation = mean_to - m.rotation * mean_from;
+  return m;
+}
+
+// Body vertices that carry garment g's pinned vertices P (rows of `garments`, the same frame as
+// `body`): those inside the loop P draws around the body (within the loop's mean radius of its
+// centre, perpendicular to the up axis, and within kPinBandMetres of its heights). A
+// waistband's loop holds the torso and leaves out the arms and hands, which the skinning of
+// pinned cloth ignores. When fewer than 3 lie inside (P is no loop), those within
+// kPinBandMetres of P; failing that, the whole body.
+constexpr float kPinBandMetres = 0.05f;
+std::vector<int32_t> pin_carriers(const std::vector<int32_t>& pinned_rows, const Eigen::Ref<const dataset::Points>& garments,
+                                  const Eigen::Ref<const dataset::Points>& body, char up_axis, float scale) {
+  const int up = up_axis == 'y' ? 1 : 2;
+  const float band = kPinBandMetres * scale;
+  Eigen::RowVector3f centre = Eigen::RowVector3f::Zero();
+  float low = std::numeric_limits<float>::infinity(), high = -low;
+  for (int32_t r : pinned_rows) {
+    centre += garments.row(r);
+    low = std::min(low, garments(r, up));
+    high = std::max(high, garments(r, up));
+  }
+  centre /= static_cast<float>(pinned_rows.size());
+  const auto across = [&](const Eigen::RowVector3f& p) {
+    Eigen::RowVector3f d = p - centre;
+    d[up] = 0.f;
+    return d.norm();
+  };
+  float radius = 0.f;
+  for (int32_t r : pinned_rows) radius += across(garments.row(r));
+  radius /= static_cast<float>(pinned_rows.size());
+  std::vector<int32_t> inside, near;
+  for (Eigen::Index b = 0; b < body.rows(); ++b) {
+    const Eigen::RowVector3f p = body.row(b);
+    if (p[up] >= low - band && p[up] <= high + band && across(p) < radius) inside.push_back(static_cast<int32_t>(b));
+    for (int32_t r : pinned_rows)
+      if ((p - garments.row(r)).norm() <= band) {
+        near.push_back(static_cast<int32_t>(b));
+        break;
+      }
+  }
+  if (inside.size() >= 3) return inside;
+  if (near.size() >= 3) return near;
+  std::vector<int32_t> all(static_cast<size_t>(body.rows()));
+  for (size_t b = 0; b < all.size(); ++b) all[b] = static_cast<int32_t>(b);
+  return all;
+}
+
+// Calls f(v, a) for each vertex v in rows [begin, end) of x, not pinned (pinned (N,): 1 =
+// fixed), whose nearest anchor a (`index` holds the anchors) lies within reach; returns how
+// many calls returned true.
 template <class F>
 int64_t for_each_anchored(const dataset::Points& x, Eigen::Index begin, Eigen::Index end,
-                          const dataset::NearestVertexIndex& index, float reach, F&& f) {
+                          const std::vector<uint8_t>& pinned, const dataset::NearestVertexIndex& index, float reach,
+                          F&& f) {
   if (end <= begin) return 0;
   const dataset::NearestBody nearest = index.query(x.middleRows(begin, end - begin));
   int64_t moved = 0;
   for (Eigen::Index v = begin; v < end; ++v)
-    if (nearest.distance[v - begin] <= reach) moved += f(v, Eigen::Index{nearest.index[v - begin]});
+    if (!pinned[static_cast<size_t>(v)] && nearest.distance[v - begin] <= reach)
+      moved += f(v, Eigen::Index{nearest.index[v - begin]});
   return moved;
 }
 
 // Moves each vertex x_v (rows [begin, end)) whose nearest anchor a (within reach) has
 // (x_v − a)·n_a < shell onto the shell along n_a; returns how many moved.
-int64_t push_out(dataset::Points& x, Eigen::Index begin, Eigen::Index end, const dataset::NearestVertexIndex& index,
+int64_t push_out(dataset::Points& x, Eigen::Index begin, Eigen::Index end, const std::vector<uint8_t>& pinned,
+                 const dataset::NearestVertexIndex& index,
                  const Eigen::Ref<const dataset::Points>& anchors, const dataset::Points& normals, float shell,
                  float reach) {
   if (anchors.rows() == 0) return 0;
-  return for_each_anchored(x, begin, end, index, reach, [&](Eigen::Index v, Eigen::Index a) {
+  return for_each_anchored(x, begin, end, pinned, index, reach, [&](Eigen::Index v, Eigen::Index a) {
     const Eigen::RowVector3f n = normals.row(a);
     const float depth = shell - (x.row(v) - anchors.row(a)).dot(n);
     if (depth <= kTolerance * shell) return false;  // a vertex already on the shell stays unmoved
@@ -67,11 +147,12 @@ int64_t push_out(dataset::Points& x, Eigen::Index begin, Eigen::Index end, const
 // (x_v − a)·n_a < within loses mu of its displacement relative to a's, tangentially to n_a:
 // x_v −= mu (r − (r·n) n), r = (x_v − x_v,before) − (a − a_before). Returns how many moved.
 int64_t drag_along(dataset::Points& x, const Eigen::Ref<const dataset::Points>& x_before, Eigen::Index begin, Eigen::Index end,
+                   const std::vector<uint8_t>& pinned,
                    const dataset::NearestVertexIndex& index, const Eigen::Ref<const dataset::Points>& anchors,
                    const Eigen::Ref<const dataset::Points>& anchors_before, const dataset::Points& normals,
                    float within, float mu, float reach) {
   if (anchors.rows() == 0) return 0;
-  return for_each_anchored(x, begin, end, index, reach, [&](Eigen::Index v, Eigen::Index a) {
+  return for_each_anchored(x, begin, end, pinned, index, reach, [&](Eigen::Index v, Eigen::Index a) {
     const Eigen::RowVector3f n = normals.row(a);
     if ((x.row(v) - anchors.row(a)).dot(n) >= within) return false;
     const Eigen::RowVector3f r = (x.row(v) - x_before.row(v)) - (anchors.row(a) - anchors_before.row(a));
@@ -98,7 +179,8 @@ std::vector<std::pair<int32_t, int32_t>> far_corners(const dataset::Faces& faces
 }
 
 ClothConstraints::ClothConstraints(const dataset::SequenceInfo& info, const dataset::Points& rest,
-                                   const EvalConfig& settings)
+                                   const Eigen::Ref<const dataset::Points>& body_first,
+                                   const Eigen::Ref<const dataset::Points>& garments_first, const EvalConfig& settings)
     : settings_(settings), reach_(kReachMetres * info.scale), body_faces_(info.body_faces) {
   const dataset::GarmentEdges edges = dataset::garment_edges(info, rest);
   for (size_t e = 0; e < edges.rows.size(); ++e)
@@ -119,6 +201,22 @@ ClothConstraints::ClothConstraints(const dataset::SequenceInfo& info, const data
   const dataset::GarmentLayout layout = dataset::garment_layout(info);
   outer_begin_ = layout.num_vertices() - layout.outer_vertices();
   if (layout.layered()) inner_faces_ = dataset::inner_faces(layout);
+  pinned_.assign(static_cast<size_t>(rest.rows()), 0);
+  if (!settings_.pins) return;
+  offset = 0;
+  for (const dataset::GarmentMesh& mesh : info.garments) {
+    PinGroup group;
+    for (int v = 0; v < mesh.num_vertices; ++v)
+      if (mesh.pinned(v)) {
+        group.rows.push_back(static_cast<int32_t>(offset + v));
+        pinned_[static_cast<size_t>(offset + v)] = 1;
+      }
+    if (!group.rows.empty()) {
+      group.carriers = pin_carriers(group.rows, garments_first, body_first, info.up_axis, info.scale);
+      pin_groups_.push_back(std::move(group));
+    }
+    offset += mesh.num_vertices;
+  }
 }
 
 ConstraintMoves ClothConstraints::apply(const Eigen::Ref<const dataset::Points>& body, dataset::Points& x) const {
@@ -146,15 +244,18 @@ ConstraintMoves ClothConstraints::project(const Eigen::Ref<const dataset::Points
     body_index = std::make_unique<dataset::NearestVertexIndex>(body);
     body_normals = dataset::vertex_normals(body, body_faces_);
   }
+  if (!pin_groups_.empty() && body_before && x_before && x_before->rows() == x.rows() &&
+      body_before->rows() == body.rows() && x_before->allFinite())
+    moves.pinned += carry_pinned(body, x, *body_before, *x_before);
   if (friction) {
     const auto within = static_cast<float>(settings_.friction_distance);
     if (mu > 0)
       moves.friction +=
-          drag_along(x, *x_before, 0, x.rows(), *body_index, body, *body_before, body_normals, within, mu, reach_);
+          drag_along(x, *x_before, 0, x.rows(), pinned_, *body_index, body, *body_before, body_normals, within, mu, reach_);
     const auto mu_layer = static_cast<float>(settings_.layer_friction);
     if (mu_layer > 0 && outer_begin_ > 0 && outer_begin_ < x.rows()) {
       const dataset::Points inner = x.topRows(outer_begin_);  // already carried by the body
-      moves.friction += drag_along(x, *x_before, outer_begin_, x.rows(), dataset::NearestVertexIndex(inner), inner,
+      moves.friction += drag_along(x, *x_before, outer_begin_, x.rows(), pinned_, dataset::NearestVertexIndex(inner), inner,
                                    x_before->topRows(outer_begin_), dataset::vertex_normals(inner, inner_faces_), within,
                                    mu_layer, reach_);
     }
@@ -163,19 +264,33 @@ ConstraintMoves ClothConstraints::project(const Eigen::Ref<const dataset::Points
   for (int pass = 0; pass < settings_.constraint_iterations; ++pass) {
     if (s > 0)
       for (size_t e = 0; e < edges_.size(); ++e)
-        moves.edges += project_pair(x, edges_[e], (1.f - s) * rest_[e], (1.f + s) * rest_[e], rest_[e]);
+        moves.edges += project_pair(x, edges_[e], (1.f - s) * rest_[e], (1.f + s) * rest_[e], rest_[e], pinned_);
     if (f > 0)
       for (size_t q = 0; q < folds_.size(); ++q)
-        moves.folds += project_pair(x, folds_[q], (1.f - f) * fold_rest_[q], kUnbounded, fold_rest_[q]);
+        moves.folds += project_pair(x, folds_[q], (1.f - f) * fold_rest_[q], kUnbounded, fold_rest_[q], pinned_);
     if (shell <= 0) continue;
-    moves.body += push_out(x, 0, x.rows(), *body_index, body, body_normals, shell, reach_);
+    moves.body += push_out(x, 0, x.rows(), pinned_, *body_index, body, body_normals, shell, reach_);
     if (outer_begin_ > 0 && outer_begin_ < x.rows()) {
       const dataset::Points inner = x.topRows(outer_begin_);  // moved by this pass: a fresh tree
-      moves.layer += push_out(x, outer_begin_, x.rows(), dataset::NearestVertexIndex(inner), inner,
+      moves.layer += push_out(x, outer_begin_, x.rows(), pinned_, dataset::NearestVertexIndex(inner), inner,
                               dataset::vertex_normals(inner, inner_faces_), shell, reach_);
     }
   }
   return moves;
+}
+
+int64_t ClothConstraints::carry_pinned(const Eigen::Ref<const dataset::Points>& body, dataset::Points& x,
+                                       const Eigen::Ref<const dataset::Points>& body_before,
+                                       const Eigen::Ref<const dataset::Points>& x_before) const {
+  int64_t moved = 0;
+  for (const PinGroup& group : pin_groups_) {
+    const RigidMotion m = fit_rigid_motion(body_before, body, group.carriers);
+    for (int32_t r : group.rows) {
+      x.row(r) = (m.rotation * x_before.row(r).transpose().cast<double>() + m.translation).transpose().cast<float>();
+      ++moved;
+    }
+  }
+  return moved;
 }
 
 }  // namespace layersnet

@@ -14,7 +14,13 @@
 //   4. does the same for every outer-layer vertex against the nearest inner-layer vertex and
 //      the inner mesh's normal there.
 // The collision steps come last, so a frame ends outside the body and the inner layer.
-// Before the passes, when the frame before is given and body_friction μ > 0, contact friction:
+// Before the passes, when the frame before is given and eval.pins is set, pins: the vertices the
+// file pins (a waistband, a top edge; GarmentMesh::pinned) move rigidly with the body under
+// them, x_{t+1} = R x_t + c, where (R, c) is the least-squares rigid motion of that body region
+// (the body vertices inside the loop the pinned vertices draw, in frame 0) from frame t to t+1.
+// The data's simulator skins pinned cloth to the torso bones, so a free network prediction of
+// them is wasted; no later step moves them (inverse mass 0 in the edge and fold steps).
+// Then, when body_friction μ > 0, contact friction:
 //   0. every garment vertex whose nearest body vertex h (frame t+1) lies within `reach` and
 //      (x − h)·n < friction_distance loses μ of its displacement relative to h's, tangentially:
 //      x −= μ (r − (r·n) n), r = (x − x_t) − (h − h_t). Blender's cloth touching the body moves
@@ -41,6 +47,7 @@ struct ConstraintMoves {
   int64_t body = 0;          // vertices pushed out of the body (over all passes)
   int64_t layer = 0;         // outer vertices pushed out of the inner layer (over all passes)
   int64_t friction = 0;      // vertices the contact friction moved
+  int64_t pinned = 0;        // pinned vertices carried with the body
 };
 
 // The two far corners (local indices) of every pair of triangles sharing an edge, each pair once.
@@ -49,15 +56,19 @@ std::vector<std::pair<int32_t, int32_t>> far_corners(const dataset::Faces& faces
 class ClothConstraints {
  public:
   // Edges and rest lengths from the garments of `info` and their rest shapes `rest` (N, 3;
-  // dataset::rest_shapes). Settings: eval.strain_limit (s; 0 = no edge step), fold_limit (f;
-  // 0 = no fold step), collision_shell (scene units; 0 = no collision steps),
-  // constraint_iterations; eval.constraints is not read.
-  ClothConstraints(const dataset::SequenceInfo& info, const dataset::Points& rest, const EvalConfig& settings);
+  // dataset::rest_shapes). The body under each garment's pinned vertices is chosen in one frame
+  // (frame 0): its body `body_first` (B, 3) and garments `garments_first` (N, 3). Settings:
+  // eval.strain_limit (s; 0 = no edge step), fold_limit (f; 0 = no fold step), collision_shell
+  // (scene units; 0 = no collision steps), constraint_iterations, pins; eval.constraints is
+  // not read.
+  ClothConstraints(const dataset::SequenceInfo& info, const dataset::Points& rest,
+                   const Eigen::Ref<const dataset::Points>& body_first,
+                   const Eigen::Ref<const dataset::Points>& garments_first, const EvalConfig& settings);
   // Projects x (N, 3, world, layer order) in place against the body of frame t (B, 3). A frame
   // with a non-finite value is left as it is (the rollout reports the divergence).
   ConstraintMoves apply(const Eigen::Ref<const dataset::Points>& body, dataset::Points& x) const;
-  // The same with the frame before (body_before (B, 3), x_before (N, 3), world), which the
-  // contact friction needs; without it (or with eval.body_friction 0) there is no friction step.
+  // The same with the frame before (body_before (B, 3), x_before (N, 3), world), which the pins
+  // and the contact friction need; without it there is neither step.
   ConstraintMoves apply(const Eigen::Ref<const dataset::Points>& body, dataset::Points& x,
                         const Eigen::Ref<const dataset::Points>& body_before,
                         const Eigen::Ref<const dataset::Points>& x_before) const;
@@ -65,6 +76,14 @@ class ClothConstraints {
  private:
   ConstraintMoves project(const Eigen::Ref<const dataset::Points>& body, dataset::Points& x,
                           const Eigen::Ref<const dataset::Points>* body_before, const Eigen::Ref<const dataset::Points>* x_before) const;
+  // Carries every pinned row of x from x_before with its body region; returns how many.
+  int64_t carry_pinned(const Eigen::Ref<const dataset::Points>& body, dataset::Points& x,
+                       const Eigen::Ref<const dataset::Points>& body_before,
+                       const Eigen::Ref<const dataset::Points>& x_before) const;
+  struct PinGroup {
+    std::vector<int32_t> rows;      // pinned rows of x of one garment
+    std::vector<int32_t> carriers;  // body vertices whose rigid motion carries them
+  };
   EvalConfig settings_;
   float reach_ = 0;                                 // scene units
   std::vector<std::pair<int32_t, int32_t>> edges_;  // rows of x
@@ -74,6 +93,8 @@ class ClothConstraints {
   dataset::Faces body_faces_;
   int32_t outer_begin_ = 0;                         // first outer-layer row; N when not layered
   dataset::Faces inner_faces_;                      // inner garments' faces, rows [0, outer_begin_)
+  std::vector<uint8_t> pinned_;                     // (N,) 1 = pinned (eval.pins only): no other step moves it
+  std::vector<PinGroup> pin_groups_;                // one per garment with pinned vertices
 };
 
 }  // namespace layersnet

@@ -83,6 +83,8 @@ struct EvalConfig {
   double body_friction = 0.0;
   double layer_friction = 0.0;     // the same for an outer-layer vertex against the inner layer
   double friction_distance = 0.3;  // scene units
+  // Pinned vertices (the file's pin weights) move rigidly with the body under them.
+  bool pins = true;
 };
 
 struct Config {

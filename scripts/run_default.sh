@@ -12,6 +12,8 @@ has() { "$bin" --help | grep -qE "^  $1( |$)"; }
 
 if has generate; then
   "$bin" generate --out "$data"   # resumes: existing valid sequences are kept
+  # Sequences generated before the files carried pin weights get them (a no-op otherwise).
+  /usr/bin/python3 generate/add_pins.py "$data"
 fi
 if [ -f "$data/dataset.json" ]; then
   has prepare && "$bin" prepare "$data"

@@ -78,8 +78,10 @@ TrainData::OpenFile& TrainData::open(int sequence) {
   auto info = std::make_shared<const dataset::SequenceInfo>(file->info());
   std::shared_ptr<const ClothConstraints> constraints;
   if (constraint_settings_) {
-    const dataset::Points first = dataset::garments_at(*info, file->read_frames(0, 1), 0);
-    constraints = std::make_shared<const ClothConstraints>(*info, dataset::rest_shapes(*info, first), *constraint_settings_);
+    const dataset::FrameWindow frame0 = file->read_frames(0, 1);
+    const dataset::Points first = dataset::garments_at(*info, frame0, 0);
+    constraints = std::make_shared<const ClothConstraints>(*info, dataset::rest_shapes(*info, first),
+                                                           frame0.body_at(0, info->num_body_vertices), first, *constraint_settings_);
   }
   files_.push_front({sequence, std::move(file), std::move(info), std::move(constraints)});
   while (static_cast<int>(files_.size()) > max_open_files_) files_.pop_back();

@@ -193,6 +193,13 @@ std::vector<BrokenCase> sequence_cases() {
                kG0 + "/panel", "1 negative panel ids"});
   c.push_back({"rest_N_mismatch", [](hid_t f) { put_floats(f, kG1 + "/rest", std::vector<float>(12, 0.f), {4, 3}); },
                kG1 + "/rest", "does not match (96, 3)"});
+  c.push_back({"pin_N_mismatch", [](hid_t f) { put_floats(f, kG1 + "/pin", std::vector<float>(4, 1.f), {4}); },
+               kG1 + "/pin", "shape (4,) does not match (96,)"});
+  c.push_back({"pin_weight_above_one", [](hid_t f) {
+                 std::vector<float> w(96, 0.f);
+                 w[7] = 1.5f;
+                 put_floats(f, kG0 + "/pin", w, {96}); },
+               kG0 + "/pin", "weight 1.500000 of vertex 7 is outside [0, 1]"});
   c.push_back({"garment_missing_mass", del_attr(kG0, "mass"), kG0, "missing attribute 'mass'"});
   c.push_back({"garment_inf_bending", set_float_attr(kG1, "bending_stiffness", std::numeric_limits<double>::infinity()),
                kG1, "'bending_stiffness' is not finite"});

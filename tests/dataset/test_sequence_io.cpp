@@ -31,6 +31,7 @@ void expect_same(const Sequence& a, const Sequence& b, float tol) {
     EXPECT_EQ(ga.panel, gb.panel);
     EXPECT_TRUE(ga.uv.isApprox(gb.uv, tol));
     EXPECT_TRUE(ga.rest.isApprox(gb.rest, tol));
+    EXPECT_EQ(ga.pin, gb.pin);
     EXPECT_FLOAT_EQ(ga.attributes.mass, gb.attributes.mass);
     EXPECT_FLOAT_EQ(ga.attributes.tension_stiffness, gb.attributes.tension_stiffness);
     EXPECT_TRUE(a.frames.garments[g].isApprox(b.frames.garments[g], tol));
@@ -88,6 +89,28 @@ TEST(SequenceIo, RestAndRampFramesRoundTripAndDefaultToZero) {
   EXPECT_EQ(r.rest_frames, 3);
   EXPECT_EQ(r.ramp_frames, 2);
   EXPECT_EQ(r.settled_frame(), 5);
+}
+
+TEST(SequenceIo, PinWeightsRoundTripAndAreOptional) {
+  const auto dir = temp_dir("pin");
+  Sequence s = make_synthetic_sequence();
+  write_sequence((dir / "none.h5").string(), s);
+  const Sequence none = read_sequence((dir / "none.h5").string());
+  EXPECT_TRUE(none.info.garments[0].pin.empty());
+  EXPECT_FALSE(none.info.garments[0].pinned(0));
+  GarmentMesh& g = s.info.garments[0];
+  g.pin.assign(static_cast<size_t>(g.num_vertices), 0.f);
+  g.pin[0] = 1.f;
+  g.pin[1] = 0.25f;
+  write_sequence((dir / "pins.h5").string(), s);
+  const Sequence r = read_sequence((dir / "pins.h5").string());
+  expect_same(s, r, 0.f);
+  EXPECT_TRUE(r.info.garments[0].pinned(0));
+  EXPECT_FALSE(r.info.garments[0].pinned(1));  // a partial weight is a spring in Blender, not a pin
+  std::string out;
+  EXPECT_EQ(testing::run_validator((dir / "pins.h5").string(), &out), 0) << out;
+  g.pin.resize(3);
+  EXPECT_THROW(write_sequence((dir / "bad.h5").string(), s), std::exception);
 }
 
 TEST(SequenceIo, RoundTripFloat64Int64GzipWithoutWindOrTranslation) {

@@ -10,6 +10,7 @@
 #include "model/params_layout.h"
 #include "run/config.h"
 
+#include <Eigen/Geometry>
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -52,7 +53,7 @@ TEST(ClothConstraints, ClothThatHoldsThemIsNotMoved) {
   EvalConfig s;
   s.strain_limit = 1.1 * worst_strain(seq, garments_at(seq, 3));  // the data's own strain fits
   ASSERT_GT(s.strain_limit, 0.0);
-  const ClothConstraints constraints(seq.info, rest_garments(seq), s);
+  const ClothConstraints constraints(seq.info, rest_garments(seq), seq.body_at(0), garments_at(seq, 0), s);
   Points x = garments_at(seq, 3);
   const Points before = x;
   const ConstraintMoves moves = constraints.apply(seq.body_at(3), x);
@@ -68,7 +69,7 @@ TEST(ClothConstraints, StretchedEdgesComeBackWithinTheLimit) {
   s.constraint_iterations = 40;
   Points x = crumpled(seq);
   ASSERT_GT(worst_strain(seq, x), 0.2);
-  const ConstraintMoves moves = ClothConstraints(seq.info, rest_garments(seq), s).apply(seq.body_at(3), x);
+  const ConstraintMoves moves = ClothConstraints(seq.info, rest_garments(seq), seq.body_at(0), garments_at(seq, 0), s).apply(seq.body_at(3), x);
   EXPECT_GT(moves.edges, 0);
   EXPECT_LE(worst_strain(seq, x), s.strain_limit + 0.01);
 }
@@ -80,7 +81,7 @@ TEST(ClothConstraints, FewPassesStillShrinkTheWorstStrain) {
   s.constraint_iterations = 1;
   Points x = crumpled(seq);
   const double before = worst_strain(seq, x);
-  ClothConstraints(seq.info, rest_garments(seq), s).apply(seq.body_at(3), x);
+  ClothConstraints(seq.info, rest_garments(seq), seq.body_at(0), garments_at(seq, 0), s).apply(seq.body_at(3), x);
   EXPECT_LT(worst_strain(seq, x), 0.75 * before);
 }
 
@@ -118,7 +119,7 @@ TEST(ClothConstraints, FoldedTrianglePairsOpenToTheFoldLimit) {
     return worst;
   };
   ASSERT_LT(shortest(x), 1 - s.fold_limit - 0.1);
-  const ConstraintMoves moves = ClothConstraints(seq.info, rest_garments(seq), s).apply(seq.body_at(3), x);
+  const ConstraintMoves moves = ClothConstraints(seq.info, rest_garments(seq), seq.body_at(0), garments_at(seq, 0), s).apply(seq.body_at(3), x);
   EXPECT_GT(moves.folds, 0);
   EXPECT_EQ(moves.edges, 0);
   EXPECT_GE(shortest(x), 1 - s.fold_limit - 0.01);
@@ -136,7 +137,7 @@ TEST(ClothConstraints, AVertexInsideTheBodyEndsOnTheShell) {
   const Eigen::Index v = 5, h = 20;  // an inner-garment vertex, moved 0.1 inside body vertex h
   x.row(v) = body.row(h) - 0.1f * body_normals.row(h);
   ASSERT_LT(signed_distance(x.row(v), body, seq.info.body_faces), 0.0);
-  const ConstraintMoves moves = ClothConstraints(seq.info, rest_garments(seq), s).apply(body, x);
+  const ConstraintMoves moves = ClothConstraints(seq.info, rest_garments(seq), seq.body_at(0), garments_at(seq, 0), s).apply(body, x);
   EXPECT_EQ(moves.body, 1);
   EXPECT_NEAR(signed_distance(x.row(v), body, seq.info.body_faces), s.collision_shell, 1e-5);
   for (Eigen::Index u = 0; u < x.rows(); ++u) {
@@ -159,7 +160,7 @@ TEST(ClothConstraints, AnOuterVertexInsideTheInnerLayerEndsOnTheShell) {
   const Eigen::Index v = outer_begin + 7, y = 9;
   x.row(v) = inner.row(y) - 0.1f * inner_normals.row(y);
   ASSERT_LT(signed_distance(x.row(v), inner, faces), 0.0);
-  const ConstraintMoves moves = ClothConstraints(seq.info, rest_garments(seq), s).apply(seq.body_at(3), x);
+  const ConstraintMoves moves = ClothConstraints(seq.info, rest_garments(seq), seq.body_at(0), garments_at(seq, 0), s).apply(seq.body_at(3), x);
   EXPECT_EQ(moves.layer, 1);
   EXPECT_NEAR(signed_distance(x.row(v), x.topRows(outer_begin), faces), s.collision_shell, 1e-5);
   // The shell is the same rule the layer-collision metric counts: no collision left.
@@ -193,23 +194,77 @@ TEST(ClothConstraints, ContactFrictionCarriesNearBodyClothWithTheBody) {
     s.body_friction = mu;
     s.friction_distance = 0.4;
     Points x = slid;
-    const ConstraintMoves moves = ClothConstraints(seq.info, rest_garments(seq), s).apply(body, x, body_before, x_before);
+    const ConstraintMoves moves = ClothConstraints(seq.info, rest_garments(seq), seq.body_at(0), garments_at(seq, 0), s).apply(body, x, body_before, x_before);
     EXPECT_GT(moves.friction, 0);
     const Eigen::RowVector3f after = relative(x);
     EXPECT_NEAR((after - after.dot(n) * n - (1.f - static_cast<float>(mu)) * tangential).norm(), 0.f, 1e-5f) << mu;
     EXPECT_NEAR(after.dot(n), r.dot(n), 1e-5f) << mu;
     EXPECT_EQ(x.row(outer), slid.row(outer)) << "beyond friction_distance";
     Points unchanged = slid;
-    ClothConstraints(seq.info, rest_garments(seq), s).apply(body, unchanged);  // no frame before: no friction
+    ClothConstraints(seq.info, rest_garments(seq), seq.body_at(0), garments_at(seq, 0), s).apply(body, unchanged);  // no frame before: no friction
     EXPECT_EQ(unchanged, slid);
   }
+}
+
+// The tubes with the top ring (highest rest vertices) of every garment pinned, as the generator
+// pins waistbands and top edges.
+dataset::Sequence pinned_tubes() {
+  dataset::Sequence seq = tubes();
+  const Points rest = rest_garments(seq);
+  Eigen::Index offset = 0;
+  for (dataset::GarmentMesh& g : seq.info.garments) {
+    const float top = rest.middleRows(offset, g.num_vertices).col(2).maxCoeff();
+    g.pin.assign(static_cast<size_t>(g.num_vertices), 0.f);
+    for (int v = 0; v < g.num_vertices; ++v)
+      if (rest(offset + v, 2) > top - 1e-4f) g.pin[static_cast<size_t>(v)] = 1.f;
+    offset += g.num_vertices;
+  }
+  return seq;
+}
+
+// The body around the pinned rings (z >= 2, rings at z = 3.2) turns and shifts rigidly while
+// the body below swings sideways like a leg: the pinned vertices follow the rigid motion
+// exactly, and neither the edge, collision nor friction steps move them afterwards.
+TEST(ClothConstraints, PinnedVerticesMoveRigidlyWithTheBodyUnderThem) {
+  const dataset::Sequence seq = pinned_tubes();
+  const Points body_before = seq.body_at(2), x_before = garments_at(seq, 2);
+  const Eigen::Matrix3f turn = Eigen::AngleAxisf(0.3f, Eigen::Vector3f(1.f, 0.5f, 2.f).normalized()).toRotationMatrix();
+  const Eigen::RowVector3f shift(0.2f, -0.1f, 0.4f);
+  Points body = (body_before * turn.transpose()).rowwise() + shift;
+  int swung = 0;
+  for (Eigen::Index b = 0; b < body.rows(); ++b)
+    if (body_before(b, 2) < 2.f) {
+      body(b, 0) += 0.7f;
+      ++swung;
+    }
+  ASSERT_GT(swung, 16);
+  EvalConfig s;
+  s.body_friction = 1.0;
+  Points x = crumpled(seq);
+  const ConstraintMoves moves = ClothConstraints(seq.info, rest_garments(seq), seq.body_at(0), garments_at(seq, 0), s).apply(body, x, body_before, x_before);
+  EXPECT_EQ(moves.pinned, 2 * 16);
+  EXPECT_GT(moves.edges, 0);
+  Eigen::Index offset = 0;
+  for (const dataset::GarmentMesh& g : seq.info.garments) {
+    for (int v = 0; v < g.num_vertices; ++v) {
+      const Eigen::Index r = offset + v;
+      if (!g.pinned(v)) continue;
+      const Eigen::RowVector3f carried = x_before.row(r) * turn.transpose() + shift;
+      EXPECT_LT((x.row(r) - carried).norm(), 1e-4f) << "row " << r;
+    }
+    offset += g.num_vertices;
+  }
+  s.pins = false;
+  Points free = crumpled(seq);
+  EXPECT_EQ(ClothConstraints(seq.info, rest_garments(seq), seq.body_at(0), garments_at(seq, 0), s).apply(body, free, body_before, x_before).pinned, 0);
+  EXPECT_GT((free - x).norm(), 0.1f);
 }
 
 TEST(ClothConstraints, ANonFiniteFrameIsLeftForTheRolloutToReport) {
   const dataset::Sequence seq = tubes();
   Points x = garments_at(seq, 3);
   x(4, 1) = std::numeric_limits<float>::quiet_NaN();
-  const ConstraintMoves moves = ClothConstraints(seq.info, rest_garments(seq), EvalConfig{}).apply(seq.body_at(3), x);
+  const ConstraintMoves moves = ClothConstraints(seq.info, rest_garments(seq), seq.body_at(0), garments_at(seq, 0), EvalConfig{}).apply(seq.body_at(3), x);
   EXPECT_EQ(moves.edges + moves.body + moves.layer, 0);
   EXPECT_TRUE(std::isnan(x(4, 1)));
 }

@@ -2,6 +2,8 @@
 // arrays, a second run keeps existing sequences (resume), every file passes the D-LAYERS-H5
 // checker, and the garment templates pass their geometric checks. Blender-dependent tests
 // are skipped when Blender is not installed.
+#include "dataset/sequence.h"
+
 #include <gtest/gtest.h>
 
 #include <cstdlib>
@@ -62,11 +64,24 @@ TEST(GenerateTiny, DeterministicResumableAndValid) {
   EXPECT_NE(slurp(dir("a").string() + ".stdout").find("kept (resume)"), std::string::npos);
   EXPECT_EQ(fs::last_write_time(dir("a") / "00000.h5"), before);
   EXPECT_EQ(run("/usr/bin/python3 " + kChecker + " " + dir("a").string()), 0);
+  // Every garment's pinned top ring is stored.
+  const layersnet::dataset::Sequence seq = layersnet::dataset::read_sequence((dir("a") / "00000.h5").string());
+  for (const layersnet::dataset::GarmentMesh& g : seq.info.garments) {
+    int pinned = 0;
+    for (int v = 0; v < g.num_vertices; ++v) pinned += g.pinned(v);
+    EXPECT_GE(pinned, 3) << g.name;
+    EXPECT_LT(pinned, g.num_vertices / 2) << g.name;
+  }
 }
 
 TEST(GenerateGarments, TemplatesHavePanelsMetricUvAndLayerGap) {
   if (run("/usr/bin/python3 -c 'import numpy' > /dev/null 2>&1") != 0) GTEST_SKIP() << "no numpy";
   EXPECT_EQ(run("/usr/bin/python3 " + kSource + "/tests/generate/test_garments.py"), 0);
+}
+
+TEST(GenerateGarments, OlderFilesGetTheGeneratorsPins) {
+  if (run("/usr/bin/python3 -c 'import h5py, numpy' > /dev/null 2>&1") != 0) GTEST_SKIP() << "no h5py/numpy";
+  EXPECT_EQ(run("/usr/bin/python3 " + kSource + "/tests/generate/test_add_pins.py"), 0);
 }
 
 TEST(GenerateRecipes, MediumMotionBlocksAreDisjointAndFit) {
