@@ -12,6 +12,7 @@ run=runs/medium
 out=models/medium
 
 "$bin" generate --recipe generate/recipes/medium.json --out "$data"
+/usr/bin/python3 generate/add_pins.py "$data"   # sets made before the files carried pin weights
 [ -f "$data/stats.h5" ] || "$bin" prepare "$data"
 mkdir -p "$(dirname "$run")"
 if [ -f "$run/config.toml" ]; then

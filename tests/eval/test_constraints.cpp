@@ -222,22 +222,24 @@ dataset::Sequence pinned_tubes() {
   return seq;
 }
 
-// The body around the pinned rings (z >= 2, rings at z = 3.2) turns and shifts rigidly while
-// the body below swings sideways like a leg: the pinned vertices follow the rigid motion
-// exactly, and neither the edge, collision nor friction steps move them afterwards.
+// The body's motion in the pin tests: around the pinned rings (z >= 2, rings at z = 3.2) it
+// turns and shifts rigidly, while the body below swings sideways like a leg.
+const Eigen::Matrix3f kTorsoTurn = Eigen::AngleAxisf(0.3f, Eigen::Vector3f(1.f, 0.5f, 2.f).normalized()).toRotationMatrix();
+const Eigen::RowVector3f kTorsoShift(0.2f, -0.1f, 0.4f);
+Points turned_torso_swung_legs(const Points& body_before) {
+  Points body = (body_before * kTorsoTurn.transpose()).rowwise() + kTorsoShift;
+  for (Eigen::Index b = 0; b < body.rows(); ++b)
+    if (body_before(b, 2) < 2.f) body(b, 0) += 0.7f;
+  return body;
+}
+
+// The pinned vertices follow the torso's rigid motion exactly, whatever the legs do, and
+// neither the edge, collision nor friction steps move them afterwards.
 TEST(ClothConstraints, PinnedVerticesMoveRigidlyWithTheBodyUnderThem) {
   const dataset::Sequence seq = pinned_tubes();
   const Points body_before = seq.body_at(2), x_before = garments_at(seq, 2);
-  const Eigen::Matrix3f turn = Eigen::AngleAxisf(0.3f, Eigen::Vector3f(1.f, 0.5f, 2.f).normalized()).toRotationMatrix();
-  const Eigen::RowVector3f shift(0.2f, -0.1f, 0.4f);
-  Points body = (body_before * turn.transpose()).rowwise() + shift;
-  int swung = 0;
-  for (Eigen::Index b = 0; b < body.rows(); ++b)
-    if (body_before(b, 2) < 2.f) {
-      body(b, 0) += 0.7f;
-      ++swung;
-    }
-  ASSERT_GT(swung, 16);
+  const Points body = turned_torso_swung_legs(body_before);
+  ASSERT_GT(((body - body_before).rowwise().norm().array() > 0.7f).count(), 16) << "the legs swing";
   EvalConfig s;
   s.body_friction = 1.0;
   Points x = crumpled(seq);
@@ -249,7 +251,7 @@ TEST(ClothConstraints, PinnedVerticesMoveRigidlyWithTheBodyUnderThem) {
     for (int v = 0; v < g.num_vertices; ++v) {
       const Eigen::Index r = offset + v;
       if (!g.pinned(v)) continue;
-      const Eigen::RowVector3f carried = x_before.row(r) * turn.transpose() + shift;
+      const Eigen::RowVector3f carried = x_before.row(r) * kTorsoTurn.transpose() + kTorsoShift;
       EXPECT_LT((x.row(r) - carried).norm(), 1e-4f) << "row " << r;
     }
     offset += g.num_vertices;
@@ -258,6 +260,33 @@ TEST(ClothConstraints, PinnedVerticesMoveRigidlyWithTheBodyUnderThem) {
   Points free = crumpled(seq);
   EXPECT_EQ(ClothConstraints(seq.info, rest_garments(seq), seq.body_at(0), garments_at(seq, 0), s).apply(body, free, body_before, x_before).pinned, 0);
   EXPECT_GT((free - x).norm(), 0.1f);
+}
+
+// The body under the pins is chosen in the frame given, not against the rest shape: the same
+// scene laid on its side and moved away (a stress sequence starts in a pose), with the rest
+// shape still upright, carries the pinned rows just as the upright scene does.
+TEST(ClothConstraints, ThePinnedLoopIsFoundInTheGivenFrameNotInTheRestShape) {
+  const dataset::Sequence seq = pinned_tubes();
+  const Eigen::Matrix3f lay = Eigen::AngleAxisf(1.5707963f, Eigen::Vector3f::UnitX()).toRotationMatrix();
+  const Eigen::RowVector3f away(3.f, 1.f, -2.f);
+  const auto posed = [&](const Points& p) -> Points { return (p * lay.transpose()).rowwise() + away; };
+  const Points x_before = garments_at(seq, 2);
+  EvalConfig s;
+  s.strain_limit = 0;
+  s.collision_shell = 0;
+  Points x = posed(crumpled(seq));
+  const ConstraintMoves moves = ClothConstraints(seq.info, rest_garments(seq), posed(seq.body_at(0)), posed(garments_at(seq, 0)), s)
+                                    .apply(posed(turned_torso_swung_legs(seq.body_at(2))), x, posed(seq.body_at(2)), posed(x_before));
+  EXPECT_EQ(moves.pinned, 2 * 16);
+  Eigen::Index offset = 0;
+  for (const dataset::GarmentMesh& g : seq.info.garments) {
+    for (int v = 0; v < g.num_vertices; ++v)
+      if (g.pinned(v)) {
+        const Points carried = posed((x_before.row(offset + v) * kTorsoTurn.transpose() + kTorsoShift).eval());
+        EXPECT_LT((x.row(offset + v) - carried.row(0)).norm(), 1e-4f) << "row " << offset + v;
+      }
+    offset += g.num_vertices;
+  }
 }
 
 TEST(ClothConstraints, ANonFiniteFrameIsLeftForTheRolloutToReport) {
