@@ -19,7 +19,8 @@
 // them, x_{t+1} = R x_t + c, where (R, c) is the least-squares rigid motion of that body region
 // (the body vertices inside the loop the pinned vertices draw, in frame 0) from frame t to t+1.
 // The data's simulator skins pinned cloth to the torso bones, so a free network prediction of
-// them is wasted; no later step moves them (inverse mass 0 in the edge and fold steps).
+// them is wasted; no later step moves them (inverse mass 0 in the edge and fold steps; the
+// friction and collision steps skip them).
 // Then, when body_friction μ > 0, contact friction:
 //   0. every garment vertex whose nearest body vertex h (frame t+1) lies within `reach` and
 //      (x − h)·n < friction_distance loses μ of its displacement relative to h's, tangentially:
