@@ -57,6 +57,12 @@ int run_simulate(SimulateCliOptions& o) {
   Eigen::setNbThreads(1);  // the model's ops own the threads; nested GEMM threads only contend
   auto model = eval::load_model_predictor(checkpoint, checkpoint, nullptr);
   model->apply_eval_settings(o.settings);
+  bool any_pins = false;
+  for (const auto& pins : scene.pins) any_pins = any_pins || !pins.empty();
+  if (any_pins && !(model->config().eval.constraints && model->config().eval.pins))
+    std::fprintf(stderr, "simulate: warning: the pinned vertices stay free, because the model's rollouts have %s; "
+                         "add --set eval.constraints=true --set eval.pins=true to hold them\n",
+                 model->config().eval.constraints ? "eval.pins = false" : "no cloth constraints (eval.constraints = false)");
   std::fprintf(stderr, "simulate: %d garments, %d body frames at %g fps, model %s\n",
                scene.sequence.info.num_garments(), scene.body_frames, scene.sequence.info.fps, checkpoint.c_str());
   const eval::Rollout r = eval::simulate_scene(*model, scene, progress_reporter());

@@ -468,6 +468,10 @@ Scene build_scene(const SceneInputs& in) {
       pins = top_ring(g.rest, g.faces, gi.obj);
     else if (!gi.pins.empty())
       pins = read_pin_file(gi.pins, g.num_vertices, gi.obj);
+    if (!pins.empty()) {
+      g.pin.assign(static_cast<size_t>(g.num_vertices), 0.f);
+      for (int32_t v : pins) g.pin[static_cast<size_t>(v)] = 1.f;
+    }
     scene.pins.push_back(std::move(pins));
     Points frames(static_cast<Eigen::Index>(T) * g.num_vertices, 3);
     for (int t = 0; t < T; ++t) frames.middleRows(static_cast<Eigen::Index>(t) * g.num_vertices, g.num_vertices) = g.rest;
@@ -504,39 +508,16 @@ Scene build_scene(const SceneInputs& in) {
 
 namespace {
 
-// The model, with pinned vertices held at their offsets from the body and progress reported.
+// The model with progress reported (the pins act inside the model's cloth constraints).
 class ScenePredictor : public Predictor {
  public:
   ScenePredictor(Predictor& model, const Scene& scene, const ProgressFn& progress)
       : model_(model), scene_(scene), progress_(progress) {}
   std::string name() const override { return model_.name(); }
-  void begin(const dataset::Sequence& seq) override {
-    model_.begin(seq);
-    rows_.clear();
-    body_vertex_.clear();
-    offset_.resize(0, 3);
-    Eigen::Index first = 0;
-    std::vector<Eigen::Index> rows;
-    for (int g = 0; g < seq.info.num_garments(); ++g) {
-      for (int32_t v : scene_.pins[g]) rows.push_back(first + v);
-      first += seq.info.garments[g].num_vertices;
-    }
-    if (rows.empty()) return;
-    const Points start = garments_at(seq, 0);
-    Points pinned(static_cast<Eigen::Index>(rows.size()), 3);
-    for (size_t i = 0; i < rows.size(); ++i) pinned.row(i) = start.row(rows[i]);
-    const dataset::NearestBody nearest = dataset::nearest_body(pinned, seq.body_at(0));
-    offset_.resize(pinned.rows(), 3);
-    for (Eigen::Index i = 0; i < pinned.rows(); ++i)
-      offset_.row(i) = pinned.row(i) - seq.body_at(0).row(nearest.index[i]);
-    rows_ = std::move(rows);
-    body_vertex_ = nearest.index;
-  }
+  void begin(const dataset::Sequence& seq) override { model_.begin(seq); }
   Points step(const dataset::Sequence& seq, int t, const Points& x_prev2, const Points& x_prev,
               const Points& x_now) override {
     Points x = model_.step(seq, t, x_prev2, x_prev, x_now);
-    const auto body = seq.body_at(t + 1);
-    for (size_t i = 0; i < rows_.size(); ++i) x.row(rows_[i]) = body.row(body_vertex_[i]) + offset_.row(i);
     ++done_;
     if (progress_) progress_(done_, scene_.body_frames - 1);
     return x;
@@ -546,9 +527,6 @@ class ScenePredictor : public Predictor {
   Predictor& model_;
   const Scene& scene_;
   const ProgressFn& progress_;
-  std::vector<Eigen::Index> rows_;
-  std::vector<int32_t> body_vertex_;
-  Points offset_;
   int done_ = 0;
 };
 

@@ -39,8 +39,10 @@ class SimulateError : public std::runtime_error {
 
 // How a garment's vertices are held: none, the vertices of a file (0-based indices separated by
 // spaces, commas or new lines; '#' starts a comment), or the rule "top-ring" (the open border
-// loop highest along the up axis, e.g. a skirt's waist). A pinned vertex keeps its offset from
-// its nearest body vertex of the first frame (translation only).
+// loop highest along the up axis, e.g. a skirt's waist). The pinned vertices become the
+// garment's pin weights (also in scene.h5) and move rigidly with the body inside their loop, as
+// the data's pinned waistbands do, through the model's cloth constraints (eval.constraints and
+// eval.pins; run/cloth_constraints.h).
 struct GarmentInput {
   std::string obj;   // OBJ with vt, posed on the body's first frame
   std::string name;  // empty: the file's stem (made unique)
