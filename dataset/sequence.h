@@ -20,6 +20,7 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
+#include <algorithm>
 #include <cstdint>
 #include <memory>
 #include <span>
@@ -56,6 +57,9 @@ struct GarmentMesh {
   // weight >= kPinnedWeight is attached to the body (a waistband, a top edge).
   std::vector<float> pin;
   bool pinned(int v) const { return !pin.empty() && pin[static_cast<size_t>(v)] >= kPinnedWeight; }
+  int num_pinned() const {
+    return static_cast<int>(std::count_if(pin.begin(), pin.end(), [](float w) { return w >= kPinnedWeight; }));
+  }
   GarmentAttributes attributes;
   int num_faces() const { return static_cast<int>(faces.rows()); }
 };

@@ -249,7 +249,7 @@ void inspect_dataset(const InspectOptions& o, const SampleOptions& sample_option
                       "bending %.3g, mass %.3g, self-friction %.3g)\n",
                       g.name.c_str(), g.type.c_str(), g.num_vertices, g.num_faces(),
                       static_cast<int>(std::set<int32_t>(g.panel.begin(), g.panel.end()).size()), p.num_patches,
-                      static_cast<int>(std::count_if(g.pin.begin(), g.pin.end(), [](float w) { return w >= kPinnedWeight; })),
+                      g.num_pinned(),
                       g.attributes.tension_stiffness, g.attributes.bending_stiffness, g.attributes.mass,
                       g.attributes.self_friction);
       }

@@ -96,8 +96,7 @@ bool run_stress(const StressOptions& o) {
     std::printf("patch tether off (eval.patch_tether = 0); the data's own max offset / rest patch radius: %.3f\n", data_tether);
   if (config.eval.constraints) {
     int pinned = 0;
-    for (const dataset::GarmentMesh& g : source.info.garments)
-      for (int v = 0; v < g.num_vertices; ++v) pinned += g.pinned(v);
+    for (const dataset::GarmentMesh& g : source.info.garments) pinned += g.num_pinned();
     std::printf("cloth constraints on: edge strain <= %g, collision shell %g units, %d passes per frame, body friction %g "
                 "within %g units, %d pinned vertices %s (run/cloth_constraints.h)\n",
                 config.eval.strain_limit, config.eval.collision_shell, config.eval.constraint_iterations,

@@ -10,6 +10,7 @@
 #include <limits>
 #include <map>
 #include <memory>
+#include <numeric>
 
 namespace layersnet {
 namespace {
@@ -94,20 +95,20 @@ std::vector<int32_t> pin_carriers(const std::vector<int32_t>& pinned_rows, const
   float radius = 0.f;
   for (int32_t r : pinned_rows) radius += across(garments.row(r));
   radius /= static_cast<float>(pinned_rows.size());
-  std::vector<int32_t> inside, near;
+  std::vector<int32_t> inside;
   for (Eigen::Index b = 0; b < body.rows(); ++b) {
     const Eigen::RowVector3f p = body.row(b);
     if (p[up] >= low - band && p[up] <= high + band && across(p) < radius) inside.push_back(static_cast<int32_t>(b));
-    for (int32_t r : pinned_rows)
-      if ((p - garments.row(r)).norm() <= band) {
-        near.push_back(static_cast<int32_t>(b));
-        break;
-      }
   }
   if (inside.size() >= 3) return inside;
+  std::vector<int32_t> near;
+  for (Eigen::Index b = 0; b < body.rows(); ++b)
+    if (std::any_of(pinned_rows.begin(), pinned_rows.end(),
+                    [&](int32_t r) { return (body.row(b) - garments.row(r)).norm() <= band; }))
+      near.push_back(static_cast<int32_t>(b));
   if (near.size() >= 3) return near;
   std::vector<int32_t> all(static_cast<size_t>(body.rows()));
-  for (size_t b = 0; b < all.size(); ++b) all[b] = static_cast<int32_t>(b);
+  std::iota(all.begin(), all.end(), 0);
   return all;
 }
 
@@ -235,8 +236,10 @@ ConstraintMoves ClothConstraints::project(const Eigen::Ref<const dataset::Points
   if (!x.allFinite()) return moves;
   const auto shell = static_cast<float>(settings_.collision_shell);
   const auto mu = static_cast<float>(settings_.body_friction);
-  const bool friction = (mu > 0 || settings_.layer_friction > 0) && body_before && x_before && x_before->rows() == x.rows() &&
-                        body_before->rows() == body.rows() && x_before->allFinite();
+  // The pins and the friction move vertices relative to the frame before.
+  const bool have_before = body_before && x_before && x_before->rows() == x.rows() && body_before->rows() == body.rows() &&
+                           x_before->allFinite();
+  const bool friction = (mu > 0 || settings_.layer_friction > 0) && have_before;
   // The body does not move between passes: its normals and k-d tree serve them all.
   std::unique_ptr<dataset::NearestVertexIndex> body_index;
   dataset::Points body_normals;
@@ -244,9 +247,7 @@ ConstraintMoves ClothConstraints::project(const Eigen::Ref<const dataset::Points
     body_index = std::make_unique<dataset::NearestVertexIndex>(body);
     body_normals = dataset::vertex_normals(body, body_faces_);
   }
-  if (!pin_groups_.empty() && body_before && x_before && x_before->rows() == x.rows() &&
-      body_before->rows() == body.rows() && x_before->allFinite())
-    moves.pinned += carry_pinned(body, x, *body_before, *x_before);
+  if (!pin_groups_.empty() && have_before) moves.pinned += carry_pinned(body, x, *body_before, *x_before);
   if (friction) {
     const auto within = static_cast<float>(settings_.friction_distance);
     if (mu > 0)
