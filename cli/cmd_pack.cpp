@@ -2,6 +2,8 @@
 // statistics and the resolved config of a checkpoint, without the optimizer state (Adam's
 // moments are twice the weights). Every command that takes --checkpoint reads the result;
 // `train --resume` refuses it. --set changes rollout settings (eval.*) in the packed config.
+// --average adds checkpoints of the same model whose weights are averaged with the first's
+// (e.g. a run's last epochs).
 #include "cli/command_registry.h"
 #include "cli/model_option.h"
 #include "run/checkpoint.h"
@@ -15,13 +17,14 @@ struct PackOptions {
   layersnet::cli::ModelOption model;
   std::string out;
   std::vector<std::string> settings;  // "eval.KEY=VALUE" written into the packed config
+  std::vector<std::string> averaged;  // further checkpoints whose weights are averaged in
 };
 
 int run_pack(const PackOptions& o) {
   const std::string checkpoint = o.model.required_path();
-  layersnet::LoadedModel m = layersnet::load_model(checkpoint);
-  m.checkpoint.has_optimizer = false;
-  m.checkpoint.state.rng.clear();
+  std::vector<std::string> sources{checkpoint};
+  sources.insert(sources.end(), o.averaged.begin(), o.averaged.end());
+  layersnet::LoadedModel m = layersnet::average_models(sources);
   if (!o.settings.empty()) {
     for (const auto& s : o.settings) layersnet::apply_rollout_override(m.config, s);
     m.checkpoint.config_toml = layersnet::to_toml(m.config);
@@ -29,6 +32,7 @@ int run_pack(const PackOptions& o) {
   const std::filesystem::path parent = std::filesystem::path(o.out).parent_path();
   if (!parent.empty()) std::filesystem::create_directories(parent);
   layersnet::write_checkpoint(o.out, m.params, m.checkpoint);
+  if (sources.size() > 1) std::printf("weights: the mean of %zu checkpoints\n", sources.size());
   std::printf("packed %s -> %s (%zu weights, %.2f MB; epoch %lld, %lld updates, best validation error %.6g)\n",
               checkpoint.c_str(), o.out.c_str(), m.params.values().size(),
               static_cast<double>(std::filesystem::file_size(o.out)) / 1e6, static_cast<long long>(m.checkpoint.state.epoch),
@@ -45,5 +49,9 @@ LAYERSNET_COMMAND(pack, "Write a checkpoint's weights, statistics and config wit
                     sub.add_option("--out", o->out, "model file to write (e.g. models/medium/model.h5)")->required();
                     sub.add_option("--set", o->settings,
                                    "rollout setting stored with the model, e.g. --set eval.constraints=true (eval.* keys only)");
+                    sub.add_option("--average", o->averaged,
+                                   "another checkpoint of the same model and data whose weights are averaged with --checkpoint's "
+                                   "(repeat it; e.g. a run's last epochs)")
+                        ->check(CLI::ExistingFile);
                     return [o] { return run_pack(*o); };
                   });

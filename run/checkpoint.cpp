@@ -12,7 +12,9 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <span>
 #include <sstream>
+#include <utility>
 
 namespace layersnet {
 
@@ -314,6 +316,38 @@ LoadedModel load_model(const std::string& checkpoint_path) {
   model::register_params(m.params, m.config.model);
   m.checkpoint = read_checkpoint(checkpoint_path, m.params);
   return m;
+}
+
+LoadedModel average_models(const std::vector<std::string>& checkpoint_paths) {
+  if (checkpoint_paths.empty()) throw CheckpointError("average_models: no checkpoint given");
+  LoadedModel mean = load_model(checkpoint_paths.front());
+  mean.checkpoint.has_optimizer = false;
+  mean.checkpoint.state.rng.clear();
+  std::vector<double> sum(mean.params.values().begin(), mean.params.values().end());
+  for (std::size_t k = 1; k < checkpoint_paths.size(); ++k) {
+    const std::string& path = checkpoint_paths[k];
+    Config other = parse_config_text(read_checkpoint_config(path), path + ":/config");
+    // Only the model section has to agree: training and rollout settings do not change what a weight means.
+    other.loss = mean.config.loss;
+    other.data = mean.config.data;
+    other.train = mean.config.train;
+    other.eval = mean.config.eval;
+    if (to_toml(other) != to_toml(mean.config))
+      throw CheckpointError(path + ": its [model] settings differ from " + checkpoint_paths.front() +
+                            "'s; only checkpoints of one model can be averaged");
+    ad::ParamStore<float> params;
+    model::register_params(params, other.model);
+    const Checkpoint c = read_checkpoint(path, params);
+    if (c.stats != mean.checkpoint.stats)
+      throw CheckpointError(path + ": its normalisation statistics (/stats) differ from " + checkpoint_paths.front() +
+                            "'s; average checkpoints of runs on the same data");
+    const std::span<const float> v = std::as_const(params).values();
+    for (std::size_t i = 0; i < sum.size(); ++i) sum[i] += v[i];
+  }
+  const double n = static_cast<double>(checkpoint_paths.size());
+  std::span<float> out = mean.params.values();
+  for (std::size_t i = 0; i < sum.size(); ++i) out[i] = static_cast<float>(sum[i] / n);
+  return mean;
 }
 
 }  // namespace layersnet

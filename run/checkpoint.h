@@ -75,4 +75,10 @@ struct LoadedModel {
 };
 LoadedModel load_model(const std::string& checkpoint_path);
 
+// The element-wise mean of the weights of `checkpoint_paths` (at least one), for averaging
+// the last epochs of one run: the config, statistics and state are the first file's, without
+// optimizer state. Throws CheckpointError naming the file when its model settings or its
+// normalisation statistics differ from the first's (their weights would not mean the same).
+LoadedModel average_models(const std::vector<std::string>& checkpoint_paths);
+
 }  // namespace layersnet

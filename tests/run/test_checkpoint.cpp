@@ -252,5 +252,59 @@ TEST_F(CheckpointTest, LoadModelRebuildsTheModelFromTheEmbeddedConfig) {
   EXPECT_TRUE(same_tensors(params, loaded.params));
 }
 
+TEST_F(CheckpointTest, AveragedModelHoldsTheMeanWeightsAndRefusesOtherModelsOrData) {
+  Config config = load_config({std::string(LAYERSNET_SOURCE_DIR) + "/configs/tiny.toml"});
+  const auto write_model = [&](const Config& c, unsigned seed, double stat, const std::string& name) {
+    ad::ParamStore<float> params;
+    model::register_params(params, c.model);
+    model::init_params(params, c.model, seed);
+    Checkpoint cp;
+    cp.config_toml = to_toml(c);
+    cp.stats["velocity.mean"] = {stat, 0.0, 0.0};
+    const std::string path = (dir_ / name).string();
+    write_checkpoint(path, params, cp);
+    return path;
+  };
+  const std::string a = write_model(config, 1, 0.5, "a.h5");
+  const std::string b = write_model(config, 2, 0.5, "b.h5");
+  Config other_training = config;
+  other_training.train.learning_rate *= 2;  // training settings may differ
+  const std::string c = write_model(other_training, 3, 0.5, "c.h5");
+
+  const LoadedModel la = load_model(a), lb = load_model(b), lc = load_model(c);
+  const LoadedModel mean = average_models({a, b, c});
+  EXPECT_FALSE(mean.checkpoint.has_optimizer);
+  EXPECT_EQ(to_toml(mean.config), to_toml(la.config));
+  int differing = 0;
+  for (const auto& e : la.params.entries()) {
+    for (int64_t k = 0; k < e.size(); ++k) {
+      const std::size_t i = e.offset + static_cast<std::size_t>(k);
+      const double expected = (static_cast<double>(la.params.values()[i]) + lb.params.values()[i] + lc.params.values()[i]) / 3;
+      EXPECT_NEAR(mean.params.values()[i], expected, 1e-6 * (1 + std::abs(expected)));
+      differing += la.params.values()[i] != lb.params.values()[i];
+    }
+  }
+  EXPECT_GT(differing, 0);  // the seeds gave different weights, so the mean is not a copy
+
+  const std::string other_data = write_model(config, 4, 0.7, "other_data.h5");
+  try {
+    average_models({a, other_data});
+    ADD_FAILURE() << "statistics of other data were averaged in";
+  } catch (const CheckpointError& e) {
+    EXPECT_NE(std::string(e.what()).find("other_data.h5"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("statistics"), std::string::npos) << e.what();
+  }
+  Config other_radius = config;
+  other_radius.model.world_radius *= 2;  // same shapes, another model
+  const std::string other_model = write_model(other_radius, 5, 0.5, "other_model.h5");
+  try {
+    average_models({a, other_model});
+    ADD_FAILURE() << "another model was averaged in";
+  } catch (const CheckpointError& e) {
+    EXPECT_NE(std::string(e.what()).find("other_model.h5"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("[model]"), std::string::npos) << e.what();
+  }
+}
+
 }  // namespace
 }  // namespace layersnet
