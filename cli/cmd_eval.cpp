@@ -71,6 +71,10 @@ LAYERSNET_COMMAND(eval, "Roll out checkpoints and baselines over a split; error,
                                    "input frame t0 of a fixed start, and of --start ramp for files without the ramp "
                                    "attributes (default: data.first_frame)");
                     sub.add_option("--max-sequences", o->max_sequences, "evaluate only the first N sequences (0 = all)");
+                    sub.add_option("--wind-scale", o->wind_scale,
+                                   "factor on the data's wind strengths as the models see them; the ground truth "
+                                   "is unchanged (0: how much a model's error owes to its response to the wind)")
+                        ->check(layersnet::cli::kFiniteNonNegative);
                     sub.add_option("--speed-frames", o->speed_frames, "frames of the 1- and 2-thread speed rollouts")
                         ->check(CLI::Range(1, 1000000));
                     sub.add_option("--tether", o->tethers,

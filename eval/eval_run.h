@@ -22,6 +22,7 @@ struct EvalRunOptions {
   int start_frame = -1;
   std::string start;                     // ramp | fixed; empty: ramp, or fixed when start_frame is given
   int max_sequences = 0;
+  double wind_scale = 1.0;               // EvalOptions::wind_scale
   int speed_frames = 10;
   std::string out = "eval_out";
   std::vector<ad::MatmulPrecision> precisions = {ad::MatmulPrecision::kFloat32};  // every model once per entry

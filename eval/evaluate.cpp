@@ -124,7 +124,8 @@ std::vector<MethodResult> evaluate(const dataset::DatasetManifest& manifest, std
   std::vector<MethodResult> results(predictors.size());
   for (size_t p = 0; p < predictors.size(); ++p) results[p].name = predictors[p]->name();
   for (const std::string& id : ids) {
-    const dataset::Sequence seq = dataset::read_sequence(manifest.sequence_path(id));
+    dataset::Sequence seq = dataset::read_sequence(manifest.sequence_path(id));
+    if (seq.info.has_wind) seq.info.wind_strength *= static_cast<float>(o.wind_scale);
     const RolloutStart start = rollout_start(manifest.sequence_path(id), o);
     CollisionOptions co;
     co.max_body_distance = o.max_body_distance_m * seq.info.scale;

@@ -77,6 +77,10 @@ struct EvalOptions {
   int max_sequences = 0;    // 0 = every sequence of the split
   double max_body_distance_m = 0.5;   // H-collision distance limit in metres (official 5.0 units at scale 10)
   double max_layer_distance_m = 0.05; // "near" L-collision distance limit in metres
+  // Factor on the data's wind strengths as every predictor sees them (1 = the data's); the
+  // ground truth the rollouts are scored against is unchanged. With 0 or 2 it measures how much
+  // a model responds to the wind.
+  double wind_scale = 1.0;
 };
 
 // Table-1 subsets of a data set: id -> subset names, from dataset.json "subsets" (written by

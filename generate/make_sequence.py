@@ -68,6 +68,9 @@ DEFAULTS = {
     # generator so every other draw is unchanged: a twin of a sequence that differs only by
     # an imperceptible nudge measures how predictable the solver's cloth is.
     "cloth_jitter": 0.0,
+    # Factor on every drawn wind strength, applied after the draws so nothing else changes: a
+    # twin with 0 measures how much of a sequence's cloth motion the wind makes.
+    "wind_scale": 1.0,
 }
 SPLIT_CODE = motion_blocks.SPLIT_CODE
 
@@ -290,6 +293,8 @@ def main():
     outer_kind = str(rng.choice(cfg["outer_kinds"]))
     layer_attrs, body_friction = outfits.sample_attributes(rng, cfg["ranges"])
     pivots = sample_wind(rng, cfg, T)
+    for p in pivots:
+        p["strength"] *= float(cfg["wind_scale"])
     warp = sample_time_warp(rng, cfg)
     pose_blend = float(rng.uniform(*cfg["pose_blend_range"])) if cfg["pose_blend_range"][0] < 1 else 1.0
     skel = body_rig.skeleton_of(clip)

@@ -98,6 +98,32 @@ TEST_F(EvalCli, EvalWritesReportsAndPrintsTheSummaryTable) {
   }
 }
 
+// --wind-scale changes the wind only as the models see it: the model's rollouts move, the
+// baselines and the ground truth they are scored against do not, and the reports say so.
+TEST_F(EvalCli, WindScaleChangesWhatTheModelSeesNotTheTruth) {
+  const auto errors = [&](const std::string& extra, const std::string& name) {
+    int code = 0;
+    const fs::path out = root_ / name;
+    const std::string text = run("eval --checkpoint " + (root_ / "tiny.h5").string() +
+                                     " --frames 3 --speed-frames 1 --out " + out.string() + extra,
+                                 &code);
+    EXPECT_EQ(code, 0) << text;
+    const auto j = nlohmann::json::parse(slurp(out / "eval.json"));
+    std::vector<double> e;
+    for (const auto& m : j["methods"]) e.push_back(m["summary"]["error_mm"]["mean"].get<double>());
+    return std::make_pair(e, j["wind_scale"].get<double>());
+  };
+  const auto [data_wind, scale_1] = errors("", "eval_wind_1");
+  const auto [calm, scale_0] = errors(" --wind-scale 0", "eval_wind_0");
+  EXPECT_EQ(scale_1, 1.0);
+  EXPECT_EQ(scale_0, 0.0);
+  ASSERT_EQ(data_wind.size(), 4u);  // model, 2 baselines, ground truth
+  ASSERT_EQ(calm.size(), 4u);
+  EXPECT_NE(data_wind[0], calm[0]);  // the model reads the wind
+  for (std::size_t k = 1; k < 4; ++k) EXPECT_EQ(data_wind[k], calm[k]) << k;
+  EXPECT_NE(slurp(root_ / "eval_wind_0" / "eval.md").find("wind strengths x 0"), std::string::npos);
+}
+
 TEST_F(EvalCli, StartsAfterTheRampByDefaultOrAtAFixedInputFrame) {
   // A copy of the data whose first test sequence has the generator's ramp attributes (the
   // second has none and takes the fixed start, data.first_frame = 2).
