@@ -9,6 +9,7 @@
 #include <Eigen/Core>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <memory>
@@ -57,8 +58,8 @@ int run_simulate(SimulateCliOptions& o) {
   Eigen::setNbThreads(1);  // the model's ops own the threads; nested GEMM threads only contend
   auto model = eval::load_model_predictor(checkpoint, checkpoint, nullptr);
   model->apply_eval_settings(o.settings);
-  bool any_pins = false;
-  for (const auto& pins : scene.pins) any_pins = any_pins || !pins.empty();
+  const auto& garments = scene.sequence.info.garments;
+  const bool any_pins = std::any_of(garments.begin(), garments.end(), [](const auto& g) { return g.num_pinned() > 0; });
   if (any_pins && !(model->config().eval.constraints && model->config().eval.pins))
     std::fprintf(stderr, "simulate: warning: the pinned vertices stay free, because the model's rollouts have %s; "
                          "add --set eval.constraints=true --set eval.pins=true to hold them\n",
