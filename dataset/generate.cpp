@@ -84,6 +84,32 @@ std::vector<std::string> split_names(int count, double val_fraction, double test
   return out;
 }
 
+// Listed index ranges; see generate.h.
+std::vector<std::string> split_names_from_ranges(int count, const json& ranges, const std::string& where) {
+  if (!ranges.is_object()) throw GenerateError(where + ": must be an object such as {\"val\": [[36, 40]], \"test\": [[40, 48]]}");
+  std::vector<std::string> out(count, "train");
+  std::vector<bool> listed(count, false);
+  for (const auto& [split, list] : ranges.items()) {
+    if (split != "val" && split != "test")
+      throw GenerateError(where + ": unknown split '" + split + "' (list val and test; every other index is train)");
+    if (!list.is_array()) throw GenerateError(where + "/" + split + ": must be a list of [first, end) index pairs");
+    for (const json& range : list) {
+      if (!range.is_array() || range.size() != 2 || !range[0].is_number_integer() || !range[1].is_number_integer())
+        throw GenerateError(where + "/" + split + ": " + range.dump() + " is not a [first, end) pair of indices");
+      const int first = range[0].get<int>(), end = range[1].get<int>();
+      if (first < 0 || end > count || first >= end)
+        throw GenerateError(where + "/" + split + ": " + range.dump() + " must satisfy 0 <= first < end <= count (" +
+                            std::to_string(count) + ")");
+      for (int i = first; i < end; ++i) {
+        if (listed[i]) throw GenerateError(where + ": index " + std::to_string(i) + " is listed twice");
+        listed[i] = true;
+        out[i] = split;
+      }
+    }
+  }
+  return out;
+}
+
 std::vector<std::string> failed_gates(const json& report, const Gates& g) {
   std::vector<std::string> failed;
   if (!report.value("finite", false)) failed.push_back("non-finite positions");
@@ -143,8 +169,11 @@ GenerateSummary generate_dataset(const GenerateOptions& opt) {
   const fs::path script = opt.script;
   const fs::path recipe_path = opt.recipe;
   json recipe = read_json(recipe_path);
-  check_keys(recipe, {"comment", "count", "seed", "val_fraction", "test_fraction", "max_attempts", "gates", "scene"},
+  check_keys(recipe, {"comment", "count", "seed", "val_fraction", "test_fraction", "split_ranges", "max_attempts", "gates",
+                      "scene"},
              recipe_path.string());
+  if (recipe.contains("split_ranges") && (recipe.contains("val_fraction") || recipe.contains("test_fraction")))
+    throw GenerateError(recipe_path.string() + ": split_ranges and val_fraction/test_fraction both set; keep one of them");
   if (recipe.contains("gates"))
     check_keys(recipe["gates"], {"max_inside_body_share", "max_outer_inside_inner_share", "max_edge_stretch",
                                  "max_p99_edge_stretch"}, recipe_path.string() + ": /gates");
@@ -168,7 +197,10 @@ GenerateSummary generate_dataset(const GenerateOptions& opt) {
   fs::create_directories(out / "logs");
   const fs::path scene_json = out / "scene.json";
   io::write_file_atomic(scene_json, scene.dump(1));
-  const auto splits = split_names(count, recipe.value("val_fraction", 0.125), recipe.value("test_fraction", 0.125));
+  const auto splits =
+      recipe.contains("split_ranges")
+          ? split_names_from_ranges(count, recipe["split_ranges"], recipe_path.string() + ": /split_ranges")
+          : split_names(count, recipe.value("val_fraction", 0.125), recipe.value("test_fraction", 0.125));
 
   json sequences = json::array();
   int accepted = 0, dropped = 0, regenerated = 0, generated_now = 0;

@@ -55,6 +55,11 @@ GenerateSummary generate_dataset(const GenerateOptions& options);
 // Split of each index: contiguous blocks (train, then val, then test); at least one val and
 // one test from 3 sequences on.
 std::vector<std::string> split_names(int count, double val_fraction, double test_fraction);
+// Split of each index from a recipe's "split_ranges": {"val": [[first, end), ...], "test": [...]};
+// every index not listed is train. A set can so grow its training split while its val and test
+// sequences keep their indices, hence their seeds and files. Throws GenerateError naming `where`
+// for an unknown split, a bad or out-of-range pair, or an index listed twice.
+std::vector<std::string> split_names_from_ranges(int count, const nlohmann::json& ranges, const std::string& where);
 // The failed gates of a make_sequence.py report (empty: accepted).
 std::vector<std::string> failed_gates(const nlohmann::json& report, const Gates& gates);
 // Well-spread seed of a sequence from (data set seed, index, attempt).

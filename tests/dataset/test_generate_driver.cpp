@@ -35,6 +35,24 @@ TEST(GenerateDriver, SplitsAreContiguousBlocksWithOneValAndTestFromThree) {
   EXPECT_EQ(s[14], "test");
 }
 
+TEST(GenerateDriver, ListedRangesKeepValAndTestIndicesAndRefuseBadLists) {
+  const auto s = split_names_from_ranges(10, json::parse(R"({"val": [[3, 4]], "test": [[4, 6]]})"), "r.json");
+  EXPECT_EQ(s, (std::vector<std::string>{"train", "train", "train", "val", "test", "test", "train", "train", "train",
+                                         "train"}));
+  auto message = [](const char* ranges) {
+    try {
+      split_names_from_ranges(10, json::parse(ranges), "r.json: /split_ranges");
+    } catch (const GenerateError& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_NE(message(R"({"val": [[3, 5]], "test": [[4, 6]]})").find("index 4 is listed twice"), std::string::npos);
+  EXPECT_NE(message(R"({"test": [[8, 11]]})").find("r.json: /split_ranges/test: [8,11] must satisfy"), std::string::npos);
+  EXPECT_NE(message(R"({"train": [[0, 2]]})").find("unknown split 'train'"), std::string::npos);
+  EXPECT_NE(message(R"({"val": [3, 4]})").find("is not a [first, end) pair"), std::string::npos);
+}
+
 TEST(GenerateDriver, GatesNameWhatFailed) {
   EXPECT_TRUE(failed_gates(passing_report(), Gates{}).empty());
   json r = passing_report();
@@ -106,6 +124,20 @@ TEST(GenerateDriver, WholeRunWithAStandInBlender) {
   const DatasetManifest m2 = read_manifest(o.out);
   EXPECT_EQ(m2.all_ids(), m.all_ids());
   EXPECT_EQ(m2.extra, m.extra);
+
+  // Growing the training split: listed ranges keep val and test at their indices, so the three
+  // sequences are kept and only the new index is simulated, as train.
+  std::ofstream(recipe) << R"({"count": 4, "seed": 4, "split_ranges": {"val": [[1, 2]], "test": [[2, 3]]},
+                               "scene": {"frames": 6}})";
+  const GenerateSummary grown = generate_dataset(o);
+  EXPECT_EQ(grown.accepted, 4);
+  EXPECT_EQ(fs::last_write_time(fs::path(o.out) / "00002.h5"), written);
+  const DatasetManifest m3 = read_manifest(o.out);
+  EXPECT_EQ(m3.train, (std::vector<std::string>{"00000", "00003"}));
+  EXPECT_EQ(m3.val, m.val);
+  EXPECT_EQ(m3.test, m.test);
+  std::ofstream(recipe) << R"({"count": 4, "seed": 4, "test_fraction": 0.25, "split_ranges": {"test": [[3, 4]]}})";
+  EXPECT_THROW(generate_dataset(o), GenerateError);
   fs::remove_all(dir);
 }
 

@@ -2,7 +2,8 @@
 """The medium recipe's motion blocks: no two splits share a BVH frame, no block shares one
 with the default recipe's training blocks, every block fits a whole sequence at the slowest
 speed, and every clip on the machine is used. The time map plays a constant speed exactly
-as the linear formula and a warp with mean 1 spans the same frames."""
+as the linear formula and a warp with mean 1 spans the same frames. The medium_plus recipe
+keeps the medium set's sequences and splits and adds training sequences."""
 import json
 import os
 import sys
@@ -43,6 +44,16 @@ def main():
     clips = sorted(f for f in os.listdir(motion_blocks.BVH_DIR) if f.endswith(".bvh"))
     assert sorted({b[1] for b in blocks}) == clips, clips
     assert medium["frames"] - medium["rest_frames"] - medium["ramp_frames"] >= 80
+    # medium_plus grows only the training split: medium's seed, scene and val/test indices, so
+    # its first 48 sequences are medium's files.
+    plus = json.load(open(os.path.join(RECIPES, "medium_plus.json")))
+    medium_recipe = json.load(open(os.path.join(RECIPES, "medium.json")))
+    assert plus["scene"] == medium and plus["seed"] == medium_recipe["seed"]
+    n = medium_recipe["count"]
+    n_test = round(n * medium_recipe["test_fraction"])
+    n_val = round(n * medium_recipe["val_fraction"])
+    assert plus["split_ranges"] == {"val": [[n - n_test - n_val, n - n_test]], "test": [[n - n_test, n]]}, plus
+    assert plus["count"] > n
     # Time map: one step is the linear map, bit for bit; a warp with mean factor 1 over the
     # moving frames ends where the constant speed ends, and is increasing.
     keys = np.arange(0.0, 3000.0, 1.0)
