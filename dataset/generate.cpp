@@ -228,6 +228,7 @@ GenerateSummary generate_dataset(const GenerateOptions& opt) {
     std::vector<std::string> reasons;
     bool ok = false;
     int attempt = 0;
+    const double spent_before = spent;
     for (; attempt < max_attempts && !ok; ++attempt) {
       const long long sseed = sequence_seed(seed, i, attempt);
       const fs::path rep_path = out / "reports" / (id + ".attempt" + std::to_string(attempt) + ".json");
@@ -286,7 +287,7 @@ GenerateSummary generate_dataset(const GenerateOptions& opt) {
     const double mean = spent / std::max(1, generated_now);
     const double eta = mean * (count - i - 1);
     std::printf("[%d/%d] %s %s %s (%d attempt%s, %.1f s); ETA %s\n", i + 1, count, id.c_str(), splits[i].c_str(),
-                entry["status"].get<std::string>().c_str(), attempt, attempt == 1 ? "" : "s", spent, fmt_duration(eta).c_str());
+                entry["status"].get<std::string>().c_str(), attempt, attempt == 1 ? "" : "s", spent - spent_before, fmt_duration(eta).c_str());
     std::fflush(stdout);
   }
 
