@@ -152,15 +152,27 @@ NormalisationStats read_stats(const std::string& path) {
   return s;
 }
 
-NormalisationStats load_stats_or_explain(const DatasetManifest& m) {
+std::string stats_split_mismatch(const NormalisationStats& s, const DatasetManifest& m) {
+  const std::string fix = "; rerun `layersnet prepare " + m.root + "`";
+  for (const auto& id : s.sequences)
+    if (std::find(m.train.begin(), m.train.end(), id) == m.train.end())
+      return "computed from sequence '" + id + "' which is not in the train split" + fix;
+  for (const auto& id : m.train)
+    if (std::find(s.sequences.begin(), s.sequences.end(), id) == s.sequences.end())
+      return "computed from " + std::to_string(s.sequences.size()) + " of the " + std::to_string(m.train.size()) +
+             " training sequences (not from '" + id + "')" + fix;
+  return "";
+}
+
+NormalisationStats load_stats_or_explain(const DatasetManifest& m, bool require_training_split) {
   const std::string p = m.stats_path();
   if (!std::filesystem::exists(p))
     throw DatasetError(p, "/", "missing normalisation statistics; create them with `layersnet prepare " + m.root + "`");
   NormalisationStats s = read_stats(p);
-  for (const auto& id : s.sequences)
-    if (std::find(m.train.begin(), m.train.end(), id) == m.train.end())
-      throw DatasetError(p, "/", "computed from sequence '" + id +
-                                     "' which is not in the train split; rerun `layersnet prepare " + m.root + "`");
+  if (require_training_split) {
+    const std::string mismatch = stats_split_mismatch(s, m);
+    if (!mismatch.empty()) throw DatasetError(p, "/", mismatch);
+  }
   return s;
 }
 

@@ -78,7 +78,11 @@ void write_stats(const std::string& path, const NormalisationStats& stats);
 // Reads and checks stats.h5; throws DatasetError naming the problem.
 NormalisationStats read_stats(const std::string& path);
 // For training and evaluation: <root>/stats.h5, or an error that says to run
-// `layersnet prepare <root>` when it is missing.
-NormalisationStats load_stats_or_explain(const DatasetManifest& manifest);
+// `layersnet prepare <root>` when it is missing or (require_training_split) was not computed
+// from exactly the manifest's training split, e.g. a stats.h5 copied from a smaller set.
+NormalisationStats load_stats_or_explain(const DatasetManifest& manifest, bool require_training_split = true);
+// Why `stats` were not computed from exactly `manifest`'s training split, with the fix; "" when
+// they were.
+std::string stats_split_mismatch(const NormalisationStats& stats, const DatasetManifest& manifest);
 
 }  // namespace layersnet::dataset

@@ -288,8 +288,11 @@ TrainSummary Run::execute() {
       throw std::runtime_error(options_.run_dir + " already holds a run; continue it with `layersnet train --resume " +
                                options_.run_dir + "` or choose another --run directory");
   }
-  // Refuses to start without stats.h5 and says that `layersnet prepare DATASET` makes it.
-  stats_ = dataset::load_stats_or_explain(dataset::read_manifest(config_.data.dataset));
+  // Refuses to start without stats.h5, or with one not made from the training split, and says
+  // that `layersnet prepare DATASET` makes it. A resumed run keeps its checkpoint's statistics
+  // (restore() warns when the data set's differ), so only a fresh run needs them to match.
+  stats_ = dataset::load_stats_or_explain(dataset::read_manifest(config_.data.dataset),
+                                          /*require_training_split=*/!options_.resume);
   if (writer()) io::write_file_atomic((fs::path(options_.run_dir) / "config.toml").string(), to_toml(config_));
   for (const auto& w : config_warnings(config_)) out_ << "warning: " << w << "\n";
 

@@ -93,6 +93,27 @@ TEST(Stats, MissingStatsSaysWhichCommandMakesThem) {
   }
 }
 
+TEST(Stats, StatisticsOfAnotherTrainingSplitAreRefusedWithTheFix) {
+  const auto dir = testing::temp_dir("stalestats");
+  const DatasetManifest m = write_synthetic_dataset(dir.string(), 2, 0, 0);
+  NormalisationStats s = compute_stats(m);
+  EXPECT_EQ(stats_split_mismatch(s, m), "");
+  s.sequences.pop_back();  // as if copied from a set with one training sequence fewer
+  write_stats(m.stats_path(), s);
+  try {
+    load_stats_or_explain(m);
+    FAIL() << "accepted statistics of a smaller training split";
+  } catch (const DatasetError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("computed from 1 of the 2 training sequences (not from '" + m.train[1] + "')"), std::string::npos)
+        << what;
+    EXPECT_NE(what.find("layersnet prepare " + dir.string()), std::string::npos) << what;
+  }
+  EXPECT_EQ(load_stats_or_explain(m, /*require_training_split=*/false).sequences.size(), 1u);
+  s.sequences = {m.train[0], "elsewhere"};
+  EXPECT_NE(stats_split_mismatch(s, m).find("'elsewhere' which is not in the train split"), std::string::npos);
+}
+
 TEST(Wind, SegmentsAndDirections) {
   SyntheticOptions o;
   o.wind = true;
