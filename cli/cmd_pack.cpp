@@ -32,7 +32,8 @@ int run_pack(const PackOptions& o) {
   const std::filesystem::path parent = std::filesystem::path(o.out).parent_path();
   if (!parent.empty()) std::filesystem::create_directories(parent);
   layersnet::write_checkpoint(o.out, m.params, m.checkpoint);
-  if (sources.size() > 1) std::printf("weights: the mean of %zu checkpoints (epoch, updates and validation error below are the first's)\n",
+  if (sources.size() > 1)
+    std::printf("weights: the mean of %zu checkpoints (epoch, updates and validation error below are the first's)\n",
                 sources.size());
   std::printf("packed %s -> %s (%zu weights, %.2f MB; epoch %lld, %lld updates, best validation error %.6g)\n",
               checkpoint.c_str(), o.out.c_str(), m.params.values().size(),
