@@ -71,6 +71,10 @@ LAYERSNET_COMMAND(eval, "Roll out checkpoints and baselines over a split; error,
                                    "input frame t0 of a fixed start, and of --start ramp for files without the ramp "
                                    "attributes (default: data.first_frame)");
                     sub.add_option("--max-sequences", o->max_sequences, "evaluate only the first N sequences (0 = all)");
+                    sub.add_option("--sequences", o->sequences,
+                                   "evaluate only these sequences of the split: ids, or ranges FIRST..LAST of ids in "
+                                   "string order, comma-separated (e.g. 00048..00083); before --max-sequences")
+                        ->delimiter(',');
                     sub.add_option("--wind-scale", o->wind_scale,
                                    "factor on the data's wind strengths as the models see them; the ground truth "
                                    "is unchanged (0: how much a model's error owes to its response to the wind)")

@@ -50,6 +50,7 @@ void run_evaluation(EvalRunOptions o) {
   eo.start_frame = o.start_frame >= 2 ? o.start_frame : std::max(2, base.data.first_frame);
   eo.start_after_ramp = o.start.empty() ? o.start_frame < 0 : o.start == "ramp";
   eo.max_sequences = o.max_sequences;
+  eo.sequences = o.sequences;
   eo.wind_scale = o.wind_scale;
 
   const bool any_bf16 = std::count(o.precisions.begin(), o.precisions.end(), ad::MatmulPrecision::kBFloat16) > 0;

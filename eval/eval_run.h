@@ -22,6 +22,7 @@ struct EvalRunOptions {
   int start_frame = -1;
   std::string start;                     // ramp | fixed; empty: ramp, or fixed when start_frame is given
   int max_sequences = 0;
+  std::vector<std::string> sequences;    // EvalOptions::sequences
   double wind_scale = 1.0;               // EvalOptions::wind_scale
   int speed_frames = 10;
   std::string out = "eval_out";

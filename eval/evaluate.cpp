@@ -113,9 +113,32 @@ RolloutStart rollout_start(const std::string& sequence_path, const EvalOptions& 
   return {std::max(2, settled - 1), true};           // t0 + 1 = first settled frame
 }
 
+std::vector<std::string> select_sequences(const std::vector<std::string>& split_ids,
+                                          const std::vector<std::string>& selection, const std::string& split,
+                                          const std::string& where) {
+  if (selection.empty()) return split_ids;
+  std::vector<bool> chosen(split_ids.size(), false);
+  for (const std::string& entry : selection) {
+    const size_t dots = entry.find("..");
+    const std::string first = dots == std::string::npos ? entry : entry.substr(0, dots);
+    const std::string last = dots == std::string::npos ? entry : entry.substr(dots + 2);
+    bool any = false;
+    for (size_t i = 0; i < split_ids.size(); ++i)
+      if (first <= split_ids[i] && split_ids[i] <= last) chosen[i] = any = true;
+    if (!any)
+      throw std::runtime_error(where + ": split '" + split + "' has no sequence " +
+                               (dots == std::string::npos ? "'" + entry + "'" : "in the range '" + entry + "'") +
+                               "; --sequences takes ids of that split, or ranges FIRST..LAST of them");
+  }
+  std::vector<std::string> ids;
+  for (size_t i = 0; i < split_ids.size(); ++i)
+    if (chosen[i]) ids.push_back(split_ids[i]);
+  return ids;
+}
+
 std::vector<MethodResult> evaluate(const dataset::DatasetManifest& manifest, std::vector<Predictor*> predictors,
                                    const EvalOptions& o, bool progress) {
-  std::vector<std::string> ids = manifest.split(o.split);
+  std::vector<std::string> ids = select_sequences(manifest.split(o.split), o.sequences, o.split, manifest.manifest_path());
   if (o.max_sequences > 0 && static_cast<int>(ids.size()) > o.max_sequences) ids.resize(o.max_sequences);
   if (ids.empty())
     throw std::runtime_error(manifest.manifest_path() + ": split '" + o.split +

@@ -75,6 +75,9 @@ struct EvalOptions {
   bool start_after_ramp = true;
   int start_frame = 2;      // input frame t0 of the first prediction (>= 2)
   int max_sequences = 0;    // 0 = every sequence of the split
+  // Sequences of the split to evaluate, each an id or an inclusive range FIRST..LAST of ids in
+  // string order ("00048..00083"); empty = all. Applied before max_sequences.
+  std::vector<std::string> sequences;
   double max_body_distance_m = 0.5;   // H-collision distance limit in metres (official 5.0 units at scale 10)
   double max_layer_distance_m = 0.05; // "near" L-collision distance limit in metres
   // Factor on the data's wind strengths as every predictor sees them (1 = the data's); the
@@ -93,6 +96,12 @@ double blender_seconds_per_frame(const std::string& sequence_path);
 
 // The input frame t0 of a sequence's rollouts under `options` (see EvalOptions), and whether
 // it came from the file's ramp attributes.
+// The ids of `split_ids` that `selection` names (EvalOptions::sequences), in split order.
+// Throws, naming `where` (the manifest), the split and the entry, for an entry that matches none.
+std::vector<std::string> select_sequences(const std::vector<std::string>& split_ids,
+                                          const std::vector<std::string>& selection, const std::string& split,
+                                          const std::string& where);
+
 struct RolloutStart {
   int input_frame = 2;
   bool after_ramp = false;

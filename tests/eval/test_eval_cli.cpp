@@ -3,6 +3,7 @@
 #include "dataset/h5.h"
 #include "dataset/stats.h"
 #include "dataset/synthetic.h"
+#include "eval/evaluate.h"
 #include "eval/render.h"
 #include "eval/rollout.h"
 #include "model/params_layout.h"
@@ -164,6 +165,48 @@ TEST_F(EvalCli, StartsAfterTheRampByDefaultOrAtAFixedInputFrame) {
   int code = 0;
   const std::string bad = run("eval --dataset " + data.string() + " --start later", &code);
   EXPECT_NE(code, 0) << bad;
+}
+
+TEST(SelectSequences, IdsAndRangesInSplitOrderAndEntriesThatMatchNothingNamed) {
+  const std::vector<std::string> split = {"00040", "00041", "00048", "00050", "00083", "00090"};
+  using V = std::vector<std::string>;
+  EXPECT_EQ(select_sequences(split, {}, "val", "d/dataset.json"), split);
+  EXPECT_EQ(select_sequences(split, {"00048..00083"}, "val", "d/dataset.json"), (V{"00048", "00050", "00083"}));
+  EXPECT_EQ(select_sequences(split, {"00090", "00040", "00040..00041"}, "val", "d/dataset.json"),
+            (V{"00040", "00041", "00090"}));
+  for (const std::string entry : {"00042", "00084..00089", "00083..00048"}) {
+    try {
+      select_sequences(split, {entry}, "val", "d/dataset.json");
+      ADD_FAILURE() << entry << " was accepted";
+    } catch (const std::runtime_error& e) {
+      const std::string what = e.what();
+      EXPECT_NE(what.find("d/dataset.json"), std::string::npos) << what;
+      EXPECT_NE(what.find("'val'"), std::string::npos) << what;
+      EXPECT_NE(what.find(entry), std::string::npos) << what;
+    }
+  }
+}
+
+TEST_F(EvalCli, SequencesOptionEvaluatesOnlyTheNamedOnes) {
+  const std::vector<std::string> ids = dataset::read_manifest((root_ / "data").string()).split("test");
+  ASSERT_EQ(ids.size(), 2u);
+  int code = 0;
+  const fs::path out = root_ / "eval_sequences";
+  const std::string text = run("eval --dataset " + (root_ / "data").string() + " --frames 1 --sequences " + ids[1] +
+                                   " --out " + out.string(),
+                               &code);
+  ASSERT_EQ(code, 0) << text;
+  const auto methods = nlohmann::json::parse(slurp(out / "eval.json"))["methods"];
+  ASSERT_FALSE(methods.empty());
+  for (const auto& m : methods) {
+    ASSERT_EQ(m["sequences"].size(), 1u) << m["name"];
+    EXPECT_EQ(m["sequences"][0]["id"].get<std::string>(), ids[1]);
+  }
+  const std::string bad = run("eval --dataset " + (root_ / "data").string() + " --sequences nothing_here --out " +
+                                  (root_ / "x").string(),
+                              &code);
+  EXPECT_EQ(code, 1) << bad;
+  EXPECT_NE(bad.find("nothing_here"), std::string::npos) << bad;
 }
 
 TEST_F(EvalCli, RunDirectoryPicksBestElseTheNewestCheckpoint) {
