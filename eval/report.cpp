@@ -169,6 +169,7 @@ std::string report_json(const std::vector<MethodResult>& methods, const ReportCo
   json j;
   j["dataset"] = c.dataset;
   j["split"] = c.options.split;
+  j["sequences_selected"] = c.options.sequences;  // --sequences; empty = the whole split
   j["frames"] = c.options.frames;
   j["start"] = c.options.start_after_ramp ? "ramp" : "fixed";  // per sequence: first_frame, input_frame
   j["start_frame"] = c.options.start_frame;
@@ -236,7 +237,10 @@ std::string report_json(const std::vector<MethodResult>& methods, const ReportCo
 std::string report_markdown(const std::vector<MethodResult>& methods, const ReportContext& c) {
   std::ostringstream o;
   const size_t n_seq = methods.empty() ? 0 : methods[0].sequences.size();
-  o << "# Evaluation: " << c.dataset << ", split `" << c.options.split << "`\n\n"
+  std::string selection;
+  for (const std::string& entry : c.options.sequences) selection += (selection.empty() ? "" : ",") + entry;
+  o << "# Evaluation: " << c.dataset << ", split `" << c.options.split << "`"
+    << (selection.empty() ? "" : ", sequences `" + selection + "`") << "\n\n"
     << n_seq << " sequences; rollouts from the ground truth at " << start_description(c.options)
     << " (each sequence's first predicted frame: `first_frame` in eval.json) for up to "
     << c.options.frames << " predicted frames (body and wind from the data every frame). Errors in mm "

@@ -196,7 +196,10 @@ TEST_F(EvalCli, SequencesOptionEvaluatesOnlyTheNamedOnes) {
                                    " --out " + out.string(),
                                &code);
   ASSERT_EQ(code, 0) << text;
-  const auto methods = nlohmann::json::parse(slurp(out / "eval.json"))["methods"];
+  const auto report = nlohmann::json::parse(slurp(out / "eval.json"));
+  EXPECT_EQ(report["sequences_selected"], nlohmann::json::array({ids[1]}));
+  EXPECT_NE(slurp(out / "eval.md").find("sequences `" + ids[1] + "`"), std::string::npos);
+  const auto methods = report["methods"];
   ASSERT_FALSE(methods.empty());
   for (const auto& m : methods) {
     ASSERT_EQ(m["sequences"].size(), 1u) << m["name"];
