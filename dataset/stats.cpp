@@ -164,6 +164,19 @@ std::string stats_split_mismatch(const NormalisationStats& s, const DatasetManif
   return "";
 }
 
+NormalisationStats load_training_stats(const DatasetManifest& m, const std::string& explicit_path,
+                                       bool require_training_split, std::string* note) {
+  if (explicit_path.empty()) return load_stats_or_explain(m, require_training_split);
+  if (!std::filesystem::exists(explicit_path))
+    throw DatasetError(explicit_path, "/", "missing: data.stats names no file; give an existing stats.h5 or leave it empty");
+  NormalisationStats s = read_stats(explicit_path);
+  const std::string mismatch = stats_split_mismatch(s, m);
+  if (note && !mismatch.empty())
+    *note = "normalising with " + explicit_path + " (data.stats), " +
+            mismatch.substr(0, mismatch.find("; rerun")) + " of " + m.root;
+  return s;
+}
+
 NormalisationStats load_stats_or_explain(const DatasetManifest& m, bool require_training_split) {
   const std::string p = m.stats_path();
   if (!std::filesystem::exists(p))

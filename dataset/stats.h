@@ -84,5 +84,9 @@ NormalisationStats load_stats_or_explain(const DatasetManifest& manifest, bool r
 // Why `stats` were not computed from exactly `manifest`'s training split, with the fix; "" when
 // they were.
 std::string stats_split_mismatch(const NormalisationStats& stats, const DatasetManifest& manifest);
+// For training: `explicit_path` when given (any statistics the user chose; `note` says when they
+// do not come from the training split), else load_stats_or_explain(manifest, require_training_split).
+NormalisationStats load_training_stats(const DatasetManifest& manifest, const std::string& explicit_path,
+                                       bool require_training_split, std::string* note);
 
 }  // namespace layersnet::dataset

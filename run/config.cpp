@@ -178,6 +178,7 @@ const Schema& schema() {
     k.add("loss.edge_strain", [](Config& c) -> double& { return c.loss.edge_strain; }, "edge-length strain weight (not in the paper; 0 = off)", weight);
     // [data]
     k.add("data.dataset", [](Config& c) -> std::string& { return c.data.dataset; }, "data set folder");
+    k.add("data.stats", [](Config& c) -> std::string& { return c.data.stats; }, "statistics file to train with (empty: DATASET/stats.h5, from the training split)");
     k.add("data.first_frame", [](Config& c) -> int& { return c.data.first_frame; }, "first input frame of a sample", {2, 1e6, {}});
     k.add("data.max_frames", [](Config& c) -> int& { return c.data.max_frames; }, "frames used per sequence (0 = all)", {0, 1e6, {}});
     k.add("data.cache_sequences", [](Config& c) -> int& { return c.data.cache_sequences; }, "sequences cached in memory", positive);

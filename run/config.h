@@ -18,6 +18,9 @@ namespace layersnet {
 
 struct DataConfig {
   std::string dataset = "data/default";  // D-LAYERS-H5 data set folder (dataset.json, stats.h5)
+  // Normalisation statistics to train with; empty = <dataset>/stats.h5, which must come from the
+  // training split. A named file may come from elsewhere, e.g. the set this one grew from.
+  std::string stats;
   int first_frame = 2;    // first input frame t of a sample (t−1 must have a velocity: ≥ 2)
   int max_frames = 0;     // frames per sequence used from first_frame on; 0 = to the end
   int cache_sequences = 8;  // sequences kept in memory by the lazy reader

@@ -27,8 +27,8 @@ if has train && [ -f "$data/stats.h5" ]; then
   fi
 fi
 if has eval && [ -d runs/default ]; then
-  # The model trained here beside the shipped one (models/medium, trained on the medium data
-  # set by scripts/train_shipped.sh), on the same test split; ends by printing the table.
+  # The model trained here beside the shipped one (models/medium, trained on the medium_plus
+  # data set by scripts/train_shipped.sh), on the same test split; ends by printing the table.
   shipped=()
   [ -f models/medium/model.h5 ] && shipped=(--checkpoint models/medium/model.h5 --name "default (trained here)" --name "shipped (medium data)")
   "$bin" eval --run runs/default "${shipped[@]}" --dataset "$data" --out runs/default/eval

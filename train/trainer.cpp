@@ -223,7 +223,8 @@ void Run::restore(const std::string& path) {
   }
   const dataset::NormalisationStats saved_stats = stats_from_arrays(cp.stats, path);
   if (stats_to_arrays(saved_stats) != stats_to_arrays(stats_))
-    out_ << "warning: " << config_.data.dataset << "/stats.h5 differs from the statistics in " << path
+    out_ << "warning: " << (config_.data.stats.empty() ? config_.data.dataset + "/stats.h5" : config_.data.stats)
+         << " differs from the statistics in " << path
          << "; continuing with the checkpoint's (the run's own) statistics\n";
   stats_ = saved_stats;
   summary_.best_val_error = state_.best_val_error;
@@ -291,8 +292,11 @@ TrainSummary Run::execute() {
   // Refuses to start without stats.h5, or with one not made from the training split, and says
   // that `layersnet prepare DATASET` makes it. A resumed run keeps its checkpoint's statistics
   // (restore() warns when the data set's differ), so only a fresh run needs them to match.
-  stats_ = dataset::load_stats_or_explain(dataset::read_manifest(config_.data.dataset),
-                                          /*require_training_split=*/!options_.resume);
+  // data.stats names a file on purpose, so it is used with a note instead of refused.
+  std::string stats_note;
+  stats_ = dataset::load_training_stats(dataset::read_manifest(config_.data.dataset), config_.data.stats,
+                                        /*require_training_split=*/!options_.resume, &stats_note);
+  if (!stats_note.empty() && !options_.resume) out_ << "note: " << stats_note << "\n";
   if (writer()) io::write_file_atomic((fs::path(options_.run_dir) / "config.toml").string(), to_toml(config_));
   for (const auto& w : config_warnings(config_)) out_ << "warning: " << w << "\n";
 

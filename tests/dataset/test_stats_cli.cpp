@@ -114,6 +114,31 @@ TEST(Stats, StatisticsOfAnotherTrainingSplitAreRefusedWithTheFix) {
   EXPECT_NE(stats_split_mismatch(s, m).find("'elsewhere' which is not in the train split"), std::string::npos);
 }
 
+TEST(Stats, ANamedStatisticsFileIsUsedWithANoteAndAMissingOneNamed) {
+  const auto dir = testing::temp_dir("namedstats");
+  const DatasetManifest m = write_synthetic_dataset(dir.string(), 2, 0, 0);
+  NormalisationStats s = compute_stats(m);
+  s.sequences.pop_back();  // the statistics of the set this one grew from
+  const std::string parent = (dir / "parent_stats.h5").string();
+  write_stats(parent, s);
+  std::string note;
+  EXPECT_EQ(load_training_stats(m, parent, true, &note).sequences.size(), 1u);
+  EXPECT_NE(note.find(parent), std::string::npos) << note;
+  EXPECT_NE(note.find("computed from 1 of the 2 training sequences"), std::string::npos) << note;
+  note.clear();
+  write_stats(parent, compute_stats(m));
+  load_training_stats(m, parent, true, &note);
+  EXPECT_EQ(note, "");  // from the training split: nothing to say
+  try {
+    load_training_stats(m, (dir / "nowhere.h5").string(), true, &note);
+    FAIL() << "accepted a missing statistics file";
+  } catch (const DatasetError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("nowhere.h5"), std::string::npos) << what;
+    EXPECT_NE(what.find("data.stats"), std::string::npos) << what;
+  }
+}
+
 TEST(Wind, SegmentsAndDirections) {
   SyntheticOptions o;
   o.wind = true;
