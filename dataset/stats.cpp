@@ -153,14 +153,13 @@ NormalisationStats read_stats(const std::string& path) {
 }
 
 std::string stats_split_mismatch(const NormalisationStats& s, const DatasetManifest& m) {
-  const std::string fix = "; rerun `layersnet prepare " + m.root + "`";
   for (const auto& id : s.sequences)
     if (std::find(m.train.begin(), m.train.end(), id) == m.train.end())
-      return "computed from sequence '" + id + "' which is not in the train split" + fix;
+      return "computed from sequence '" + id + "' which is not in the train split";
   for (const auto& id : m.train)
     if (std::find(s.sequences.begin(), s.sequences.end(), id) == s.sequences.end())
       return "computed from " + std::to_string(s.sequences.size()) + " of the " + std::to_string(m.train.size()) +
-             " training sequences (not from '" + id + "')" + fix;
+             " training sequences (not from '" + id + "')";
   return "";
 }
 
@@ -172,8 +171,7 @@ NormalisationStats load_training_stats(const DatasetManifest& m, const std::stri
   NormalisationStats s = read_stats(explicit_path);
   const std::string mismatch = stats_split_mismatch(s, m);
   if (note && !mismatch.empty())
-    *note = "normalising with " + explicit_path + " (data.stats), " +
-            mismatch.substr(0, mismatch.find("; rerun")) + " of " + m.root;
+    *note = "normalising with " + explicit_path + " (data.stats), " + mismatch + " of " + m.root;
   return s;
 }
 
@@ -184,7 +182,7 @@ NormalisationStats load_stats_or_explain(const DatasetManifest& m, bool require_
   NormalisationStats s = read_stats(p);
   if (require_training_split) {
     const std::string mismatch = stats_split_mismatch(s, m);
-    if (!mismatch.empty()) throw DatasetError(p, "/", mismatch);
+    if (!mismatch.empty()) throw DatasetError(p, "/", mismatch + "; rerun `layersnet prepare " + m.root + "`");
   }
   return s;
 }

@@ -81,8 +81,7 @@ NormalisationStats read_stats(const std::string& path);
 // `layersnet prepare <root>` when it is missing or (require_training_split) was not computed
 // from exactly the manifest's training split, e.g. a stats.h5 copied from a smaller set.
 NormalisationStats load_stats_or_explain(const DatasetManifest& manifest, bool require_training_split = true);
-// Why `stats` were not computed from exactly `manifest`'s training split, with the fix; "" when
-// they were.
+// Why `stats` were not computed from exactly `manifest`'s training split; "" when they were.
 std::string stats_split_mismatch(const NormalisationStats& stats, const DatasetManifest& manifest);
 // For training: `explicit_path` when given (any statistics the user chose; `note` says when they
 // do not come from the training split), else load_stats_or_explain(manifest, require_training_split).

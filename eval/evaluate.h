@@ -94,14 +94,14 @@ std::map<std::string, std::vector<std::string>> read_subsets(const std::string& 
 // or -1 when the file has none.
 double blender_seconds_per_frame(const std::string& sequence_path);
 
-// The input frame t0 of a sequence's rollouts under `options` (see EvalOptions), and whether
-// it came from the file's ramp attributes.
 // The ids of `split_ids` that `selection` names (EvalOptions::sequences), in split order.
 // Throws, naming `where` (the manifest), the split and the entry, for an entry that matches none.
 std::vector<std::string> select_sequences(const std::vector<std::string>& split_ids,
                                           const std::vector<std::string>& selection, const std::string& split,
                                           const std::string& where);
 
+// The input frame t0 of a sequence's rollouts under `options` (see EvalOptions), and whether
+// it came from the file's ramp attributes.
 struct RolloutStart {
   int input_frame = 2;
   bool after_ramp = false;
