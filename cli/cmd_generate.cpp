@@ -40,6 +40,10 @@ LAYERSNET_COMMAND(generate, "Simulate D-LAYERS-like sequences with Blender's clo
   sub.add_option("--threads", opt->threads, "Blender threads (one Blender process runs at a time)");
   sub.add_option("--blender", opt->blender, "Blender executable");
   sub.add_option("--script", opt->script, "path of generate/make_sequence.py");
+  sub.add_option("--splits", opt->only_splits,
+                 "simulate only these splits (e.g. val,test); other splits' existing sequences are kept")
+      ->delimiter(',')
+      ->check(CLI::IsMember({"train", "val", "test"}));
   sub.add_option("--checker", opt->checker, "validator run on each accepted file (default: dataset/check_dlayers_h5.py)");
   return [opt] { return run_generate(*opt); };  // errors: reported by cli/main.cpp
 });

@@ -225,6 +225,11 @@ GenerateSummary generate_dataset(const GenerateOptions& opt) {
         continue;
       }
     }
+    if (!opt.only_splits.empty() &&
+        std::find(opt.only_splits.begin(), opt.only_splits.end(), splits[i]) == opt.only_splits.end()) {
+      std::printf("[%d/%d] %s %s not requested (--splits)\n", i + 1, count, id.c_str(), splits[i].c_str());
+      continue;
+    }
     std::vector<std::string> reasons;
     bool ok = false;
     int attempt = 0;

@@ -33,6 +33,9 @@ struct GenerateOptions {
   int max_attempts = -1;
   int threads = 2;
   std::string blender = "blender";
+  // Simulate only the sequences of these splits (empty: all). Sequences of other splits that
+  // already exist are kept; the others are left out of the manifest until a later run makes them.
+  std::vector<std::string> only_splits;
 };
 
 // Quality thresholds; why these values: generate/README.md ("Quality gates").
