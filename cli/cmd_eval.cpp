@@ -61,7 +61,13 @@ LAYERSNET_COMMAND(eval, "Roll out checkpoints and baselines over a split; error,
                         ->check(CLI::ExistingDirectory);
                     sub.add_option("--dataset", o->dataset, "data set folder (default: the first checkpoint's data.dataset)");
                     sub.add_option("--split", o->split, "train | val | test (default: the config's eval.split)");
-                    sub.add_option("--frames", o->frames, "predicted frames per sequence (default: eval.frames)");
+                    sub.add_option("--frames", o->frames,
+                                   "predicted frames per sequence, clamped to what each sequence holds; a large "
+                                   "number (e.g. 1000) rolls out every frame after the start (default: eval.frames)");
+                    sub.add_option("--mark", o->mark_frames,
+                                   "long rollouts are also summarised over their first N frames (error) and at frame "
+                                   "N (crumple)")
+                        ->check(CLI::PositiveNumber);
                     sub.add_option("--start", o->start,
                                    "where rollouts start: ramp = per sequence, the first predicted frame is the "
                                    "file's rest_frames + ramp_frames (files without them: as fixed); fixed = input "

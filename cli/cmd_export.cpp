@@ -1,7 +1,8 @@
 // `layersnet export --checkpoint C [--sequence ID] [--frames N] [--format obj|ply] [--out DIR]`:
 // one rollout written as predicted and ground-truth meshes per frame (body, each garment) to
 // open in Blender or MeshLab, plus strip.png (prediction over ground truth, a few frames).
-// Without --checkpoint, --baseline chooses the predictor (constant-velocity | follow-body).
+// Without --checkpoint, --baseline chooses the predictor (constant-velocity | follow-body |
+// nearest-body | skinned), post-processed like a model with --set eval.constraints=true.
 #include "cli/command_registry.h"
 #include "cli/exit_codes.h"
 #include "cli/model_option.h"
@@ -57,8 +58,17 @@ int run_export(const ExportCliOptions& o) {
     predictor = std::make_unique<eval::ConstantVelocity>();
   } else if (o.baseline == "follow-body") {
     predictor = std::make_unique<eval::FollowBody>();
+  } else if (o.baseline == "skinned" || o.baseline == "nearest-body") {
+    predictor = std::make_unique<eval::SkinnedToBody>(o.baseline == "skinned");
   } else {
-    throw std::runtime_error("--baseline '" + o.baseline + "' is unknown: use constant-velocity or follow-body");
+    throw std::runtime_error("--baseline '" + o.baseline +
+                             "' is unknown: use constant-velocity, follow-body, nearest-body or skinned");
+  }
+  // A baseline gets the same post-processing as a model when asked: --set eval.constraints=true.
+  if (checkpoint.empty()) {
+    Config post = base;
+    for (const auto& a : o.settings) apply_rollout_override(post, a);
+    if (post.eval.constraints) predictor = std::make_unique<eval::PostProcessed>(std::move(predictor), post.eval);
   }
   const dataset::Sequence seq = dataset::read_sequence(manifest.sequence_path(id));
   const int frames = o.frames > 0 ? o.frames : base.eval.frames;
@@ -83,7 +93,7 @@ LAYERSNET_COMMAND(export, "Write a rollout's predicted and ground-truth meshes (
                   [](CLI::App& sub) {
                     auto o = std::make_shared<ExportCliOptions>();
                     o->model.add_to(sub, "checkpoint to roll out");
-                    sub.add_option("--baseline", o->baseline, "without --checkpoint: constant-velocity | follow-body");
+                    sub.add_option("--baseline", o->baseline, "without --checkpoint: constant-velocity | follow-body | nearest-body | skinned (with --set eval.constraints=true: post-processed like a model)");
                     sub.add_option("--dataset", o->dataset, "data set folder (default: the checkpoint's data.dataset)");
                     sub.add_option("--split", o->split, "split to take the sequence from (default: eval.split)");
                     sub.add_option("--sequence", o->sequence, "sequence id (default: the split's first)");

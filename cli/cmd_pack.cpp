@@ -6,7 +6,11 @@
 // (e.g. a run's last epochs).
 #include "cli/command_registry.h"
 #include "cli/model_option.h"
+#include "dataset/file_io.h"
+#include "dataset/sha256.h"
 #include "run/checkpoint.h"
+
+#include <nlohmann/json.hpp>
 
 #include <cstdio>
 #include <filesystem>
@@ -32,6 +36,16 @@ int run_pack(const PackOptions& o) {
   const std::filesystem::path parent = std::filesystem::path(o.out).parent_path();
   if (!parent.empty()) std::filesystem::create_directories(parent);
   layersnet::write_checkpoint(o.out, m.params, m.checkpoint);
+  // Provenance beside the model: what it was packed from, and the data set it names.
+  nlohmann::json prov = {{"model", o.out}, {"model_sha256", layersnet::io::sha256_file(o.out)},
+                         {"sources", nlohmann::json::array()}, {"settings", o.settings}};
+  for (const auto& s : sources) prov["sources"].push_back({{"checkpoint", s}, {"sha256", layersnet::io::sha256_file(s)}});
+  const std::filesystem::path manifest = std::filesystem::path(m.config.data.dataset) / "dataset.json";
+  prov["dataset"] = m.config.data.dataset;
+  prov["dataset_manifest_sha256"] =
+      std::filesystem::exists(manifest) ? layersnet::io::sha256_file(manifest.string()) : std::string("not found");
+  const std::string prov_path = o.out + ".provenance.json";
+  layersnet::io::write_file_atomic(prov_path, prov.dump(1) + "\n");
   if (sources.size() > 1)
     std::printf("weights: the mean of %zu checkpoints (epoch, updates and validation error below are the first's)\n",
                 sources.size());
@@ -39,6 +53,7 @@ int run_pack(const PackOptions& o) {
               checkpoint.c_str(), o.out.c_str(), m.params.values().size(),
               static_cast<double>(std::filesystem::file_size(o.out)) / 1e6, static_cast<long long>(m.checkpoint.state.epoch),
               static_cast<long long>(m.checkpoint.state.global_step), m.checkpoint.state.best_val_error);
+  std::printf("sha256 %s; provenance in %s\n", prov["model_sha256"].get<std::string>().c_str(), prov_path.c_str());
   return 0;
 }
 

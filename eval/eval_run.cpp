@@ -3,6 +3,7 @@
 
 #include "autodiff/bf16_gemm.h"
 #include "dataset/manifest.h"
+#include "dataset/sha256.h"
 #include "dataset/stats.h"
 #include "eval/evaluate.h"
 #include "eval/machine.h"
@@ -47,6 +48,7 @@ void run_evaluation(EvalRunOptions o) {
   EvalOptions eo;
   eo.split = o.split.empty() ? base.eval.split : o.split;
   eo.frames = o.frames > 0 ? o.frames : base.eval.frames;
+  eo.mark_frames = o.mark_frames;
   eo.start_frame = o.start_frame >= 2 ? o.start_frame : std::max(2, base.data.first_frame);
   eo.start_after_ramp = o.start.empty() ? o.start_frame < 0 : o.start == "ramp";
   eo.max_sequences = o.max_sequences;
@@ -91,28 +93,57 @@ void run_evaluation(EvalRunOptions o) {
     kinds.push_back("replay");
     paths.push_back(o.replays[r]);
   }
-  owned.push_back(std::make_unique<ConstantVelocity>());
-  owned.push_back(std::make_unique<FollowBody>());
-  owned.push_back(std::make_unique<GroundTruth>());
-  for (const char* k : {"baseline", "baseline", "ground truth"}) {
-    kinds.push_back(k);
-    paths.push_back("");
+  // Baselines once per post-processing setting the models run with, under the first model's
+  // rollout settings (and --set): a model with the constraints, friction and pins is compared
+  // with baselines that get the same.
+  Config post = base;
+  for (const auto& a : o.settings) apply_rollout_override(post, a);
+  std::vector<bool> baseline_post;
+  for (const auto& setting : o.constraints) baseline_post.push_back(setting == "on");
+  if (o.constraints.empty())
+    for (const auto& path : o.checkpoints)
+      baseline_post.push_back(parse_config_text(read_checkpoint_config(path), path).eval.constraints);
+  if (baseline_post.empty()) baseline_post.push_back(false);
+  std::sort(baseline_post.begin(), baseline_post.end());
+  baseline_post.erase(std::unique(baseline_post.begin(), baseline_post.end()), baseline_post.end());
+  const size_t baseline_first = owned.size();
+  for (const bool on : baseline_post) {
+    std::vector<std::unique_ptr<Predictor>> plain;
+    plain.push_back(std::make_unique<ConstantVelocity>());
+    plain.push_back(std::make_unique<FollowBody>());
+    plain.push_back(std::make_unique<SkinnedToBody>(false));
+    plain.push_back(std::make_unique<SkinnedToBody>(true));
+    for (auto& b : plain) {
+      owned.push_back(on ? std::make_unique<PostProcessed>(std::move(b), post.eval) : std::move(b));
+      kinds.push_back("baseline");
+      paths.push_back("");
+    }
   }
+  const size_t baseline_count = owned.size() - baseline_first;
+  owned.push_back(std::make_unique<GroundTruth>());
+  kinds.push_back("ground truth");
+  paths.push_back("");
   std::vector<Predictor*> predictors;
   for (auto& p : owned) predictors.push_back(p.get());
 
-  std::printf("eval: %s split '%s', %zu model(s), %zu replay(s) + 2 baselines, up to %d frames from %s, %d thread(s), "
+  std::printf("eval: %s split '%s', %zu model(s), %zu replay(s) + %zu baselines, up to %d frames from %s, %d thread(s), "
               "products %s%s%s\n",
-              root.c_str(), eo.split.c_str(), model_count, o.replays.size(), eo.frames, start_description(eo).c_str(),
+              root.c_str(), eo.split.c_str(), model_count, o.replays.size(), baseline_count, eo.frames,
+              start_description(eo).c_str(),
               omp_get_max_threads(), o.precision_label.c_str(), any_bf16 ? ", bf16 kernel " : "", any_bf16 ? ad::bf16_kernel_name() : "");
   std::vector<MethodResult> results = evaluate(manifest, predictors, eo, true);
   for (size_t p = 0; p < results.size(); ++p) {
     results[p].kind = kinds[p];
     results[p].checkpoint = paths[p];
+    if (kinds[p] == "model") results[p].checkpoint_sha256 = io::sha256_file(paths[p]);
+    if (const auto* net = dynamic_cast<const ModelPredictor*>(predictors[p])) results[p].post_processed = net->config().eval.constraints;
+    if (dynamic_cast<const PostProcessed*>(predictors[p])) results[p].post_processed = true;
   }
 
   ReportContext ctx;
   ctx.dataset = root;
+  ctx.manifest_sha256 = io::sha256_file(manifest.manifest_path());
+  ctx.post_processing = post.eval;
   ctx.options = eo;
   // Speed on the first sequence of the split, 1 and 2 threads.
   const std::string speed_id = results[0].sequences[0].id;

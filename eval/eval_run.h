@@ -1,7 +1,8 @@
 #pragma once
 // `layersnet eval` as one call: every checkpoint (and run) as a model predictor, once per
 // cloth-constraint setting, patch tether and product precision asked for, recorded sequences
-// (Replay), the two baselines and the ground truth, evaluated over a split (evaluate.h); speed
+// (Replay), the baselines (each bare and, when a model runs with it, with the same
+// post-processing) and the ground truth, evaluated over a split (evaluate.h); speed
 // at 1 and 2 threads on the split's first sequence, Blender's recorded time, and the reports
 // (report.h: eval.json, eval.md, plots) with the summary table printed.
 #include "autodiff/bf16_gemm.h"
@@ -19,6 +20,7 @@ struct EvalRunOptions {
   std::string dataset;                   // empty: the first checkpoint's data.dataset
   std::string split;                     // empty: the config's eval.split
   int frames = -1;                       // <= 0: the config's eval.frames
+  int mark_frames = 36;                  // EvalOptions::mark_frames
   int start_frame = -1;
   std::string start;                     // ramp | fixed; empty: ramp, or fixed when start_frame is given
   int max_sequences = 0;

@@ -43,7 +43,8 @@ double blender_seconds_per_frame(const std::string& path) {
   return h5::read_float_attr(f.get(), "q_blender_s_per_frame", {path, "/"});
 }
 
-SequenceResult score_rollout(const dataset::Sequence& seq, const Rollout& r, const CollisionOptions& o) {
+SequenceResult score_rollout(const dataset::Sequence& seq, const Rollout& r, const CollisionOptions& o,
+                             int mark_frames) {
   const GarmentLayout L = garment_layout(seq.info);
   SequenceResult s;
   s.garment_types = L.types;
@@ -56,6 +57,8 @@ SequenceResult score_rollout(const dataset::Sequence& seq, const Rollout& r, con
   double inner = 0, outer = 0, h = 0, lo = 0, la = 0, ln = 0;
   const GarmentEdges edges = garment_edges(seq);
   std::vector<double> strains;  // every edge of every frame, for the sequence's p99
+  const FacePairs pairs = adjacent_face_pairs(L);
+  std::vector<double> dihedrals;  // every interior edge of every frame
   std::array<double, kBodyDistanceBands> band_sum{};
   bool finite = true;
   for (size_t k = 0; k < r.frames.size(); ++k) {
@@ -73,8 +76,12 @@ SequenceResult score_rollout(const dataset::Sequence& seq, const Rollout& r, con
       const std::vector<double> e = edge_strains(edges, r.frames[k]);
       s.strain_p99_curve.push_back(quantile(e, 0.99));
       strains.insert(strains.end(), e.begin(), e.end());
+      const std::vector<double> d = dihedral_angles_deg(pairs, r.frames[k]);
+      s.dihedral_curve.push_back(mean_std(d).mean);
+      dihedrals.insert(dihedrals.end(), d.begin(), d.end());
     } else {  // NaN would break the sort; the sequence counts as diverged
       s.strain_p99_curve.push_back(std::numeric_limits<double>::quiet_NaN());
+      s.dihedral_curve.push_back(std::numeric_limits<double>::quiet_NaN());
       finite = false;
     }
     s.error_curve.push_back(m.error);
@@ -94,8 +101,17 @@ SequenceResult score_rollout(const dataset::Sequence& seq, const Rollout& r, con
   if (finite) {
     s.strain_mean = mean_std(strains).mean;
     s.strain_p99 = quantile(std::move(strains), 0.99);
+    s.dihedral_mean = mean_std(dihedrals).mean;
+    s.dihedral_p99 = quantile(std::move(dihedrals), 0.99);
   } else {
     s.strain_mean = s.strain_p99 = std::numeric_limits<double>::quiet_NaN();
+    s.dihedral_mean = s.dihedral_p99 = std::numeric_limits<double>::quiet_NaN();
+  }
+  s.mark = std::clamp(mark_frames, 1, std::max(1, static_cast<int>(r.frames.size())));
+  if (!s.error_curve.empty()) {
+    s.error_to_mark = 0;
+    for (int k = 0; k < s.mark; ++k) s.error_to_mark += s.error_curve[k] / s.mark;
+    s.dihedral_at_mark = s.dihedral_curve[s.mark - 1];
   }
   if (L.layered()) {
     s.outer_error = outer;
@@ -155,7 +171,7 @@ std::vector<MethodResult> evaluate(const dataset::DatasetManifest& manifest, std
     co.max_layer_distance = o.max_layer_distance_m * seq.info.scale;
     for (size_t p = 0; p < predictors.size(); ++p) {
       const Rollout r = rollout(*predictors[p], seq, start.input_frame, o.frames);
-      SequenceResult s = score_rollout(seq, r, co);
+      SequenceResult s = score_rollout(seq, r, co, o.mark_frames);
       s.id = id;
       s.after_ramp = start.after_ramp;
       if (auto it = subsets.find(id); it != subsets.end()) s.subsets = it->second;
@@ -218,6 +234,8 @@ double median_ms_per_frame(Predictor& predictor, const dataset::Sequence& seq, i
 Summary summarise(const MethodResult& m) {
   Summary s;
   std::vector<double> err, inner, outer, h, lo, la, ln, strain_mean, strain_p99, steps;
+  std::vector<double> dihedral_mean, dihedral_p99, to_mark, at_mark, at_end;
+  std::vector<std::vector<double>> dihedral_curve;
   std::map<std::string, std::vector<double>> by_type, by_subset;
   std::vector<std::vector<double>> curve, strain_curve;
   std::array<double, kBodyDistanceBands> band_sum_mm{};
@@ -237,6 +255,18 @@ Summary summarise(const MethodResult& m) {
     h.push_back(100 * r.h_rate);
     strain_mean.push_back(100 * r.strain_mean);
     strain_p99.push_back(100 * r.strain_p99);
+    dihedral_mean.push_back(r.dihedral_mean);
+    dihedral_p99.push_back(r.dihedral_p99);
+    to_mark.push_back(r.error_to_mark * mm);
+    if (!r.dihedral_curve.empty()) {
+      at_mark.push_back(r.dihedral_at_mark);
+      at_end.push_back(r.dihedral_curve.back());
+    }
+    s.mark = s.mark == 0 ? r.mark : std::min(s.mark, r.mark);
+    for (size_t k = 0; k < r.dihedral_curve.size(); ++k) {
+      if (dihedral_curve.size() <= k) dihedral_curve.resize(k + 1);
+      dihedral_curve[k].push_back(r.dihedral_curve[k]);
+    }
     if (r.outer_error >= 0) {
       outer.push_back(r.outer_error * mm);
       lo.push_back(100 * r.l_rate_outer);
@@ -268,6 +298,12 @@ Summary summarise(const MethodResult& m) {
   s.l_near_percent = mean_std(ln);
   s.strain_mean_percent = mean_std(strain_mean);
   s.strain_p99_percent = mean_std(strain_p99);
+  s.dihedral_mean_deg = mean_std(dihedral_mean);
+  s.dihedral_p99_deg = mean_std(dihedral_p99);
+  s.error_to_mark_mm = mean_std(to_mark);
+  s.dihedral_at_mark_deg = mean_std(at_mark);
+  s.dihedral_end_deg = mean_std(at_end);
+  for (const auto& v : dihedral_curve) s.dihedral_curve_deg.push_back(mean_std(v).mean);
   for (const auto& [k, v] : by_type) s.by_type_mm[k] = mean_std(v);
   for (const auto& [k, v] : by_subset) s.by_subset_mm[k] = mean_std(v);
   for (const auto& v : curve) s.curve_mm.push_back(mean_std(v).mean);
@@ -278,11 +314,64 @@ Summary summarise(const MethodResult& m) {
                                      : std::numeric_limits<double>::quiet_NaN();
     s.band_share[b] = all_vertex_frames > 0 ? static_cast<double>(band_count[b]) / all_vertex_frames : 0.0;
   }
+  const int64_t near_count = band_count[0] + band_count[1];
+  s.near_body_mm = near_count > 0 ? (band_sum_mm[0] + band_sum_mm[1]) / static_cast<double>(near_count)
+                                  : std::numeric_limits<double>::quiet_NaN();
+  s.free_cloth_mm = s.band_mm[kBodyDistanceBands - 1];
+  s.free_share = s.band_share[kBodyDistanceBands - 1];
   if (!steps.empty()) {
     std::nth_element(steps.begin(), steps.begin() + static_cast<std::ptrdiff_t>(steps.size() / 2), steps.end());
     s.median_step_ms = steps[steps.size() / 2];
   }
   return s;
+}
+
+std::vector<Comparison> compare_with_baselines(const std::vector<MethodResult>& methods) {
+  std::vector<Comparison> out;
+  for (const MethodResult& m : methods) {
+    if (m.kind != "model") continue;
+    const Summary sm = summarise(m);
+    const size_t first = out.size();
+    for (const MethodResult& b : methods) {
+      if (b.kind != "baseline" || b.post_processed != m.post_processed) continue;
+      const Summary sb = summarise(b);
+      Comparison c;
+      c.model = m.name;
+      c.baseline = b.name;
+      c.post_processed = m.post_processed;
+      c.ratio_of_means = sb.error_mm.mean > 0 ? sm.error_mm.mean / sb.error_mm.mean : 0;
+      c.free_ratio_of_means = sb.free_cloth_mm > 0 ? sm.free_cloth_mm / sb.free_cloth_mm : 0;
+      std::map<std::string, const SequenceResult*> base;
+      for (const auto& r : b.sequences) base[r.id] = &r;
+      for (const auto& r : m.sequences) {
+        const auto it = base.find(r.id);
+        if (it == base.end()) continue;
+        const SequenceResult& q = *it->second;
+        if (r.diverged_at >= 0 || q.diverged_at >= 0 || !std::isfinite(r.error) || !std::isfinite(q.error) ||
+            !(q.error > 0)) {
+          ++c.skipped;
+          continue;
+        }
+        c.ids.push_back(r.id);
+        c.ratios.push_back(r.error / q.error);
+      }
+      if (!c.ratios.empty()) {
+        c.mean_ratio = mean_std(c.ratios).mean;
+        c.median_ratio = quantile(c.ratios, 0.5);
+        const auto worst = std::max_element(c.ratios.begin(), c.ratios.end());
+        c.worst_ratio = *worst;
+        c.worst_id = c.ids[static_cast<size_t>(worst - c.ratios.begin())];
+      }
+      out.push_back(std::move(c));
+    }
+    // The best baseline has the lowest error, so the highest ratio of means.
+    size_t best = out.size();
+    for (size_t i = first; i < out.size(); ++i)
+      if (out[i].ratio_of_means > 0 && (best == out.size() || out[i].ratio_of_means > out[best].ratio_of_means))
+        best = i;
+    if (best < out.size()) out[best].best_baseline = true;
+  }
+  return out;
 }
 
 }  // namespace layersnet::eval

@@ -53,6 +53,14 @@ struct SequenceResult {
   // Edge strain (ratio) over all edges x rollout frames; NaN once a prediction is non-finite:
   double strain_mean = 0, strain_p99 = 0;
   std::vector<double> strain_p99_curve;  // (n,) over each rollout frame's edges
+  // Crumple (metrics.h, dihedral_angles_deg), degrees over every interior edge x rollout frame;
+  // NaN once a prediction is non-finite:
+  double dihedral_mean = 0, dihedral_p99 = 0;
+  std::vector<double> dihedral_curve;  // (n,) mean over each rollout frame's interior edges
+  // The same rollout cut at the mark (EvalOptions::mark_frames, clamped to n): mean error over
+  // the first `mark` frames (scene units) and the mean dihedral angle of frame `mark`.
+  int mark = 0;
+  double error_to_mark = 0, dihedral_at_mark = 0;
   std::vector<double> step_ms;  // (n,)
   int diverged_at = -1;         // first rollout frame with a non-finite prediction, -1 = none
   double mm() const { return 1000.0 / scale; }  // millimetres per scene unit
@@ -62,6 +70,9 @@ struct MethodResult {
   std::string name;
   std::string kind;  // "model", "baseline", "ground truth"
   std::string checkpoint;  // models only
+  std::string checkpoint_sha256;  // models only: the file's SHA-256, hex
+  // Run with the cloth constraints, contact friction and pins after every predicted frame.
+  bool post_processed = false;
   std::vector<SequenceResult> sequences;
   double ms_per_frame_1thread = -1, ms_per_frame_2threads = -1;  // median, -1 = not measured
 };
@@ -78,6 +89,9 @@ struct EvalOptions {
   // Sequences of the split to evaluate, each an id or an inclusive range FIRST..LAST of ids in
   // string order ("00048..00083"); empty = all. Applied before max_sequences.
   std::vector<std::string> sequences;
+  // Long rollouts are also summarised at this many frames (the official test length), so a
+  // rollout over every moving frame still gives the 36-frame figures.
+  int mark_frames = 36;
   double max_body_distance_m = 0.5;   // H-collision distance limit in metres (official 5.0 units at scale 10)
   double max_layer_distance_m = 0.05; // "near" L-collision distance limit in metres
   // Factor on the data's wind strengths as every predictor sees them (1 = the data's); the
@@ -114,7 +128,9 @@ std::vector<MethodResult> evaluate(const dataset::DatasetManifest& manifest, std
                                    const EvalOptions& options, bool progress = false);
 
 // Metrics of one rollout against the sequence's ground truth.
-SequenceResult score_rollout(const dataset::Sequence& seq, const Rollout& r, const CollisionOptions& options);
+// mark_frames: see EvalOptions::mark_frames.
+SequenceResult score_rollout(const dataset::Sequence& seq, const Rollout& r, const CollisionOptions& options,
+                             int mark_frames = 36);
 
 // Ground-truth "predictor": returns the data's next frame (its collision rates are the floor).
 class GroundTruth : public Predictor {
@@ -156,12 +172,38 @@ struct Summary {
   std::map<std::string, MeanStd> by_subset_mm;  // T, T+W, L, L+W
   std::vector<double> curve_mm;                 // mean over sequences per rollout frame
   std::vector<double> strain_p99_curve_percent; // the same of the per-frame strain p99
+  MeanStd dihedral_mean_deg, dihedral_p99_deg;   // crumple, over sequences
+  std::vector<double> dihedral_curve_deg;        // mean over sequences per rollout frame
+  // At the mark (EvalOptions::mark_frames) and at each rollout's last frame:
+  MeanStd error_to_mark_mm, dihedral_at_mark_deg, dihedral_end_deg;
+  int mark = 0;                                  // the shortest sequence's mark
   // Per body-distance band: error pooled over every vertex-frame of every sequence in the band
   // (mm; NaN when none) and the band's share of all vertex-frames.
   std::array<double, kBodyDistanceBands> band_mm{}, band_share{};
+  // The same pooled into two: on or near the body (under the last band edge, 6 cm) and free
+  // cloth beyond it, where a learned simulator has to earn its keep.
+  double near_body_mm = 0, free_cloth_mm = 0, free_share = 0;
   double median_step_ms = 0;                    // over every step of every sequence
   int diverged = 0;  // sequences with a non-finite prediction: left out of every number above
 };
 Summary summarise(const MethodResult& method);
+
+// A model against one baseline run with the same post-processing: the ratio of their mean errors
+// (the headline form) and the ratio per sequence, whose spread the mean hides.
+struct Comparison {
+  std::string model, baseline;
+  bool post_processed = false;
+  bool best_baseline = false;    // the baseline with the lowest mean error under this post-processing
+  double ratio_of_means = 0;     // model error / baseline error, both mean over sequences (mm)
+  double free_ratio_of_means = 0;  // the same over free cloth (Summary::free_cloth_mm)
+  std::vector<std::string> ids;  // sequences where both are finite
+  std::vector<double> ratios;    // per sequence, in ids order
+  double mean_ratio = 0, median_ratio = 0, worst_ratio = 0;
+  std::string worst_id;
+  int skipped = 0;               // sequences left out: one of the two diverged
+};
+// Every model result against every baseline result with the same post_processed flag, in
+// method order. Empty when there is no pair.
+std::vector<Comparison> compare_with_baselines(const std::vector<MethodResult>& methods);
 
 }  // namespace layersnet::eval

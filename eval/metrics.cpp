@@ -5,6 +5,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
+#include <set>
 #include <stdexcept>
 
 namespace layersnet::eval {
@@ -102,6 +104,52 @@ FrameMetrics frame_metrics(const GarmentLayout& L, const Eigen::Ref<const Points
     m.layer_collisions_near = -1;
   }
   return m;
+}
+
+FacePairs adjacent_face_pairs(const GarmentLayout& L) {
+  FacePairs out;
+  for (int g = 0; g < L.num_garments(); ++g) {
+    const Faces& f = L.faces[g];
+    const int32_t offset = L.offsets[g];
+    // Edge (lo, hi) -> first face seen; a second face closes the pair.
+    std::map<std::pair<int32_t, int32_t>, Eigen::Index> open;
+    std::set<std::pair<int32_t, int32_t>> closed;
+    for (Eigen::Index i = 0; i < f.rows(); ++i)
+      for (int k = 0; k < 3; ++k) {
+        const int32_t a = f(i, k), b = f(i, (k + 1) % 3);
+        const std::pair<int32_t, int32_t> e{std::min(a, b), std::max(a, b)};
+        if (closed.count(e)) continue;
+        const auto it = open.find(e);
+        if (it == open.end()) {
+          open.emplace(e, i);
+          continue;
+        }
+        const Eigen::Index j = it->second;
+        out.first.push_back({f(j, 0) + offset, f(j, 1) + offset, f(j, 2) + offset});
+        out.second.push_back({f(i, 0) + offset, f(i, 1) + offset, f(i, 2) + offset});
+        open.erase(it);
+        closed.insert(e);
+      }
+  }
+  return out;
+}
+
+std::vector<double> dihedral_angles_deg(const FacePairs& pairs, const Eigen::Ref<const Points>& x) {
+  const auto normal = [&](const std::array<int32_t, 3>& t) {
+    const Eigen::Vector3d a = x.row(t[0]).cast<double>().transpose();
+    return Eigen::Vector3d((x.row(t[1]).cast<double>().transpose() - a).cross(x.row(t[2]).cast<double>().transpose() - a));
+  };
+  std::vector<double> angles;
+  angles.reserve(pairs.first.size());
+  constexpr double kDegrees = 180.0 / 3.14159265358979323846;
+  for (size_t e = 0; e < pairs.first.size(); ++e) {
+    const Eigen::Vector3d n1 = normal(pairs.first[e]), n2 = normal(pairs.second[e]);
+    const double l1 = n1.norm(), l2 = n2.norm();
+    if (!(l1 > 0) || !(l2 > 0) || !std::isfinite(l1) || !std::isfinite(l2)) continue;
+    // atan2 of |sin| and cos stays accurate near 0 and 180 degrees, where acos does not.
+    angles.push_back(kDegrees * std::atan2(n1.cross(n2).norm(), n1.dot(n2)));
+  }
+  return angles;
 }
 
 MeanStd mean_std(const std::vector<double>& values) {

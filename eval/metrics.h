@@ -34,6 +34,8 @@
 
 #include <Eigen/Core>
 
+#include <array>
+
 #include <cstdint>
 #include <vector>
 
@@ -87,6 +89,19 @@ struct CollisionOptions {
 FrameMetrics frame_metrics(const GarmentLayout& layout, const Eigen::Ref<const Points>& pred,
                            const Eigen::Ref<const Points>& truth, const Eigen::Ref<const Points>& body,
                            const Faces& body_faces, const CollisionOptions& options = {});
+
+// Crumple: the dihedral angle of every interior edge, the angle between the unit normals of
+// the two triangles sharing it (0 = flat, 180 degrees = folded shut). Cloth that crumples into
+// paper keeps its edge lengths, so edge strain cannot see it; this measure does.
+struct FacePairs {
+  std::vector<std::array<int32_t, 3>> first, second;  // (E,) the two triangles' corners, rows of x
+};
+// Every pair of triangles that share an edge, within each garment of `layout`, each pair once.
+// Edges with more than two triangles (non-manifold) pair their first two.
+FacePairs adjacent_face_pairs(const GarmentLayout& layout);
+// Absolute dihedral angle of every pair, degrees; pairs with a degenerate or non-finite triangle
+// are skipped. x (N, 3).
+std::vector<double> dihedral_angles_deg(const FacePairs& pairs, const Eigen::Ref<const Points>& x);
 
 // Mean and population standard deviation (ddof 0, as numpy's default) of values.
 struct MeanStd {

@@ -16,6 +16,8 @@ namespace layersnet::eval {
 
 struct ReportContext {
   std::string dataset;
+  std::string manifest_sha256;      // SHA-256 of the data set's dataset.json (its ids per split)
+  EvalConfig post_processing;       // the settings the post-processed baselines ran with
   EvalOptions options;
   double blender_s_per_frame = -1;  // mean over the evaluated sequences; -1 = not recorded
   int speed_frames = 0;             // frames of the speed rollouts

@@ -2,6 +2,7 @@
 #include "eval/rollout.h"
 
 #include "dataset/garments.h"
+#include "dataset/neighbours.h"
 
 #include "eval/tether.h"
 
@@ -10,6 +11,7 @@
 #include "run/checkpoint.h"
 #include "run/run_dir.h"
 
+#include <algorithm>
 #include <chrono>
 #include <limits>
 #include <stdexcept>
@@ -30,6 +32,123 @@ Points FollowBody::step(const dataset::Sequence& seq, int t, const Points&, cons
   const Eigen::RowVector3f shift = seq.info.translation.row(t + 1) - seq.info.translation.row(t);
   Points x = x_now;
   x.rowwise() += shift;
+  return x;
+}
+
+Eigen::Matrix<float, Eigen::Dynamic, 9, Eigen::RowMajor> body_frames(const Eigen::Ref<const Points>& body,
+                                                                     const dataset::Faces& faces,
+                                                                     const std::vector<int32_t>& tangent_neighbour) {
+  const Points normals = dataset::vertex_normals(body, faces);
+  Eigen::Matrix<float, Eigen::Dynamic, 9, Eigen::RowMajor> frames(body.rows(), 9);
+  for (Eigen::Index i = 0; i < body.rows(); ++i) {
+    const Eigen::Vector3f n = normals.row(i).transpose();
+    Eigen::Vector3f u = (body.row(tangent_neighbour[static_cast<size_t>(i)]) - body.row(i)).transpose();
+    u -= u.dot(n) * n;
+    if (!(u.norm() > 1e-12f)) u = n.unitOrthogonal();  // an isolated vertex: any tangent, kept consistent
+    u.normalize();
+    const Eigen::Vector3f b = n.cross(u);
+    frames.row(i) << u.transpose(), b.transpose(), n.transpose();
+  }
+  return frames;
+}
+
+void SkinnedToBody::begin(const dataset::Sequence& seq) {
+  const dataset::Faces& f = seq.info.body_faces;
+  body_neighbours_.assign(static_cast<size_t>(seq.info.num_body_vertices), {});
+  for (Eigen::Index i = 0; i < f.rows(); ++i)
+    for (int k = 0; k < 3; ++k) {
+      body_neighbours_[static_cast<size_t>(f(i, k))].push_back(f(i, (k + 1) % 3));
+      body_neighbours_[static_cast<size_t>(f(i, k))].push_back(f(i, (k + 2) % 3));
+    }
+  for (auto& n : body_neighbours_) {
+    std::sort(n.begin(), n.end());
+    n.erase(std::unique(n.begin(), n.end()), n.end());
+  }
+  bindings_.clear();
+}
+
+namespace {
+// The tangent of body vertex i points to its lowest-numbered neighbour (itself when it has none).
+std::vector<int32_t> tangent_neighbours(const std::vector<std::vector<int32_t>>& neighbours) {
+  std::vector<int32_t> out(neighbours.size());
+  for (size_t i = 0; i < neighbours.size(); ++i)
+    out[i] = neighbours[i].empty() ? static_cast<int32_t>(i) : neighbours[i].front();
+  return out;
+}
+}  // namespace
+
+void SkinnedToBody::bind(const dataset::Sequence& seq, int t, const Points& x) {
+  const Points body = seq.body_at(t);
+  const auto frames = body_frames(body, seq.info.body_faces, tangent_neighbours(body_neighbours_));
+  const dataset::NearestBody nearest = dataset::nearest_body(x, body);
+  bindings_.assign(static_cast<size_t>(x.rows()), {});
+  for (Eigen::Index v = 0; v < x.rows(); ++v) {
+    const int32_t h = nearest.index[static_cast<size_t>(v)];
+    std::vector<int32_t> carriers{h};
+    carriers.insert(carriers.end(), body_neighbours_[static_cast<size_t>(h)].begin(),
+                    body_neighbours_[static_cast<size_t>(h)].end());
+    double total = 0;
+    auto& list = bindings_[static_cast<size_t>(v)];
+    for (const int32_t c : carriers) {
+      const Eigen::Vector3f d = (x.row(v) - body.row(c)).transpose();
+      Binding b;
+      b.body_vertex = c;
+      // Squared distance floored at a micro-unit, so a vertex on the body keeps finite weights.
+      const double w = 1.0 / std::max(1e-12, static_cast<double>(d.squaredNorm()));
+      b.weight = static_cast<float>(w);
+      total += w;
+      if (rotate_) {
+        const Eigen::Map<const Eigen::Matrix3f> F(frames.row(c).data());  // columns u, b, n
+        b.offset = F.transpose() * d;
+      } else {
+        b.offset = d;
+      }
+      list.push_back(b);
+    }
+    for (Binding& b : list) b.weight = static_cast<float>(b.weight / total);
+  }
+}
+
+Points SkinnedToBody::step(const dataset::Sequence& seq, int t, const Points&, const Points&, const Points& x_now) {
+  if (body_neighbours_.size() != static_cast<size_t>(seq.info.num_body_vertices)) begin(seq);
+  if (bindings_.size() != static_cast<size_t>(x_now.rows())) bind(seq, t, x_now);
+  const Points body = seq.body_at(t + 1);
+  Eigen::Matrix<float, Eigen::Dynamic, 9, Eigen::RowMajor> frames;
+  if (rotate_) frames = body_frames(body, seq.info.body_faces, tangent_neighbours(body_neighbours_));
+  Points x(x_now.rows(), 3);
+  for (Eigen::Index v = 0; v < x.rows(); ++v) {
+    Eigen::Vector3f p = Eigen::Vector3f::Zero();
+    for (const Binding& b : bindings_[static_cast<size_t>(v)]) {
+      Eigen::Vector3f q = body.row(b.body_vertex).transpose();
+      if (rotate_) {
+        const Eigen::Map<const Eigen::Matrix3f> F(frames.row(b.body_vertex).data());
+        q += F * b.offset;
+      } else {
+        q += b.offset;
+      }
+      p += b.weight * q;
+    }
+    x.row(v) = p.transpose();
+  }
+  return x;
+}
+
+std::unique_ptr<const ClothConstraints> make_cloth_constraints(const dataset::Sequence& seq,
+                                                               const EvalConfig& settings) {
+  return std::make_unique<const ClothConstraints>(seq.info, rest_garments(seq), seq.body_at(0), garments_at(seq, 0),
+                                                  settings);
+}
+
+void PostProcessed::begin(const dataset::Sequence& seq) {
+  inner_->begin(seq);
+  constraints_ = make_cloth_constraints(seq, settings_);
+}
+
+Points PostProcessed::step(const dataset::Sequence& seq, int t, const Points& x_prev2, const Points& x_prev,
+                           const Points& x_now) {
+  if (!constraints_) begin(seq);
+  Points x = inner_->step(seq, t, x_prev2, x_prev, x_now);
+  constraints_->apply(seq.body_at(t + 1), x, seq.body_at(t), x_now);
   return x;
 }
 
@@ -75,7 +194,7 @@ void NetworkPredictor<T>::begin(const dataset::Sequence& seq) {
   tether_limit_.clear();
   if (config_.eval.patch_tether > 0) tether_limit_ = tether_limits(seq, *structure_, config_.eval.patch_tether);
   constraints_.reset();
-  if (config_.eval.constraints) constraints_ = std::make_unique<const ClothConstraints>(seq.info, rest_garments(seq), seq.body_at(0), garments_at(seq, 0), config_.eval);
+  if (config_.eval.constraints) constraints_ = make_cloth_constraints(seq, config_.eval);
 }
 
 template <class T>

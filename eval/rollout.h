@@ -61,6 +61,64 @@ class FollowBody : public Predictor {
 };
 
 
+// Baseline: every garment vertex skinned to the body surface at the rollout's first input frame
+// t0 and carried with it. The vertex is bound to its nearest body vertex and that vertex's mesh
+// neighbours (weights ∝ 1 / squared distance); for each, its offset is kept in the body vertex's
+// local frame (vertex normal, and a tangent towards a fixed neighbour), so the garment moves
+// with the surface's translation and rotation: x_{t+1} = Σ w_i (h_i + F_i d_i) at frame t+1.
+// A body moved rigidly carries a bound garment exactly. With rotate = false the offsets stay in
+// world axes (each vertex follows its body vertices' translation only). The rollout's own
+// state is not fed back: the binding is made once, from the ground truth at t0.
+class SkinnedToBody : public Predictor {
+ public:
+  explicit SkinnedToBody(bool rotate = true) : rotate_(rotate) {}
+  std::string name() const override { return rotate_ ? "skinned to the body" : "nearest body vertices (translation)"; }
+  void begin(const dataset::Sequence& seq) override;
+  Points step(const dataset::Sequence& seq, int t, const Points& x_prev2, const Points& x_prev,
+              const Points& x_now) override;
+
+ private:
+  struct Binding {
+    int32_t body_vertex = 0;
+    float weight = 0;
+    Eigen::Vector3f offset;  // local frame (tangent, bitangent, normal) or world axes
+  };
+  void bind(const dataset::Sequence& seq, int t, const Points& x);
+  bool rotate_;
+  std::vector<std::vector<int32_t>> body_neighbours_;  // (B,) mesh neighbours, ascending
+  std::vector<std::vector<Binding>> bindings_;         // (N,) empty until the first step
+};
+
+// The body-local frames SkinnedToBody uses: per body vertex the columns (tangent, bitangent,
+// normal) as rows 3i..3i+2 of the result's transpose. body (B, 3); tangent_neighbour (B,): the
+// neighbour the tangent points to. Exposed for tests.
+Eigen::Matrix<float, Eigen::Dynamic, 9, Eigen::RowMajor> body_frames(const Eigen::Ref<const Points>& body,
+                                                                     const dataset::Faces& faces,
+                                                                     const std::vector<int32_t>& tangent_neighbour);
+
+// The cloth constraints of `settings` (run/cloth_constraints.h) built for one sequence, the
+// same for the network and for every baseline run with the post-processing.
+std::unique_ptr<const ClothConstraints> make_cloth_constraints(const dataset::Sequence& seq,
+                                                               const EvalConfig& settings);
+
+// Any predictor followed by the model's post-processing (the cloth constraints with contact
+// friction and pins, under `settings`, eval.constraints not read) after every predicted frame,
+// exactly as the network's rollout applies it: a baseline compared with a post-processed model
+// gets the same help. Named "[constrained] <inner name>".
+class PostProcessed : public Predictor {
+ public:
+  PostProcessed(std::unique_ptr<Predictor> inner, EvalConfig settings)
+      : inner_(std::move(inner)), settings_(std::move(settings)) {}
+  std::string name() const override { return "[constrained] " + inner_->name(); }
+  void begin(const dataset::Sequence& seq) override;
+  Points step(const dataset::Sequence& seq, int t, const Points& x_prev2, const Points& x_prev,
+              const Points& x_now) override;
+
+ private:
+  std::unique_ptr<Predictor> inner_;
+  EvalConfig settings_;
+  std::unique_ptr<const ClothConstraints> constraints_;
+};
 
 // The dataset sample of a rollout step: the window t-2..t+1 with the body from the data and the
 // garments from the rollout (x_prev2, x_prev, x_now at t-2..t; t+1, the unused target, from the data).

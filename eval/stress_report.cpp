@@ -3,6 +3,7 @@
 
 #include "dataset/file_io.h"
 #include "dataset/manifest.h"
+#include "dataset/sha256.h"
 #include "dataset/stats.h"
 #include "eval/stress.h"
 #include "eval/tether.h"
@@ -167,7 +168,8 @@ bool run_stress(const StressOptions& o) {
   std::printf("  (c_g + %.1f x rest graph diameter; eval/stress.h); the data's own max dist / bound over frames %d..%d: %.3f\n",
               kStretchAllowance, first, source.info.num_frames - 1, data_ratio);
 
-  nlohmann::json j = {{"checkpoint", o.checkpoint}, {"dataset", root},        {"sequence", id},
+  nlohmann::json j = {{"checkpoint", o.checkpoint}, {"checkpoint_sha256", io::sha256_file(o.checkpoint)},
+            {"dataset", root}, {"dataset_manifest_sha256", io::sha256_file(manifest.manifest_path())}, {"sequence", id},
             {"runs", nlohmann::json::array()},     {"data_bound_ratio", data_ratio},
             {"patch_tether", config.eval.patch_tether}, {"data_tether_ratio", data_tether},
             {"constraints", config.eval.constraints},

@@ -1,6 +1,7 @@
 // `layersnet eval` and `layersnet export` end to end: a freshly initialised tiny model
 // (configs/tiny.toml) in a checkpoint, on a tiny synthetic data set.
 #include "dataset/h5.h"
+#include "dataset/sha256.h"
 #include "dataset/stats.h"
 #include "dataset/synthetic.h"
 #include "eval/evaluate.h"
@@ -11,6 +12,8 @@
 #include "run/config.h"
 
 #include "tests/eval/cli_test_util.h"
+
+#include "dataset/sha256.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -67,7 +70,9 @@ TEST_F(EvalCli, EvalWritesReportsAndPrintsTheSummaryTable) {
   EXPECT_NE(text.find("follow the body"), std::string::npos) << text;
   EXPECT_NE(text.find("ms/f 1t"), std::string::npos) << text;
   const auto j = nlohmann::json::parse(slurp(out / "eval.json"));
-  ASSERT_EQ(j["methods"].size(), 5u);  // 2 models, 2 baselines, ground truth
+  EXPECT_NE(text.find("skinned to the body"), std::string::npos) << text;
+  // 2 models, 4 baselines (bare: the models run without the constraints), ground truth.
+  ASSERT_EQ(j["methods"].size(), 7u);
   EXPECT_EQ(j["split"], "test");
   for (const auto& m : j["methods"]) {
     ASSERT_EQ(m["sequences"].size(), 2u) << m["name"];
@@ -77,11 +82,12 @@ TEST_F(EvalCli, EvalWritesReportsAndPrintsTheSummaryTable) {
     EXPECT_EQ(m["summary"]["strain_p99_curve_percent"].size(), 3u) << m["name"];
     EXPECT_EQ(m["sequences"][0]["strain_p99_curve"].size(), 3u) << m["name"];
   }
-  const auto& gt = j["methods"][4];
+  const auto& gt = j["methods"][6];
   EXPECT_EQ(gt["kind"], "ground truth");
   EXPECT_EQ(gt["summary"]["error_mm"]["mean"].get<double>(), 0.0);
   EXPECT_GT(gt["summary"]["strain_p99_percent"]["mean"].get<double>(), 0.0);  // the synthetic cloth ripples
-  EXPECT_NE(text.find("strain p99 %"), std::string::npos) << text;
+  EXPECT_NE(text.find("strain99%"), std::string::npos) << text;
+  EXPECT_NE(text.find("crumple"), std::string::npos) << text;
   EXPECT_EQ(j["methods"][0]["kind"], "model");
   EXPECT_GT(j["methods"][0]["ms_per_frame_1thread"].get<double>(), 0.0);
   EXPECT_GT(j["methods"][1]["ms_per_frame_2threads"].get<double>(), 0.0);
@@ -96,7 +102,57 @@ TEST_F(EvalCli, EvalWritesReportsAndPrintsTheSummaryTable) {
     EXPECT_TRUE(fs::exists(out / "curve.png"));
     EXPECT_TRUE(fs::exists(out / "speed.png"));
     EXPECT_TRUE(fs::exists(out / "strain.png"));
+    EXPECT_TRUE(fs::exists(out / "crumple.png"));
   }
+  // The report folder holds reports only: plot data and scripts are removed.
+  for (const char* leftover : {"curve.dat", "strain.dat", "crumple.dat", "speed.dat", "plots.gp", "gnuplot.log"})
+    EXPECT_FALSE(fs::exists(out / leftover)) << leftover;
+  // Provenance: the checkpoint's and the manifest's SHA-256.
+  EXPECT_EQ(j["methods"][0]["checkpoint_sha256"].get<std::string>().size(), 64u);
+  EXPECT_EQ(j["methods"][0]["checkpoint_sha256"], io::sha256_file((root_ / "tiny.h5").string()));
+  EXPECT_NE(j["methods"][0]["checkpoint_sha256"], j["methods"][1]["checkpoint_sha256"]);
+  EXPECT_EQ(j["dataset_manifest_sha256"].get<std::string>().size(), 64u);
+  // Crumple and the free-cloth split for every method, the ground truth too.
+  for (const auto& m : j["methods"]) {
+    EXPECT_EQ(m["summary"]["dihedral_curve_deg"].size(), 3u) << m["name"];
+    EXPECT_GT(m["summary"]["dihedral_mean_deg"]["mean"].get<double>(), 0.0) << m["name"];
+    EXPECT_TRUE(m["summary"].contains("free_cloth_mm")) << m["name"];
+  }
+  // Each model against each bare baseline, one best.
+  ASSERT_EQ(j["comparisons"].size(), 8u);
+  int best = 0;
+  for (const auto& c : j["comparisons"]) {
+    EXPECT_FALSE(c["post_processed"].get<bool>());
+    EXPECT_EQ(c["per_sequence"].size(), 2u);
+    best += c["best_baseline"].get<bool>();
+  }
+  EXPECT_EQ(best, 2);
+  EXPECT_NE(md.find("against the baselines under the same post-processing"), std::string::npos);
+  EXPECT_NE(md.find("## Crumple and long rollouts"), std::string::npos);
+}
+
+// With the constraints on, every baseline runs bare and post-processed, and each model row
+// meets the baselines with its own post-processing.
+TEST_F(EvalCli, BaselinesGetTheModelsPostProcessing) {
+  int code = 0;
+  const fs::path out = root_ / "eval_post";
+  const std::string text = run("eval --checkpoint " + (root_ / "tiny.h5").string() +
+                                   " --constraints off,on --frames 3 --speed-frames 1 --out " + out.string(),
+                               &code);
+  ASSERT_EQ(code, 0) << text;
+  const auto j = nlohmann::json::parse(slurp(out / "eval.json"));
+  ASSERT_EQ(j["methods"].size(), 11u);  // 2 model rows, 8 baselines, ground truth
+  int post = 0;
+  for (const auto& m : j["methods"])
+    if (m["kind"] == "baseline" && m["post_processed"].get<bool>()) {
+      ++post;
+      EXPECT_EQ(m["name"].get<std::string>().rfind("[constrained] ", 0), 0u) << m["name"];
+    }
+  EXPECT_EQ(post, 4);
+  for (const auto& c : j["comparisons"])
+    EXPECT_EQ(c["model"].get<std::string>().rfind("[constrained] ", 0) == 0, c["post_processed"].get<bool>()) << c;
+  EXPECT_EQ(j["comparisons"].size(), 8u);
+  EXPECT_EQ(j["post_processing"]["strain_limit"].get<double>(), 0.05);
 }
 
 // --wind-scale changes the wind only as the models see it: the model's rollouts move, the
@@ -118,10 +174,10 @@ TEST_F(EvalCli, WindScaleChangesWhatTheModelSeesNotTheTruth) {
   const auto [calm, scale_0] = errors(" --wind-scale 0", "eval_wind_0");
   EXPECT_EQ(scale_1, 1.0);
   EXPECT_EQ(scale_0, 0.0);
-  ASSERT_EQ(data_wind.size(), 4u);  // model, 2 baselines, ground truth
-  ASSERT_EQ(calm.size(), 4u);
+  ASSERT_EQ(data_wind.size(), 6u);  // model, 4 baselines, ground truth
+  ASSERT_EQ(calm.size(), 6u);
   EXPECT_NE(data_wind[0], calm[0]);  // the model reads the wind
-  for (std::size_t k = 1; k < 4; ++k) EXPECT_EQ(data_wind[k], calm[k]) << k;
+  for (std::size_t k = 1; k < 6; ++k) EXPECT_EQ(data_wind[k], calm[k]) << k;
   EXPECT_NE(slurp(root_ / "eval_wind_0" / "eval.md").find("wind strengths x 0"), std::string::npos);
 }
 

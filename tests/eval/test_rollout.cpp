@@ -2,6 +2,7 @@
 #include "dataset/synthetic.h"
 #include "eval/evaluate.h"
 #include "eval/rollout.h"
+#include "eval/stress.h"
 #include "run/run_dir.h"
 #include "test_predictors.h"
 #include "model/layersnet.h"
@@ -11,6 +12,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <limits>
@@ -204,6 +206,173 @@ TEST(Rollout, ErrorIsSplitByTheTruthsDistanceFromTheBody) {
   EXPECT_NEAR(sum.band_mm[2], 0.5 * s.mm(), 1e-6);
   EXPECT_NEAR(sum.band_share[0] + sum.band_share[1] + sum.band_share[2], 1.0, 1e-12);
   EXPECT_NEAR(sum.band_share[2], static_cast<double>(s.band_vertex_frames[2]) / static_cast<double>(vertex_frames), 1e-12);
+}
+
+// Rotates frame t of the body and garments of seq about the z axis through `pivot` by t * step
+// radians and shifts it by t * drift: the whole scene moves rigidly, frame 0 stays.
+void move_rigidly(dataset::Sequence& seq, float step, const Eigen::RowVector3f& pivot, const Eigen::RowVector3f& drift) {
+  const int B = seq.info.num_body_vertices;
+  const dataset::Points body0 = seq.body_at(0);
+  std::vector<dataset::Points> garments0;
+  for (int g = 0; g < seq.info.num_garments(); ++g) garments0.push_back(seq.garment_at(g, 0));
+  for (int t = 0; t < seq.info.num_frames; ++t) {
+    const Eigen::Matrix3f R = Eigen::AngleAxisf(step * static_cast<float>(t), Eigen::Vector3f::UnitZ()).toRotationMatrix();
+    const auto move = [&](const dataset::Points& x) {
+      dataset::Points y = ((x.rowwise() - pivot) * R.transpose()).rowwise() + (pivot + static_cast<float>(t) * drift);
+      return y;
+    };
+    seq.frames.body.middleRows(static_cast<Eigen::Index>(t) * B, B) = move(body0);
+    for (int g = 0; g < seq.info.num_garments(); ++g) {
+      const int n = seq.info.garments[g].num_vertices;
+      seq.frames.garments[g].middleRows(static_cast<Eigen::Index>(t) * n, n) = move(garments0[g]);
+    }
+  }
+}
+
+TEST(Rollout, SkinningCarriesAGarmentWithARigidlyTurningBody) {
+  dataset::Sequence seq = sequence(2, 12);
+  move_rigidly(seq, 0.15f, Eigen::RowVector3f(0.3f, -0.2f, 0.f), Eigen::RowVector3f(0.05f, 0.02f, 0.01f));
+  SkinnedToBody skinned;
+  const SequenceResult s = score_rollout(seq, rollout(skinned, seq, 2, 9), {});
+  EXPECT_LT(s.error, 1e-4) << "skinning must carry a garment exactly under a rigid motion";
+  // Translation-only skinning and follow-the-body cannot follow the turn.
+  SkinnedToBody translated(false);
+  EXPECT_GT(score_rollout(seq, rollout(translated, seq, 2, 9), {}).error, 0.1);
+  FollowBody fb;
+  EXPECT_GT(score_rollout(seq, rollout(fb, seq, 2, 9), {}).error, 0.1);
+}
+
+TEST(Rollout, SkinningBindsAtTheRolloutsFirstInputFrame) {
+  // The garment moves relative to the body before t0 and rigidly with it after: a binding made
+  // at t0 is exact, one made at frame 0 would not be.
+  dataset::Sequence seq = sequence(1, 12);
+  move_rigidly(seq, 0.1f, Eigen::RowVector3f::Zero(), Eigen::RowVector3f::Zero());
+  const int n = seq.info.garments[0].num_vertices;
+  for (int t = 0; t < 5; ++t) seq.frames.garments[0].middleRows(static_cast<Eigen::Index>(t) * n, n).col(2).array() += 0.3f * static_cast<float>(5 - t);
+  SkinnedToBody skinned;
+  EXPECT_LT(score_rollout(seq, rollout(skinned, seq, 5, 6), {}).error, 1e-4);
+  EXPECT_EQ(skinned.name(), "skinned to the body");
+}
+
+TEST(Rollout, BodyFramesAreOrthonormalAndTurnWithTheBody) {
+  const dataset::Sequence seq = sequence(1, 4);
+  std::vector<int32_t> neighbour(static_cast<size_t>(seq.info.num_body_vertices));
+  for (Eigen::Index f = 0; f < seq.info.body_faces.rows(); ++f)
+    for (int k = 0; k < 3; ++k) neighbour[static_cast<size_t>(seq.info.body_faces(f, k))] = seq.info.body_faces(f, (k + 1) % 3);
+  const dataset::Points body = seq.body_at(0);
+  const auto F = body_frames(body, seq.info.body_faces, neighbour);
+  const Eigen::Matrix3f R = Eigen::AngleAxisf(0.7f, Eigen::Vector3f(1, 2, 3).normalized()).toRotationMatrix();
+  const dataset::Points turned = body * R.transpose();
+  const auto G = body_frames(turned, seq.info.body_faces, neighbour);
+  for (Eigen::Index i = 0; i < body.rows(); ++i) {
+    const Eigen::Map<const Eigen::Matrix3f> f(F.row(i).data()), g(G.row(i).data());
+    EXPECT_LT((f.transpose() * f - Eigen::Matrix3f::Identity()).norm(), 1e-5f) << i;
+    EXPECT_LT((R * f - g).norm(), 1e-4f) << i;
+  }
+}
+
+TEST(Rollout, PostProcessingIsTheSameForABaselineAsForTheModel) {
+  // The constraints pull a stretched prediction back; PostProcessed applies exactly what the
+  // network's rollout applies (make_cloth_constraints + apply with the frame before).
+  const dataset::Sequence seq = sequence(2, 8);
+  EvalConfig settings;
+  settings.constraints = true;
+  settings.strain_limit = 0.05;
+  settings.body_friction = 0.5;
+  struct Stretch : Predictor {
+    std::string name() const override { return "stretch"; }
+    Points step(const dataset::Sequence& s, int t, const Points&, const Points&, const Points&) override {
+      return 1.3f * garments_at(s, t + 1);
+    }
+  };
+  PostProcessed pp(std::make_unique<Stretch>(), settings);
+  EXPECT_EQ(pp.name(), "[constrained] stretch");
+  const Rollout r = rollout(pp, seq, 2, 4);
+  Stretch bare;
+  const Rollout b = rollout(bare, seq, 2, 4);
+  // Replay the same step by hand through the network's road.
+  const auto c = make_cloth_constraints(seq, settings);
+  Points x = 1.3f * garments_at(seq, 3);
+  c->apply(seq.body_at(3), x, seq.body_at(2), garments_at(seq, 2));
+  EXPECT_EQ((r.frames[0] - x).cwiseAbs().maxCoeff(), 0.f);
+  const GarmentEdges edges = garment_edges(seq);
+  const auto strain = [&](const Points& p) { const auto e = edge_strains(edges, p); return *std::max_element(e.begin(), e.end()); };
+  EXPECT_GT(strain(b.frames[0]), 0.2);
+  EXPECT_LT(strain(r.frames[0]), strain(b.frames[0]));
+}
+
+TEST(Rollout, CrumpleIsZeroForAFlatSheetAndGrowsWithItsFolds) {
+  dataset::GarmentLayout L;
+  L.offsets = {0, 6};
+  L.types = {"sheet"};
+  dataset::Faces f(4, 3);
+  f << 0, 1, 4, 0, 4, 3, 1, 2, 5, 1, 5, 4;  // a 3 x 2 grid, counter-clockwise
+  L.faces = {f};
+  const FacePairs pairs = adjacent_face_pairs(L);
+  ASSERT_EQ(pairs.first.size(), 3u);  // the three interior edges
+  Points flat(6, 3);
+  flat << 0, 0, 0, 1, 0, 0, 2, 0, 0, 0, 1, 0, 1, 1, 0, 2, 1, 0;
+  for (double a : dihedral_angles_deg(pairs, flat)) EXPECT_NEAR(a, 0.0, 1e-9);
+  Points folded = flat;  // the right column lifted: a 45 degree fold along x = 1
+  folded(2, 2) = 1;
+  folded(5, 2) = 1;
+  const auto angles = dihedral_angles_deg(pairs, folded);
+  ASSERT_EQ(angles.size(), 3u);
+  EXPECT_NEAR(*std::max_element(angles.begin(), angles.end()), 45.0, 1e-6);
+  // A degenerate triangle is skipped, not counted as flat or folded.
+  Points collapsed = flat;
+  collapsed.row(4) = collapsed.row(1);
+  EXPECT_LT(dihedral_angles_deg(pairs, collapsed).size(), 3u);
+}
+
+TEST(Rollout, CrumpleOfTheGroundTruthIsScoredAndMarkedAtTheMark) {
+  const dataset::Sequence seq = sequence(2, 12);
+  GroundTruth gt;
+  const SequenceResult s = score_rollout(seq, rollout(gt, seq, 2, 9), {}, 4);
+  ASSERT_EQ(s.dihedral_curve.size(), 9u);
+  EXPECT_EQ(s.mark, 4);
+  EXPECT_EQ(s.dihedral_at_mark, s.dihedral_curve[3]);
+  EXPECT_GT(s.dihedral_mean, 0.0);  // tubes bend around the body
+  EXPECT_EQ(s.error_to_mark, 0.0);
+  // A mark beyond the rollout clamps to its last frame.
+  EXPECT_EQ(score_rollout(seq, rollout(gt, seq, 2, 3), {}, 36).mark, 3);
+}
+
+TEST(Rollout, ComparisonsPairTheSamePostProcessingAndGivePerSequenceRatios) {
+  const auto result = [](std::string name, std::string kind, bool post, std::vector<double> errors) {
+    MethodResult m;
+    m.name = std::move(name);
+    m.kind = std::move(kind);
+    m.post_processed = post;
+    for (size_t i = 0; i < errors.size(); ++i) {
+      SequenceResult s;
+      s.id = "0000" + std::to_string(i);
+      s.scale = 1000;  // 1 mm per unit
+      s.error = errors[i];
+      m.sequences.push_back(s);
+    }
+    return m;
+  };
+  const std::vector<MethodResult> methods = {
+      result("net", "model", false, {1, 2, 3}), result("[constrained] net", "model", true, {1, 1, 1}),
+      result("follow", "baseline", false, {2, 4, 3}), result("skin", "baseline", false, {4, 4, 4}),
+      result("[constrained] follow", "baseline", true, {4, 2, 1})};
+  const auto c = compare_with_baselines(methods);
+  ASSERT_EQ(c.size(), 3u);
+  EXPECT_EQ(c[0].baseline, "follow");
+  EXPECT_TRUE(c[0].best_baseline);
+  EXPECT_FALSE(c[1].best_baseline);
+  EXPECT_NEAR(c[0].ratio_of_means, 2.0 / 3.0, 1e-12);
+  EXPECT_NEAR(c[0].mean_ratio, (0.5 + 0.5 + 1.0) / 3, 1e-12);
+  EXPECT_NEAR(c[0].median_ratio, 0.5, 1e-12);
+  EXPECT_EQ(c[0].worst_id, "00002");
+  EXPECT_NEAR(c[0].worst_ratio, 1.0, 1e-12);
+  // The post-processed model meets the post-processed baseline only.
+  EXPECT_EQ(c[2].model, "[constrained] net");
+  EXPECT_EQ(c[2].baseline, "[constrained] follow");
+  EXPECT_TRUE(c[2].best_baseline);
+  EXPECT_NEAR(c[2].worst_ratio, 1.0, 1e-12);
+  EXPECT_EQ(c[2].worst_id, "00002");
 }
 
 TEST(Rollout, StatsRoundTripThroughCheckpointNames) {
