@@ -28,8 +28,11 @@ if has train && [ -f "$data/stats.h5" ]; then
 fi
 if has eval && [ -d runs/default ]; then
   # The model trained here beside the shipped one (models/medium, trained on the medium_plus
-  # data set by scripts/train_shipped.sh), on the same test split; ends by printing the table.
+  # data set by scripts/train_shipped.sh), on the same test split, each network alone and with
+  # its post-processing, against every baseline bare and with the same post-processing; ends by
+  # printing the table and each model against its best baseline.
   shipped=()
   [ -f models/medium/model.h5 ] && shipped=(--checkpoint models/medium/model.h5 --name "default (trained here)" --name "shipped (medium data)")
-  "$bin" eval --run runs/default "${shipped[@]}" --dataset "$data" --out runs/default/eval
+  "$bin" eval --run runs/default "${shipped[@]}" --dataset "$data" --constraints off,on \
+    --out runs/default/eval
 fi
