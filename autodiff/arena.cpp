@@ -84,9 +84,10 @@ GradRegion::~GradRegion() {
 
 void* GradRegion::allocate(std::size_t bytes) {
   if (!base_) {
-    // Address space only (MAP_NORESERVE): nothing is committed until written. 1 TiB first,
-    // smaller if the kernel refuses (e.g. a limited address space).
-    for (std::size_t size = std::size_t{1} << 40; size >= (std::size_t{1} << 30); size >>= 2) {
+    // Address space only (MAP_NORESERVE): nothing is committed until written. 256 GiB first
+    // (a D-LAYERS-size training step reserves under 1 GiB; the 128 TiB address space holds
+    // hundreds of tapes), smaller if the kernel refuses (e.g. a limited address space).
+    for (std::size_t size = std::size_t{1} << 38; size >= (std::size_t{1} << 30); size >>= 2) {
       void* p = mmap(nullptr, size + kPage, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS | MAP_NORESERVE, -1, 0);
       if (p == MAP_FAILED) continue;
       // Align the start to a huge page, so that whole 2 MiB pages can be released.
