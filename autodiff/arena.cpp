@@ -1,7 +1,13 @@
 #include "autodiff/arena.h"
 
+#include <sys/mman.h>
+
+#include <cerrno>
 #include <cstdlib>
+#include <cstring>
 #include <new>
+#include <stdexcept>
+#include <string>
 
 namespace layersnet {
 extern int aligned_new_anchor;  // autodiff/aligned_new.cpp: 64-byte aligned heap, the same bits every run
@@ -21,15 +27,19 @@ Arena::Arena(std::size_t first_block_bytes) {
 }
 
 Arena::~Arena() {
-  for (auto& b : blocks_) std::free(b.data);
+  for (auto& b : blocks_) munmap(b.data, b.size);
 }
 
+// Blocks come straight from the kernel (mmap, page-aligned, so 64-byte aligned too), not from
+// malloc: when rewind() merges the blocks, the old ones go back to the system at once. From
+// malloc's heap (kept resident by a program that tunes malloc not to trim, as the benchmarks
+// do) the merged block came on top of them, and the step's peak counted the arena twice.
 void Arena::add_block(std::size_t min_bytes) {
   std::size_t size = blocks_.empty() ? min_bytes : blocks_.back().size * 2;
   if (size < min_bytes) size = min_bytes;
   size = round_up(size < kAlignment ? kAlignment : size, kAlignment);
-  void* p = std::aligned_alloc(kAlignment, size);
-  if (!p) throw std::bad_alloc();
+  void* p = mmap(nullptr, size, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+  if (p == MAP_FAILED) throw std::bad_alloc();
   ++heap_allocations_;
   blocks_.push_back({static_cast<std::byte*>(p), size});
 }
@@ -51,7 +61,7 @@ void Arena::rewind() {
   if (blocks_.size() > 1) {
     // Merge: next step of the same shape then fits in one block, with no heap traffic.
     const std::size_t total = capacity();
-    for (auto& b : blocks_) std::free(b.data);
+    for (auto& b : blocks_) munmap(b.data, b.size);
     blocks_.clear();
     add_block(total);
   }
@@ -66,6 +76,60 @@ std::size_t Arena::capacity() const {
   std::size_t total = 0;
   for (const auto& b : blocks_) total += b.size;
   return total;
+}
+
+GradRegion::~GradRegion() {
+  if (base_) munmap(base_, reserved_);
+}
+
+void* GradRegion::allocate(std::size_t bytes) {
+  if (!base_) {
+    // Address space only (MAP_NORESERVE): nothing is committed until written. 256 GiB first
+    // (a D-LAYERS-size training step reserves under 1 GiB; the 128 TiB address space holds
+    // hundreds of tapes), smaller if the kernel refuses (e.g. a limited address space).
+    for (std::size_t size = std::size_t{1} << 38; size >= (std::size_t{1} << 30); size >>= 2) {
+      void* p = mmap(nullptr, size + kPage, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS | MAP_NORESERVE, -1, 0);
+      if (p == MAP_FAILED) continue;
+      // Align the start to a huge page, so that whole 2 MiB pages can be released.
+      auto* raw = static_cast<std::byte*>(p);
+      const auto mis = reinterpret_cast<std::uintptr_t>(raw) % kPage;
+      const std::size_t head = mis ? kPage - mis : 0;
+      if (head) munmap(raw, head);
+      if (kPage - head) munmap(raw + head + size, kPage - head);
+      base_ = raw + head;
+      reserved_ = size;
+      madvise(base_, reserved_, MADV_HUGEPAGE);  // a hint; without THP the region works with 4 KiB pages
+      break;
+    }
+    if (!base_)
+      throw std::runtime_error(std::string("tape: cannot reserve address space for gradients (mmap: ") +
+                               std::strerror(errno) + "); raise the process's address-space limit (ulimit -v)");
+  }
+  const std::size_t need = round_up(bytes == 0 ? 1 : bytes, kAlignment);
+  if (top_ + need > reserved_)
+    throw std::runtime_error("tape: gradients of one step exceed the " + std::to_string(reserved_ >> 30) +
+                             " GiB of reserved address space; raise the address-space limit (ulimit -v)");
+  void* p = base_ + top_;
+  top_ += need;
+  if (top_ > dirty_end_) dirty_end_ = top_;
+  if (top_ > peak_top_) peak_top_ = top_;
+  return p;
+}
+
+void GradRegion::release_from(std::size_t offset) {
+  const std::size_t from = round_up(offset, kPage);
+  const std::size_t to = round_up(dirty_end_, kPage);
+  if (from >= to) return;
+  madvise(base_ + from, to - from, MADV_DONTNEED);  // private anonymous memory: reads as zero afterwards
+  dirty_end_ = from;
+}
+
+void GradRegion::rewind() {
+  if (base_ && dirty_end_ > 0) {
+    madvise(base_, round_up(dirty_end_, kPage), MADV_DONTNEED);
+    dirty_end_ = 0;
+  }
+  top_ = 0;
 }
 
 }  // namespace layersnet::ad

@@ -1,6 +1,7 @@
 #include "autodiff/ops_attention.h"
 
 #include "autodiff/ops_graph.h"
+#include "autodiff/row_blocks.h"
 
 #include <Eigen/Core>
 
@@ -198,8 +199,8 @@ RiaProblem<T> make_problem(const RiaParams<T>& p, const Var<T>& q, const Var<T>&
 
 // Node: in[0] = q, in[1] = r, in[2] = s, in[3] = the weights output (a second output: its
 // gradient is read, never written); RiaParams;
-// saved = [a (E*H) | rho (E*H) | cq = q.(s + r) (E*H) | dw scratch (E*H) |
-//          ds_edge (E*H*D), only when s needs a gradient].
+// saved = [a (E*H) | rho (E*H) | cq = q.(s + r) (E*H)]; backward's dw (E*H) and ds_edge
+// (E*H*D, only when s needs a gradient) are backward scratch.
 template <class T>
 RiaResult<T> rot_inv_attention(Tape<T>& tape, const Var<T>& q, const Var<T>& r, const Var<T>& s,
                                const RiaGraph& graph, T scale, T eps) {
@@ -237,7 +238,7 @@ RiaResult<T> rot_inv_attention(Tape<T>& tape, const Var<T>& q, const Var<T>& r, 
   RiaResult<T> res{tape.new_var(q.rows, q.cols, grad), tape.new_var(n_edges, H, grad)};
   const bool s_grad = grad && s.grad;
   const int64_t EH = n_edges * H;
-  T* saved = tape.scratch(static_cast<std::size_t>(grad ? 4 * EH + (s_grad ? n_edges * q.cols : 0) : 3 * EH));
+  T* saved = tape.scratch(static_cast<std::size_t>(3 * EH));
   ria_forward_any(pb, saved, saved + EH, saved + 2 * EH, res.weights.value, res.out.value);
   if (!grad) return res;
 
@@ -262,9 +263,11 @@ void backward_rot_inv_attention(const Node<T>& node) {
   const RiaParams<T>& params = std::get<RiaParams<T>>(node.params);
   const RiaProblem<T> pb = make_problem(params, q, r, s);
   const int64_t EH = static_cast<int64_t>(params.senders.size()) * pb.heads;
-  T* ds_edge = s.grad ? node.saved + 4 * EH : nullptr;
+  T* ds_edge = s.grad ? backward_scratch<T, kScratchRiaSenders>(params.senders.size() * static_cast<std::size_t>(q.cols))
+                     : nullptr;
   ria_backward_receivers_any(pb, node.saved, node.saved + EH, node.saved + 2 * EH, node.out.grad, w.grad,
-                             node.saved + 3 * EH, q.grad, r.grad, ds_edge);
+                             backward_scratch<T, kScratchRiaWeights>(static_cast<std::size_t>(EH)), q.grad, r.grad,
+                             ds_edge);
   if (s.grad) {
     const int32_t* sender_offsets = params.sender_offsets.data();
     const int32_t* edges = params.edges_by_sender.data();

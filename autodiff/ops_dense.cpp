@@ -219,10 +219,7 @@ Var<T> linear_op(Tape<T>& tape, const Var<T>& x, const Var<T>& W, const Var<T>& 
   const bool grad = tape.wants_grad({x, W, b});
   Var<T> out = tape.new_var(x.rows, W.rows, grad);
   linear_forward<T>({x.value, x.rows, x.cols}, {W.value, W.rows, W.cols}, b.value, relu, out.val());
-  if (grad) {
-    Node<T>& node = tape.record(relu ? OpKind::LinearRelu : OpKind::Linear, out, {x, W, b});
-    if (relu) node.saved = tape.scratch(static_cast<std::size_t>(out.size()));  // dz in backward
-  }
+  if (grad) tape.record(relu ? OpKind::LinearRelu : OpKind::Linear, out, {x, W, b});
   return out;
 }
 
@@ -250,7 +247,7 @@ void backward_linear_relu(const Node<T>& node) {
   const auto& [x, W, b, unused] = node.in;
   linear_backward<T>({x.value, x.rows, x.cols}, {W.value, W.rows, W.cols},
                      {node.out.grad, node.out.rows, node.out.cols}, x.grad, W.grad, b.grad, node.out.value,
-                     node.saved);
+                     backward_scratch<T, kScratchLinearRelu>(static_cast<std::size_t>(node.out.size())));
 }
 
 // ---- add, sub, mul, div ---------------------------------------------------------------------
@@ -482,7 +479,7 @@ Var<T> concat_cols(Tape<T>& tape, std::span<const Var<T>> inputs) {
     C += v.cols;
     grad |= v.grad != nullptr;
   }
-  grad &= tape.recording();
+  grad = tape.recording() ? grad : tape.profiling();
   Var<T> out = tape.new_var(N, C, grad);
   for_row_blocks(N, C, [&](int64_t r0, int64_t n) {
     for (int64_t r = r0; r < r0 + n; ++r) {

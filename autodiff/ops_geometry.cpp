@@ -1,5 +1,7 @@
 #include "autodiff/ops_geometry.h"
 
+#include "autodiff/row_blocks.h"
+
 #include <algorithm>
 #include <cmath>
 
@@ -197,7 +199,7 @@ void backward_rotate3(const Node<T>& node) {
 
 // ---- rot_map_apply ----------------------------------------------------------------------
 // Node: in[0] = W, in[1] = R, in[2] = v; RotationParams::transpose;
-// saved = [t = v W (N, 3) | u = rows R t (N, 3) | scratch dU (N, 3) | scratch dT (N, 3)].
+// saved = [t = v W (N, 3) | u = rows R t (N, 3)]; backward's dU, dT (N, 3) are backward scratch.
 template <class T>
 Var<T> rot_map_apply(Tape<T>& tape, const Var<T>& W, const Var<T>& R, const Var<T>& v, bool transpose) {
   check_shape("rot_map_apply W (d, 3)", W, W.rows, 3);
@@ -206,7 +208,7 @@ Var<T> rot_map_apply(Tape<T>& tape, const Var<T>& W, const Var<T>& R, const Var<
   const int64_t n_rows = v.rows;
   const bool grad = tape.wants_grad({W, R, v});
   Var<T> out = tape.new_var(n_rows, W.rows, grad);
-  T* saved = tape.scratch(static_cast<std::size_t>(grad ? 12 * n_rows : 6 * n_rows));
+  T* saved = tape.scratch(static_cast<std::size_t>(6 * n_rows));
   MatMap<T> t(saved, n_rows, 3), u(saved + 3 * n_rows, n_rows, 3);
   t.noalias() = v.val() * W.val();  // rows t[n] = W^T v[n]
 #pragma omp parallel for schedule(static) if (n_rows * 15 > kParallelMin)
@@ -225,15 +227,17 @@ void backward_rot_map_apply(const Node<T>& node) {
   const int64_t n_rows = v.rows;
   T* saved = node.saved;
   ConstMatMap<T> t(saved, n_rows, 3), u(saved + 3 * n_rows, n_rows, 3);
-  MatMap<T> du(saved + 6 * n_rows, n_rows, 3), dt(saved + 9 * n_rows, n_rows, 3);
+  T* du_buf = backward_scratch<T, kScratchRotMapU>(static_cast<std::size_t>(3 * n_rows));
+  T* dt_buf = backward_scratch<T, kScratchRotMapT>(static_cast<std::size_t>(3 * n_rows));
+  MatMap<T> du(du_buf, n_rows, 3), dt(dt_buf, n_rows, 3);
   const auto g = node.out.grd();
   du.noalias() = g * W.val();  // out = u W^T
   if (W.grad) W.grd().noalias() += g.transpose() * u;
   dt.setZero();
 #pragma omp parallel for schedule(static) if (n_rows * 36 > kParallelMin)
   for (int64_t n = 0; n < n_rows; ++n)
-    mat3_apply_backward(R.value + 9 * n, saved + 3 * n, saved + 3 * (2 * n_rows + n), transpose,
-                        R.grad ? R.grad + 9 * n : nullptr, saved + 3 * (3 * n_rows + n));
+    mat3_apply_backward(R.value + 9 * n, saved + 3 * n, du_buf + 3 * n, transpose, R.grad ? R.grad + 9 * n : nullptr,
+                        dt_buf + 3 * n);
   if (v.grad) v.grd().noalias() += dt * W.val().transpose();  // t = v W
   if (W.grad) W.grd().noalias() += v.val().transpose() * dt;
 }

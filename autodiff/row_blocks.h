@@ -58,4 +58,20 @@ const T* reduce_row_blocks(int64_t rows, int64_t cols, int64_t width, F&& f) {
   return base;
 }
 
+// Scratch for one op kind's backward on this thread: grows to the largest request, then is
+// reused by every later call, so what only backward needs is not held on the tape from the
+// forward on. Contents are unspecified; valid until the next call with the same Slot.
+template <class T, int Slot>
+T* backward_scratch(std::size_t count) {
+  static thread_local std::vector<T> buffer;
+  if (buffer.size() < count) {
+    buffer.clear();
+    buffer.resize(count);
+  }
+  return buffer.data();
+}
+
+// Slots of backward_scratch (one per buffer an op needs at the same time).
+enum ScratchSlot : int { kScratchLinearRelu, kScratchRiaWeights, kScratchRiaSenders, kScratchRotMapU, kScratchRotMapT };
+
 }  // namespace layersnet::ad

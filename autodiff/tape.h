@@ -9,6 +9,13 @@
 // Backward ADDS into input gradients. The caller zeroes parameter gradients between
 // steps (ParamStore::zero_grads); tape tensors get zeroed gradients when created.
 //
+// Memory: values and saved intermediates live in the arena until reset(). Gradients of op
+// outputs live in a GradRegion (autodiff/arena.h): committed only where backward writes, and
+// given back as the walk passes the op that produced them, so after backward the gradients of
+// intermediate tensors read as zero; leaves (leaf(), zeros(.., true)) and parameters keep theirs.
+// Scratch that only backward uses is not allocated at forward time (each kernel keeps one
+// reusable buffer; see ops_*.cpp).
+//
 // One step:   tape.reset(); ...forward ops...; tape.backward(loss); optimizer step.
 // Rollout:    NoRecord guard(tape); ...forward ops... (no nodes, no gradient buffers).
 #include "autodiff/arena.h"
@@ -51,6 +58,24 @@ struct Node {
   std::array<Var<T>, 4> in{};
   OpParams<T> params;  // the struct of this op kind; std::monostate for ops without any
   T* saved = nullptr;  // in the arena; layout in each op's recording code
+  // GradRegion offset before this op's output gradients: everything above is dead once this
+  // node's backward has run.
+  std::size_t grad_mark = 0;
+};
+
+// Where one step's time and memory go, per op kind (`layersnet bench model --profile`).
+// Forward time of an op = wall time from the previous op's record (or from profiling start)
+// to its own, so model code between ops counts towards the next op.
+struct OpProfile {
+  int64_t count = 0;
+  double forward_ms = 0, backward_ms = 0;
+  std::size_t arena_bytes = 0;  // values and saved intermediates allocated for the op (held until reset)
+  std::size_t grad_bytes = 0;   // gradients of its outputs (committed only while backward needs them)
+};
+struct TapeProfile {
+  std::array<OpProfile, kOpCount> ops{};
+  std::size_t arena_bytes_end_of_forward = 0;  // values + saved, when backward starts
+  std::size_t grad_bytes_reserved = 0;         // every op-output gradient of the step
 };
 
 template <class T>
@@ -87,7 +112,7 @@ class Tape {
 
   // True when an op with these inputs must record a node and produce a gradient.
   bool wants_grad(std::initializer_list<Var<T>> inputs) const {
-    if (!recording_) return false;
+    if (!recording_) return profile_ != nullptr;  // profiling a no-grad forward: every op reports
     for (const auto& v : inputs)
       if (v.grad) return true;
     return false;
@@ -103,10 +128,26 @@ class Tape {
   void reset();
 
   const std::vector<Node<T>>& nodes() const { return nodes_; }
+  const GradRegion& grad_region() const { return grads_; }
+
+  // Profiling: times and bytes per op kind go into *p until set_profile(nullptr). With
+  // profiling on, a non-recording tape answers wants_grad with true, so that every op calls
+  // record() (timing only: no node, no gradient buffer); ops may then save what their
+  // backward would need, which the profile counts.
+  void set_profile(TapeProfile* p);
+  bool profiling() const { return profile_ != nullptr; }
 
  private:
+  void mark_profile(OpKind op, const Var<T>& out);
+  T* leaf_grad(int64_t count);
   Arena arena_;
+  GradRegion grads_;
   std::vector<Node<T>> nodes_;
+  std::size_t grad_mark_ = 0;  // GradRegion top at the last record
+  TapeProfile* profile_ = nullptr;
+  double profile_clock_ms_ = 0;
+  std::size_t profile_arena_ = 0;
+  Node<T> profile_sink_;  // what record() returns when profiling a non-recording tape
   bool recording_ = true;
   MatmulPrecision matmul_precision_ = MatmulPrecision::kFloat32;
 };

@@ -23,6 +23,9 @@ LAYERSNET_BENCH(model, "Training and inference step vs the PyTorch reference", [
   sub.add_flag("--torch-filter", o->torch_filter,
                "keep the reference's contention filter (drops iterations with foreign load; fails on a busy machine)");
   sub.add_option("--json", o->json, "write the figures as JSON");
+  sub.add_flag("--profile", o->profile,
+               "first print, per op kind, forward and backward time and tape bytes of one training and one "
+               "inference step (mean of --iters; with --passes 0 only this)");
   sub.add_flag("--eigen-threads", o->eigen_threads, "Eigen's own GEMM threading on (default off)");
   sub.add_flag("!--default-malloc", o->malloc_heap, "do not tune malloc (reference: --malloc default)");
   return [o] {

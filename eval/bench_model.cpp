@@ -158,6 +158,43 @@ Reference run_reference(const BenchModelOptions& o, const fs::path& script, int 
   return r;
 }
 
+// Per op kind, summed over `iters` steps then divided by it: one training step's forward and
+// backward and one inference step's forward, with the bytes each op kind allocates.
+struct StepProfile {
+  ad::TapeProfile train, infer;
+  double train_ms = 0, infer_ms = 0;  // the profiled steps' own wall time (profiling on)
+  double peak_rss_mib = 0;            // VmHWM after them
+};
+
+void print_profile(const StepProfile& p, int threads, const std::string& size) {
+  const double mib = 1.0 / (1024.0 * 1024.0);
+  std::printf("\nprofile --size %s, %d thread%s (per step; fwd = wall time from the previous op's end, "
+              "model code in between included; arena = values + saved intermediates, held to the end of "
+              "the step; grad = output gradients, committed only while backward needs them)\n",
+              size.c_str(), threads, threads > 1 ? "s" : "");
+  std::printf("%-16s | %5s %9s %9s %9s %9s | %5s %9s %9s\n", "op", "n", "fwd_ms", "bwd_ms", "arena_MiB", "grad_MiB",
+              "n", "fwd_ms", "arena_MiB");
+  std::printf("%-16s | %45s | %25s\n", "", "training step", "inference step");
+  double tf = 0, tb = 0, ta = 0, tg = 0, itf = 0, ita = 0;
+  int64_t tn = 0, itn = 0;
+  for (int k = 0; k < ad::kOpCount; ++k) {
+    const auto& a = p.train.ops[static_cast<std::size_t>(k)];
+    const auto& b = p.infer.ops[static_cast<std::size_t>(k)];
+    if (a.count == 0 && b.count == 0) continue;
+    std::printf("%-16s | %5lld %9.2f %9.2f %9.1f %9.1f | %5lld %9.2f %9.1f\n", ad::op_name(static_cast<ad::OpKind>(k)),
+                static_cast<long long>(a.count), a.forward_ms, a.backward_ms, a.arena_bytes * mib, a.grad_bytes * mib,
+                static_cast<long long>(b.count), b.forward_ms, b.arena_bytes * mib);
+    tn += a.count, tf += a.forward_ms, tb += a.backward_ms, ta += a.arena_bytes * mib, tg += a.grad_bytes * mib;
+    itn += b.count, itf += b.forward_ms, ita += b.arena_bytes * mib;
+  }
+  std::printf("%-16s | %5lld %9.2f %9.2f %9.1f %9.1f | %5lld %9.2f %9.1f\n", "sum of ops", static_cast<long long>(tn),
+              tf, tb, ta, tg, static_cast<long long>(itn), itf, ita);
+  std::printf("%-16s | %35.2f %19s | %25.2f\n", "whole step", p.train_ms, "", p.infer_ms);
+  std::printf("tape at the end of the training forward: arena %.1f MiB, gradients reserved %.1f MiB; "
+              "process peak so far (VmHWM) %.0f MiB\n",
+              p.train.arena_bytes_end_of_forward * mib, p.train.grad_bytes_reserved * mib, p.peak_rss_mib);
+}
+
 }  // namespace
 
 namespace layersnet::eval {
@@ -225,6 +262,32 @@ int run_bench_model(const BenchModelOptions& o) {
   };
 
   const auto threads = parse_threads(o.threads);
+  if (o.profile)
+    for (int t : threads) {
+      omp_set_num_threads(t);
+      Eigen::setNbThreads(o.eigen_threads ? t : 1);
+      for (int i = 0; i < o.warmup; ++i) train_step(), infer_step();
+      StepProfile sp;
+      const int n = std::max(o.iters, 1);
+      for (int i = 0; i < n; ++i) {
+        tape.set_profile(&sp.train);
+        double t0 = now_ms();
+        train_step();
+        sp.train_ms += now_ms() - t0;
+        tape.set_profile(&sp.infer);
+        t0 = now_ms();
+        infer_step();
+        sp.infer_ms += now_ms() - t0;
+        tape.set_profile(nullptr);
+      }
+      for (ad::TapeProfile* tp : {&sp.train, &sp.infer})
+        for (auto& op : tp->ops) op.count /= n, op.forward_ms /= n, op.backward_ms /= n, op.arena_bytes /= n, op.grad_bytes /= n;
+      sp.train.arena_bytes_end_of_forward /= n, sp.train.grad_bytes_reserved /= n;
+      sp.train_ms /= n, sp.infer_ms /= n;
+      sp.peak_rss_mib = vm_hwm_mib();
+      print_profile(sp, t, o.size);
+    }
+  if (o.passes <= 0) return 0;
   std::map<int, Ours> ours;
   std::map<int, std::vector<Reference>> refs;
   // libgomp reads OMP_WAIT_POLICY at start-up; the reference subprocess inherits it, so both

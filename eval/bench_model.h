@@ -18,6 +18,7 @@ struct BenchModelOptions {
   bool torch_filter = false;   // keep the reference's contention filter
   bool malloc_heap = true;     // mallopt as the reference's --malloc heap
   bool eigen_threads = false;  // let Eigen's GEMM use the OpenMP threads itself
+  bool profile = false;  // per op kind: forward/backward time and tape bytes, train and infer step
   std::string json;
 };
 

@@ -3,6 +3,7 @@
 #include "autodiff/params.h"
 #include "gradcheck_registry.h"
 
+#include <algorithm>
 #include <cstdint>
 #include <memory>
 #include <vector>
@@ -91,6 +92,60 @@ TEST(Tape, BackwardAccumulatesWhenAVariableIsUsedTwice) {
   std::fill_n(y.grad, y.size(), 1.0);
   tape.backward_seeded();
   for (int64_t k = 0; k < x.size(); ++k) EXPECT_EQ(x.grad[k], 2.0);
+}
+
+// Gradients of op outputs live in the tape's GradRegion and are given back behind the backward
+// walk: after backward an intermediate gradient reads zero again, leaves keep theirs, and a
+// second step on the same tape gives the same gradients (the region starts from zero pages).
+TEST(Tape, IntermediateGradientsAreReleasedAndLeavesKept) {
+  Tape<float> tape;
+  std::vector<float> a(1 << 20);  // 4 MiB per tensor: spans whole 2 MiB pages of the region
+  for (std::size_t k = 0; k < a.size(); ++k) a[k] = static_cast<float>(k % 7) - 3.f;
+  std::vector<float> first;
+  for (int step = 0; step < 2; ++step) {
+    tape.reset();
+    Var<float> x = tape.leaf(a.data(), 1024, 1024);
+    Var<float> h = mul(tape, x, x);     // intermediate
+    Var<float> y = add(tape, h, x);     // dy/dx = 2x + 1
+    Var<float> loss = sum_all(tape, y);
+    ASSERT_NE(h.grad, nullptr);
+    EXPECT_GE(tape.grad_region().top(), 2 * a.size() * sizeof(float));  // h and y gradients
+    tape.backward(loss);
+    for (std::size_t k = 0; k < a.size(); k += 4099) EXPECT_EQ(x.grad[k], 2.f * a[k] + 1.f) << k;
+    for (std::size_t k = 0; k < a.size(); k += 4099) EXPECT_EQ(h.grad[k], 0.f) << "released: reads zero";
+    if (step == 0) first.assign(x.grad, x.grad + x.size());
+    else EXPECT_TRUE(std::equal(first.begin(), first.end(), x.grad));
+  }
+}
+
+// bench model --profile: every recorded op reports its kind, time and bytes; a profiled
+// no-record forward reports its ops too, with no node and no gradient.
+TEST(Tape, ProfileCountsOpsOfRecordedAndUnrecordedForwards) {
+  Tape<double> tape;
+  const RowMat<double> a = random_matrix(64, 8, 6);
+  TapeProfile rec, inf;
+  tape.set_profile(&rec);
+  Var<double> x = tape.leaf(a.data(), 64, 8);
+  Var<double> loss = sum_all(tape, mul(tape, x, x));
+  tape.backward(loss);
+  tape.set_profile(nullptr);
+  EXPECT_EQ(rec.ops[static_cast<std::size_t>(OpKind::Mul)].count, 1);
+  EXPECT_EQ(rec.ops[static_cast<std::size_t>(OpKind::SumAll)].count, 1);
+  EXPECT_EQ(rec.ops[static_cast<std::size_t>(OpKind::Mul)].grad_bytes, 64u * 8u * sizeof(double));
+  EXPECT_GE(rec.ops[static_cast<std::size_t>(OpKind::Mul)].arena_bytes, 64u * 8u * sizeof(double));
+  EXPECT_GE(rec.ops[static_cast<std::size_t>(OpKind::Mul)].backward_ms, 0.0);
+  tape.reset();
+  NoRecord<double> off(tape);
+  tape.set_profile(&inf);
+  Var<double> c = tape.constant(a.data(), 64, 8);
+  Var<double> y = sum_all(tape, mul(tape, c, c));
+  tape.set_profile(nullptr);
+  EXPECT_EQ(inf.ops[static_cast<std::size_t>(OpKind::Mul)].count, 1);
+  EXPECT_EQ(inf.ops[static_cast<std::size_t>(OpKind::SumAll)].count, 1);
+  EXPECT_EQ(inf.ops[static_cast<std::size_t>(OpKind::Mul)].grad_bytes, 0u);
+  EXPECT_EQ(y.grad, nullptr);
+  EXPECT_TRUE(tape.nodes().empty());
+  EXPECT_NEAR(y.scalar(), a.squaredNorm(), 1e-12 * a.squaredNorm());
 }
 
 TEST(Tape, BackwardNeedsAScalarLoss) {
