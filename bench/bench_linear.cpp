@@ -10,7 +10,7 @@
 //            are packed once (cache) and checked against the cache on every call, as in a
 //            rollout. Its speed-up is fwd0 / bf16; its error is reported against float.
 // Goals: forward >= 0.8 of the GEMM rate, backward <= 2.2x the forward time.
-#include "eval/bench_linear.h"
+#include "bench/bench_linear.h"
 #include "autodiff/bf16_gemm.h"
 #include "autodiff/ops_dense.h"
 #include "dataset/file_io.h"

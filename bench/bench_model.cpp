@@ -9,9 +9,9 @@
 // README advises on a shared machine. The load average is printed beside every row.
 // GFLOP/s use the reference's FLOP count (`flops_forward.total`, train step = 3x forward), so
 // FLOPs our formulation skips (e.g. the factored decoder) show up as a higher rate.
-#include "eval/bench_model.h"
+#include "bench/bench_model.h"
 #include "autodiff/optim.h"
-#include "eval/bench_util.h"
+#include "bench/bench_util.h"
 #include "dataset/file_io.h"
 #include "losses/losses.h"
 #include "losses/sample_loss_input.h"

@@ -18,9 +18,9 @@
 // forward stages (model::StageTimes), inference = input build + forward (no tape), training
 // step = forward + losses + backward + Adam. Interleaved passes over all sizes (foreign load
 // spreads over every size); medians over all passes' iterations after the first pass's warm-up.
-#include "eval/bench_scaling.h"
+#include "bench/bench_scaling.h"
 #include "autodiff/optim.h"
-#include "eval/bench_util.h"
+#include "bench/bench_util.h"
 #include "dataset/file_io.h"
 #include "dataset/neighbours.h"
 #include "losses/losses.h"

@@ -18,9 +18,9 @@
 //   input build             N + P (the body/wind searches still run; sample + model input,
 //                           patch structure cached as in a rollout)
 //   train step              (train - Adam) x expected forward share (backward assumed ∝ forward)
-#include "eval/bench_scene.h"
+#include "bench/bench_scene.h"
 #include "autodiff/optim.h"
-#include "eval/bench_util.h"
+#include "bench/bench_util.h"
 #include "dataset/file_io.h"
 #include "eval/metrics.h"
 #include "losses/losses.h"

@@ -1,4 +1,4 @@
-#include "eval/pareto.h"
+#include "bench/pareto.h"
 
 #include <algorithm>
 #include <cmath>

@@ -1,9 +1,9 @@
 // The sweep of `layersnet bench trade` (see trade.h).
-#include "eval/trade.h"
+#include "bench/trade.h"
 
 #include "dataset/file_io.h"
 #include "eval/machine.h"
-#include "eval/pareto.h"
+#include "bench/pareto.h"
 #include "model/params_layout.h"
 #include "run/config.h"
 

@@ -1,10 +1,10 @@
 // `layersnet simulate --garment G.obj [--garment G2.obj ...] (--body-frames DIR | --body-pc2 F
 // --body-topology OBJ | --body-h5 F) [--checkpoint C] [--wind W] [--fps F] [--scale S] [--up z|y]
-// --out DIR`: the learned simulator on a user's outfit and motion (eval/simulate.h).
+// --out DIR`: the learned simulator on a user's outfit and motion (simulate/simulate.h).
 #include "cli/command_registry.h"
 #include "cli/model_option.h"
 #include "cli/program_files.h"
-#include "eval/simulate.h"
+#include "simulate/simulate.h"
 
 #include <Eigen/Core>
 #include <unistd.h>

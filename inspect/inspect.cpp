@@ -1,5 +1,5 @@
 // `layersnet inspect` (see inspect.h).
-#include "eval/inspect.h"
+#include "inspect/inspect.h"
 
 #include "dataset/manifest.h"
 #include "dataset/patches.h"

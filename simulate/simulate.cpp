@@ -1,5 +1,5 @@
 // A user's scene: reading, checks, the rollout from rest and the outputs (see simulate.h).
-#include "eval/simulate.h"
+#include "simulate/simulate.h"
 
 #include "dataset/manifest.h"
 #include "dataset/mesh_io.h"

@@ -2,7 +2,7 @@
 // whole sweep end to end (2 variants, 1 tiny epoch each) on a tiny synthetic data set.
 #include "dataset/stats.h"
 #include "dataset/synthetic.h"
-#include "eval/pareto.h"
+#include "bench/pareto.h"
 
 #include "tests/eval/cli_test_util.h"
 

@@ -5,7 +5,7 @@
 #include "dataset/stats.h"
 #include "dataset/synthetic.h"
 #include "eval/rollout.h"
-#include "eval/simulate.h"
+#include "simulate/simulate.h"
 #include "model/params_layout.h"
 #include "run/checkpoint.h"
 #include "run/config.h"
@@ -203,7 +203,7 @@ TEST_F(Simulate, BlenderReadsTheObjSequenceAndThePc2) {
   ASSERT_EQ(code, 0) << text;
   const int K = seq_.info.num_frames, g = 1;
   const std::string garment = seq_.info.garments[g].name;
-  const std::string script = std::string(LAYERSNET_SOURCE_DIR) + "/tests/cli/blender_reads_simulation.py";
+  const std::string script = std::string(LAYERSNET_SOURCE_DIR) + "/tests/simulate/blender_reads_simulation.py";
   const std::string blender = run_cli_command("blender -b --factory-startup --python-exit-code 1 --python " + script +
                                                   " -- " + out.string() + " " + garment + " 0 1 " +
                                                   std::to_string(K - 1),
