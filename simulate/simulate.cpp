@@ -1,6 +1,8 @@
 // A user's scene: reading, checks, the rollout from rest and the outputs (see simulate.h).
 #include "simulate/simulate.h"
 
+#include "simulate/wind.h"
+
 #include "dataset/manifest.h"
 #include "dataset/mesh_io.h"
 #include "dataset/neighbours.h"
@@ -33,30 +35,6 @@ std::string fixed(double v, int digits = 2) {
 
 std::string vec_text(const Eigen::RowVector3f& v) {
   return "(" + fixed(v.x()) + ", " + fixed(v.y()) + ", " + fixed(v.z()) + ")";
-}
-
-float parse_number(const std::string& text, const std::string& what) {
-  try {
-    size_t used = 0;
-    const float v = std::stof(text, &used);
-    if (used == text.size() && std::isfinite(v)) return v;
-  } catch (const std::exception&) {
-  }
-  throw SimulateError(what + ": '" + text + "' is not a finite number");
-}
-
-std::vector<std::string> split(const std::string& text, char sep) {
-  std::vector<std::string> parts;
-  std::stringstream s(text);
-  std::string part;
-  while (std::getline(s, part, sep)) parts.push_back(part);
-  return parts;
-}
-
-std::string trim(const std::string& s) {
-  const auto b = s.find_first_not_of(" \t\r\n");
-  if (b == std::string::npos) return {};
-  return s.substr(b, s.find_last_not_of(" \t\r\n") + 1 - b);
 }
 
 // Input axes and units -> the model's: x_model = factor * R x_input.
@@ -273,6 +251,31 @@ void check_around_body(const std::string& file, const Points& garment, const Poi
                         "units (--scale) and up axis (--up)");
 }
 
+// A garment has a shape: its vertices do not all sit at one point (a mesh exported without
+// its transforms, or with every vertex snapped together, would be simulated as a point).
+void check_garment_shape(const std::string& file, const Points& garment, const Points& body) {
+  const float height = body.col(2).maxCoeff() - body.col(2).minCoeff();
+  const float extent = (garment.colwise().maxCoeff() - garment.colwise().minCoeff()).maxCoeff();
+  if (!(extent > 1e-5f * height))
+    throw SimulateError(file + ": all " + std::to_string(garment.rows()) + " vertices lie at one point " +
+                        vec_text(garment.row(0)) +
+                        " (model units): the garment has no shape; export the mesh with its vertex positions "
+                        "(apply its transforms and modifiers) posed on the body's first frame");
+}
+
+// Two layers are two garments: the same file, or the same vertices, given twice would put one
+// layer exactly on the other.
+void check_distinct_layers(const std::string& first_file, const Points& first, const std::string& file,
+                           const Points& garment) {
+  std::error_code ec;
+  const bool same_file = fs::equivalent(first_file, file, ec) && !ec;
+  const bool same_vertices = first.rows() == garment.rows() && first == garment;
+  if (same_file || same_vertices)
+    throw SimulateError(file + ": " + (same_file ? "is the same file as " : "has the same vertices as ") + first_file +
+                        ", given as an earlier layer: each --garment is its own layer, from the innermost to the "
+                        "outermost; give each layer's own OBJ once");
+}
+
 // An outer layer lies outside the inner one: where the two are close, each outer vertex lies on
 // the outward side of its nearest inner vertex, outward being the body's normal there.
 void check_layer_order(const std::string& inner_file, const Points& inner, const std::string& outer_file,
@@ -293,61 +296,6 @@ void check_layer_order(const std::string& inner_file, const Points& inner, const
                         std::to_string(near) + " vertices near " + inner_file +
                         " are on the body's side of it): garments are given from the innermost to the outermost, so "
                         "the order is probably wrong; swap the --garment options");
-}
-
-// ---- wind
-
-struct WindRow {
-  int frame;
-  Eigen::Vector3f direction;
-  float strength;
-};
-
-WindRow wind_row(const std::vector<std::string>& cells, const std::string& where) {
-  WindRow r{};
-  const float frame = parse_number(trim(cells[0]), where + ": frame");
-  if (frame < 0 || frame != std::floor(frame)) throw SimulateError(where + ": the frame must be a whole number >= 0");
-  r.frame = static_cast<int>(frame);
-  for (int c = 0; c < 3; ++c) r.direction[c] = parse_number(trim(cells[1 + c]), where + ": direction");
-  r.strength = parse_number(trim(cells[4]), where + ": strength");
-  if (r.strength < 0) throw SimulateError(where + ": the strength must be >= 0");
-  if (r.strength > 0 && r.direction.norm() == 0)
-    throw SimulateError(where + ": the direction (0, 0, 0) has no way to blow; give dx,dy,dz or strength 0");
-  return r;
-}
-
-std::vector<WindRow> read_wind(const std::string& spec) {
-  if (spec.empty() || spec == "none") return {};
-  if (spec.rfind("constant:", 0) == 0) {
-    const auto cells = split(spec.substr(9), ',');
-    if (cells.size() != 4)
-      throw SimulateError("--wind " + spec + ": use constant:dx,dy,dz,strength, e.g. constant:1,0,0,400");
-    return {wind_row({"0", cells[0], cells[1], cells[2], cells[3]}, "--wind " + spec)};
-  }
-  std::ifstream in(spec);
-  if (!in) throw SimulateError(spec + ": the wind CSV cannot be opened (--wind is none, constant:dx,dy,dz,strength or a CSV file)");
-  std::vector<WindRow> rows;
-  std::string line;
-  int line_no = 0;
-  while (std::getline(in, line)) {
-    ++line_no;
-    line = trim(line);
-    if (line.empty() || line[0] == '#') continue;
-    const auto cells = split(line, ',');
-    const std::string where = spec + ": line " + std::to_string(line_no);
-    const bool header = rows.empty() && line_no == 1 && !cells.empty() &&
-                        trim(cells[0]).find_first_of("0123456789") == std::string::npos;
-    if (header) continue;
-    if (cells.size() != 5) throw SimulateError(where + ": expected 5 columns frame,dx,dy,dz,strength");
-    WindRow r = wind_row(cells, where);
-    if (!rows.empty() && r.frame <= rows.back().frame)
-      throw SimulateError(where + ": frame " + std::to_string(r.frame) + " after frame " +
-                          std::to_string(rows.back().frame) + ": frames must increase from row to row; sort the rows");
-    rows.push_back(r);
-  }
-  if (rows.empty())
-    throw SimulateError(spec + ": the wind CSV has no rows; give rows 'frame,dx,dy,dz,strength' or use --wind none");
-  return rows;
 }
 
 // Unique, HDF5-safe garment names.
@@ -461,6 +409,8 @@ Scene build_scene(const SceneInputs& in) {
     g.panel = dataset::uv_islands(g.faces, g.uv);
     g.rest = units.to_model(obj.positions);
     g.attributes = gi.attributes;
+    check_garment_shape(gi.obj, g.rest, body0);
+    for (size_t i = 0; i < starts.size(); ++i) check_distinct_layers(in.garments[i].obj, starts[i], gi.obj, g.rest);
     check_around_body(gi.obj, g.rest, body0);
     if (!starts.empty()) check_layer_order(in.garments[starts.size() - 1].obj, starts.back(), gi.obj, g.rest, body0, info.body_faces);
     std::vector<int32_t> pins;
@@ -605,8 +555,29 @@ Rollout simulate_scene(Predictor& model, Scene& scene, const ProgressFn& progres
   return r;
 }
 
+void check_output_folder(const std::string& dir) {
+  if (dir.empty()) throw SimulateError("--out: give the output folder");
+  for (fs::path p = fs::absolute(dir); !p.empty(); p = p.parent_path()) {
+    std::error_code ec;
+    const fs::file_status s = fs::status(p, ec);
+    if (ec && s.type() != fs::file_type::not_found)
+      throw SimulateError("--out " + dir + ": " + p.string() + " cannot be examined (" + ec.message() + ")");
+    if (s.type() == fs::file_type::not_found) {
+      if (p == p.parent_path()) break;
+      continue;
+    }
+    if (s.type() != fs::file_type::directory)
+      throw SimulateError("--out " + dir + ": " + (p == fs::absolute(dir) ? std::string("is an existing file") : p.string() + " is a file") +
+                          ", not a folder; give a folder for the outputs (it is created when missing) or move the file away");
+    if (access(p.c_str(), W_OK | X_OK) != 0)
+      throw SimulateError("--out " + dir + ": " + p.string() + " is not writable; give a folder you can write to");
+    break;  // the nearest existing folder decides
+  }
+}
+
 int write_simulation(const std::string& dir_name, const Scene& scene, const SimulateOutputs& o) {
   const fs::path dir(dir_name);
+  check_output_folder(dir_name);
   fs::create_directories(dir);
   TemporaryFolder tmp{dir / (".simulate-partial-" + std::to_string(getpid()))};
   fs::remove_all(tmp.path);

@@ -110,4 +110,8 @@ struct SimulateOutputs {
 // into place at the end; on failure the temporary folder is removed. Returns the file count.
 int write_simulation(const std::string& dir, const Scene& scene, const SimulateOutputs& options = {});
 
+// Throws SimulateError naming --out when `dir` cannot hold the outputs: it (or a folder on its
+// path) is an existing file, or the nearest existing folder is not writable. Creates nothing.
+void check_output_folder(const std::string& dir);
+
 }  // namespace layersnet::eval

@@ -5,7 +5,9 @@
 #include "dataset/stats.h"
 #include "dataset/synthetic.h"
 #include "eval/rollout.h"
+#include "simulate/motion.h"
 #include "simulate/simulate.h"
+#include "simulate/wind.h"
 #include "model/params_layout.h"
 #include "run/checkpoint.h"
 #include "run/config.h"
@@ -18,6 +20,8 @@
 #include <nlohmann/json.hpp>
 
 #include <cstdlib>
+#include <iterator>
+#include <limits>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -437,6 +441,247 @@ TEST_F(Simulate, Pc2RoundTripsExactly) {
   } catch (const dataset::DatasetError& e) {
     EXPECT_NE(std::string(e.what()).find("truncated"), std::string::npos) << e.what();
   }
+}
+
+
+// ---- every input checked where it is read
+
+std::string read_text(const fs::path& p) {
+  std::ifstream in(p);
+  return std::string(std::istreambuf_iterator<char>(in), {});
+}
+
+TEST_F(Simulate, NanVertexInAGarmentObjIsRefusedWithTheFileAndLine) {
+  std::istringstream lines(read_text(garment_obj(0)));
+  const fs::path obj = root_ / "nan_vertex.obj";
+  std::ofstream out(obj);
+  std::string line;
+  for (int n = 1; std::getline(lines, line); ++n) out << (n == 3 ? "v 0.1 nan 2" : line) << "\n";
+  out.close();
+  SceneInputs in = inputs();
+  in.garments[0].obj = obj.string();
+  const std::string e = scene_error(in);
+  EXPECT_NE(e.find(obj.string() + ": line 3: vertex 3 is not finite"), std::string::npos) << e;
+}
+
+TEST_F(Simulate, GarmentWhoseVerticesAllCoincideIsRefused) {
+  const auto& mesh = seq_.info.garments[0];
+  dataset::Points x = seq_.garment_at(0, 0);
+  x.rowwise() = x.row(0).eval();
+  const fs::path obj = root_ / "point.obj";
+  dataset::write_obj(obj.string(), x, mesh.faces, &mesh.uv);
+  SceneInputs in = inputs();
+  in.garments[0].obj = obj.string();
+  const std::string e = scene_error(in);
+  EXPECT_NE(e.find(obj.string() + ": all " + std::to_string(x.rows()) + " vertices lie at one point"), std::string::npos)
+      << e;
+}
+
+TEST_F(Simulate, TheSameGarmentAsBothLayersIsRefused) {
+  SceneInputs in = inputs();
+  in.garments[1].obj = garment_obj(0);
+  std::string e = scene_error(in);
+  EXPECT_NE(e.find(garment_obj(0) + ": is the same file as " + garment_obj(0)), std::string::npos) << e;
+  // A copy under another name is the same layer too.
+  const fs::path copy = root_ / "copy_of_inner.obj";
+  fs::copy_file(garment_obj(0), copy, fs::copy_options::overwrite_existing);
+  in.garments[1].obj = copy.string();
+  e = scene_error(in);
+  EXPECT_NE(e.find(copy.string() + ": has the same vertices as " + garment_obj(0)), std::string::npos) << e;
+}
+
+TEST_F(Simulate, OutThatIsAnExistingFileIsRefusedAndLeftAlone) {
+  const fs::path file = root_ / "a_file_not_a_folder";
+  std::ofstream(file) << "keep me\n";
+  int code = 0;
+  const std::string text = run_cli("simulate --checkpoint " + checkpoint() + " --body-frames " +
+                                       (root_ / "body").string() + garment_args() + " --out " + file.string(),
+                                   &code);
+  EXPECT_EQ(code, 1) << text;
+  EXPECT_NE(text.find("--out " + file.string() + ": is an existing file, not a folder"), std::string::npos) << text;
+  EXPECT_EQ(read_text(file), "keep me\n");
+  // A file on the way to the folder is named too.
+  EXPECT_THROW(check_output_folder((file / "sub").string()), SimulateError);
+  EXPECT_NO_THROW(check_output_folder((root_ / "new" / "folder").string()));
+  EXPECT_FALSE(fs::exists(root_ / "new"));  // the check creates nothing
+}
+
+TEST_F(Simulate, NonFiniteBodyPointInAPc2IsRefusedWithTheSample) {
+  dataset::PointCache cache;
+  for (int t = 0; t < 3; ++t) cache.frames.push_back(seq_.body_at(t));
+  cache.frames[1](5, 2) = std::numeric_limits<float>::infinity();
+  const fs::path pc2 = root_ / "inf_body.pc2";
+  dataset::write_pc2(pc2.string(), cache);
+  const fs::path topology = root_ / "body_topology.obj";
+  dataset::write_obj(topology.string(), seq_.body_at(0), seq_.info.body_faces);
+  SceneInputs in = inputs();
+  in.body = {};
+  in.body.pc2 = pc2.string();
+  in.body.topology = topology.string();
+  const std::string e = scene_error(in);
+  EXPECT_NE(e.find(pc2.string() + ": sample 1: point 5 is not finite"), std::string::npos) << e;
+}
+
+TEST_F(Simulate, WindCsvWithAnAbsurdFrameOrDirectionIsRefusedByLine) {
+  const fs::path csv = root_ / "wind_absurd.csv";
+  std::ofstream(csv) << "frame,dx,dy,dz,strength\n0,1,0,0,400\n1e30,1,0,0,400\n";
+  try {
+    read_wind(csv.string());
+    ADD_FAILURE() << "a frame of 1e30 was accepted";
+  } catch (const SimulateError& e) {
+    EXPECT_NE(std::string(e.what()).find(csv.string() + ": line 3: the frame must be a whole number"),
+              std::string::npos) << e.what();
+  }
+  std::ofstream(csv) << "0,3e38,3e38,0,400\n";
+  try {
+    read_wind(csv.string());
+    ADD_FAILURE() << "a direction whose length overflows was accepted";
+  } catch (const SimulateError& e) {
+    EXPECT_NE(std::string(e.what()).find(csv.string() + ": line 1: the direction is too long"), std::string::npos)
+        << e.what();
+  }
+}
+
+// ---- motion capture (BVH)
+
+// A BVH text: a Hips root with one leg (9 channels), `frames` motion lines (or `lines` of them).
+std::string small_bvh(const std::string& root, int frames, int lines = -1, const std::string& value = "0") {
+  std::string s = "HIERARCHY\nROOT " + root +
+                  "\n{\n  OFFSET 0 0 0\n  CHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation\n"
+                  "  JOINT LeftUpLeg\n  {\n    OFFSET 1 0 0\n    CHANNELS 3 Zrotation Yrotation Xrotation\n"
+                  "    End Site\n    {\n      OFFSET 0 -4 0\n    }\n  }\n}\nMOTION\nFrames: " +
+                  std::to_string(frames) + "\nFrame Time: 0.0083333\n";
+  for (int f = 0; f < (lines < 0 ? frames : lines); ++f) s += "0 0 0 0 0 0 0 0 " + value + "\n";
+  return s;
+}
+
+std::string bvh_error(const fs::path& path, const std::string& text) {
+  std::ofstream(path) << text;
+  try {
+    read_bvh_header(path.string());
+  } catch (const SimulateError& e) {
+    return e.what();
+  }
+  return "(no error)";
+}
+
+TEST_F(Simulate, BvhHeaderIsReadAndBadClipsAreRefusedNamingTheFile) {
+  const fs::path bvh = root_ / "clip.bvh";
+  std::ofstream(bvh) << small_bvh("Hips", 4);
+  const BvhHeader h = read_bvh_header(bvh.string());
+  EXPECT_EQ(h.joints, (std::vector<std::string>{"Hips", "LeftUpLeg"}));
+  EXPECT_EQ(h.channels, 9);
+  EXPECT_EQ(h.frames, 4);
+  EXPECT_NEAR(h.rate(), 120.0, 0.01);
+  const fs::path bad = root_ / "bad.bvh";
+  const std::string name = bad.string() + ": ";
+  EXPECT_NE(bvh_error(bad, small_bvh("Pelvis", 4)).find(name + "no joint named Hips"), std::string::npos);
+  EXPECT_NE(bvh_error(bad, small_bvh("Hips", 0)).find(name + "line 17: Frames: 0;"), std::string::npos)
+      << bvh_error(bad, small_bvh("Hips", 0));
+  EXPECT_NE(bvh_error(bad, small_bvh("Hips", 5, 3)).find("the clip ends after 3 of its 5 frames"), std::string::npos);
+  EXPECT_NE(bvh_error(bad, small_bvh("Hips", 2, 2, "nan")).find(name + "line 19: 'nan' is not a finite number"),
+            std::string::npos) << bvh_error(bad, small_bvh("Hips", 2, 2, "nan"));
+  EXPECT_NE(bvh_error(bad, "v 0 0 0\n").find(name + "line 1: a BVH file starts with HIERARCHY"), std::string::npos);
+  EXPECT_NE(bvh_error(bad, "").find(name + "is empty"), std::string::npos);
+}
+
+TEST_F(Simulate, BadBvhIsRefusedBeforeBlenderRunsAndLeavesNoOutput) {
+  const fs::path bvh = root_ / "no_frames.bvh", out = root_ / "out_bad_motion";
+  std::ofstream(bvh) << small_bvh("Hips", 0);
+  int code = 0;
+  std::string text = run_cli("simulate --checkpoint " + checkpoint() + " --motion " + bvh.string() + garment_args() +
+                                 " --blender /nonexistent/blender --out " + out.string(),
+                             &code);
+  EXPECT_EQ(code, 1) << text;
+  EXPECT_NE(text.find("error: " + bvh.string() + ": line 17: Frames: 0;"), std::string::npos) << text;
+  std::ofstream(bvh) << small_bvh("Hips", 4);
+  text = run_cli("simulate --checkpoint " + checkpoint() + " --motion " + bvh.string() + " --bvh-start 4" +
+                     garment_args() + " --out " + out.string(),
+                 &code);
+  EXPECT_EQ(code, 1) << text;
+  EXPECT_NE(text.find(bvh.string() + ": --bvh-start 4 is outside its 4 frames (0..3)"), std::string::npos) << text;
+  text = run_cli("simulate --checkpoint " + checkpoint() + " --motion " + bvh.string() + " --body-frames " +
+                     (root_ / "body").string() + garment_args() + " --out " + out.string(),
+                 &code);
+  EXPECT_EQ(code, 1) << text;
+  EXPECT_NE(text.find("give the body motion once"), std::string::npos) << text;
+  EXPECT_FALSE(fs::exists(out));
+}
+
+constexpr const char* kCmuClip = "/usr/share/assimp/models/BVH/01_01.bvh";
+
+// The first `frames` motion frames of the CMU clip (120 Hz), as a short file of its own.
+void write_short_cmu_clip(const fs::path& path, int frames) {
+  std::ifstream in(kCmuClip);
+  std::ofstream out(path);
+  std::string line;
+  while (std::getline(in, line) && line.rfind("MOTION", 0) != 0) out << line << "\n";
+  out << "MOTION\nFrames: " << frames << "\nFrame Time: .0083333\n";
+  std::getline(in, line);  // Frames:
+  std::getline(in, line);  // Frame Time:
+  for (int f = 0; f < frames && std::getline(in, line); ++f) out << line << "\n";
+}
+
+TEST_F(Simulate, UnknownSkeletonIsRefusedByTheRetargetingNamingTheFile) {
+  if (std::system("blender --version > /dev/null 2>&1") != 0) GTEST_SKIP() << "blender not installed";
+  const fs::path bvh = root_ / "two_bones.bvh";
+  std::ofstream(bvh) << small_bvh("Hips", 4);
+  int code = 0;
+  const std::string text = run_cli("simulate --checkpoint " + checkpoint() + " --motion " + bvh.string() +
+                                       garment_args() + " --out " + (root_ / "out_unknown").string(),
+                                   &code);
+  EXPECT_EQ(code, 1) << text;
+  EXPECT_NE(text.find(bvh.string() + ": unknown skeleton (joints Hips, LeftUpLeg)"), std::string::npos) << text;
+  EXPECT_FALSE(fs::exists(root_ / "out_unknown"));
+}
+
+// A 41-frame CMU clip at 120 Hz played from BVH frame 1 at 30 fps: the rest frame, then
+// 1 + (41 - 1 - 1) / 4 = 10 frames, in metres with y up; the rest of simulate runs as for a PC2.
+TEST_F(Simulate, MotionFromABvhClipIsRetargetedOntoTheBodyAndSimulated) {
+  if (std::system("blender --version > /dev/null 2>&1") != 0) GTEST_SKIP() << "blender not installed";
+  if (!fs::exists(kCmuClip)) GTEST_SKIP() << kCmuClip << " missing (Debian package assimp-testmodels)";
+  const fs::path bvh = root_ / "cmu_short.bvh", out = root_ / "out_motion";
+  write_short_cmu_clip(bvh, 41);
+  // The tube garments, in metres with y up like the body Blender writes.
+  std::string garments;
+  for (int g = 0; g < seq_.info.num_garments(); ++g) {
+    const auto& mesh = seq_.info.garments[g];
+    dataset::Points x = seq_.garment_at(g, 0) / 10.f;
+    x.col(1).swap(x.col(2));
+    x.col(2) *= -1.f;  // model (x, y, z) -> input (x, z, -y)
+    const fs::path obj = root_ / ("metre_" + mesh.name + ".obj");
+    dataset::write_obj(obj.string(), x, mesh.faces, &mesh.uv);
+    garments += " --garment " + obj.string();
+  }
+  int code = 0;
+  const std::string text = run_cli("simulate --checkpoint " + checkpoint() + " --motion " + bvh.string() +
+                                       " --scale 1 --up y" + garments + " --out " + out.string(),
+                                   &code);
+  ASSERT_EQ(code, 0) << text;
+  EXPECT_NE(text.find("retargeting " + bvh.string()), std::string::npos) << text;
+  const dataset::PointCache body = dataset::read_pc2((out / "body.pc2").string());
+  ASSERT_EQ(body.frames.size(), 11u) << text;
+  const dataset::ObjMesh topology = dataset::read_obj((out / "body.obj").string());
+  EXPECT_EQ(topology.positions.rows(), body.frames[0].rows());
+  // Metres, y up: the rest body stands about 1.7 m tall along y with its feet near 0.
+  const float height = body.frames[0].col(1).maxCoeff() - body.frames[0].col(1).minCoeff();
+  EXPECT_GT(height, 1.5f);
+  EXPECT_LT(height, 1.9f);
+  EXPECT_LT(std::abs(body.frames[0].col(1).minCoeff()), 0.1f);
+  // The first frame is the rest pose, later frames move.
+  EXPECT_GT((body.frames.back() - body.frames.front()).rowwise().norm().maxCoeff(), 0.01f);
+  for (int g = 0; g < seq_.info.num_garments(); ++g) {
+    const std::string name = "metre_" + seq_.info.garments[g].name;
+    EXPECT_EQ(dataset::read_pc2((out / (name + ".pc2")).string()).frames.size(), 11u);
+  }
+  // --bvh-start and --frames: 5 frames from BVH frame 21.
+  const fs::path out2 = root_ / "out_motion_start";
+  const std::string text2 = run_cli("simulate --checkpoint " + checkpoint() + " --motion " + bvh.string() +
+                                        " --bvh-start 21 --frames 5 --scale 1 --up y" + garments + " --out " +
+                                        out2.string(),
+                                    &code);
+  ASSERT_EQ(code, 0) << text2;
+  EXPECT_EQ(dataset::read_pc2((out2 / "body.pc2").string()).frames.size(), 5u);
 }
 
 }  // namespace
