@@ -36,7 +36,8 @@ int parse_floats(const char* s, float* out, int max_count) {
 // 1-based or negative (relative) OBJ index -> 0-based, or -1 when out of range.
 int resolve_index(long index, size_t count) {
   if (index > 0 && static_cast<size_t>(index) <= count) return static_cast<int>(index - 1);
-  if (index < 0 && static_cast<size_t>(-index) <= count) return static_cast<int>(count + index);
+  // -(index + 1) cannot overflow, where -index does for the smallest long (strtol saturates there).
+  if (index < 0 && static_cast<unsigned long>(-(index + 1)) < count) return static_cast<int>(static_cast<long>(count) + index);
   return -1;
 }
 

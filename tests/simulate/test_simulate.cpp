@@ -464,6 +464,18 @@ TEST_F(Simulate, NanVertexInAGarmentObjIsRefusedWithTheFileAndLine) {
   EXPECT_NE(e.find(obj.string() + ": line 3: vertex 3 is not finite"), std::string::npos) << e;
 }
 
+// Found by fuzz/fuzz_user_files.cpp: a relative index beyond the range of long.
+TEST_F(Simulate, FaceIndexBeyondTheRangeOfLongIsRefusedByLine) {
+  const fs::path obj = root_ / "huge_index.obj";
+  std::ofstream(obj) << "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 -99999999999999999999999 3\n";
+  try {
+    dataset::read_obj(obj.string());
+    ADD_FAILURE() << "an index beyond the range of long was accepted";
+  } catch (const dataset::DatasetError& e) {
+    EXPECT_NE(std::string(e.what()).find(obj.string() + ": line 4: vertex index"), std::string::npos) << e.what();
+  }
+}
+
 TEST_F(Simulate, GarmentWhoseVerticesAllCoincideIsRefused) {
   const auto& mesh = seq_.info.garments[0];
   dataset::Points x = seq_.garment_at(0, 0);
