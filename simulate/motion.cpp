@@ -156,7 +156,12 @@ void retarget_bvh(const MotionInput& m, const std::string& out_dir) {
   std::string line, reason;
   while (std::getline(in, line))
     if (line.rfind("retarget_bvh: error: ", 0) == 0) reason = line.substr(21);
-  if (!reason.empty()) throw SimulateError(reason);
+  if (!reason.empty()) {  // the script named the file and the fix: its log adds nothing
+    in.close();
+    std::error_code ec;
+    fs::remove_all(out_dir, ec);
+    throw SimulateError(reason);
+  }
   throw SimulateError(m.bvh + ": Blender could not retarget the clip (exit " + std::to_string(rc) + "); its log: " +
                       log.string());
 }

@@ -38,7 +38,8 @@ struct MotionInput {
 // Checks the BVH (read_bvh_header, bvh_start within its frames), then runs Blender headless to
 // write `out_dir`/body.pc2 and `out_dir`/body.obj: frame 0 the rest pose of the generator's body,
 // a ramp into the clip, then the clip resampled to `fps`. Blender's output goes to
-// `out_dir`/blender.log. Throws SimulateError naming the BVH file and the fix.
+// `out_dir`/blender.log, which stays when Blender fails for a reason the script could not name
+// (the folder is removed when it names one). Throws SimulateError naming the BVH file and the fix.
 void retarget_bvh(const MotionInput& input, const std::string& out_dir);
 
 }  // namespace layersnet::eval
