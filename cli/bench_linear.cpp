@@ -1,6 +1,6 @@
-// `layersnet bench linear`: options only; the benchmark is eval/bench_linear.h.
+// `layersnet bench linear`: options only; the benchmark is bench/bench_linear.h.
 #include "cli/command_registry.h"
-#include "eval/bench_linear.h"
+#include "bench/bench_linear.h"
 
 #include <memory>
 

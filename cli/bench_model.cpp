@@ -1,7 +1,7 @@
-// `layersnet bench model`: options only; the benchmark is eval/bench_model.h.
+// `layersnet bench model`: options only; the benchmark is bench/bench_model.h.
 #include "cli/command_registry.h"
 #include "cli/exit_codes.h"
-#include "eval/bench_model.h"
+#include "bench/bench_model.h"
 
 #include <memory>
 #include <stdexcept>

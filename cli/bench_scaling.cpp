@@ -1,6 +1,6 @@
-// `layersnet bench scaling`: options only; the benchmark is eval/bench_scaling.h.
+// `layersnet bench scaling`: options only; the benchmark is bench/bench_scaling.h.
 #include "cli/command_registry.h"
-#include "eval/bench_scaling.h"
+#include "bench/bench_scaling.h"
 
 #include <memory>
 

@@ -1,6 +1,6 @@
-// `layersnet bench scene`: options only; the benchmark is eval/bench_scene.h.
+// `layersnet bench scene`: options only; the benchmark is bench/bench_scene.h.
 #include "cli/command_registry.h"
-#include "eval/bench_scene.h"
+#include "bench/bench_scene.h"
 
 #include <memory>
 

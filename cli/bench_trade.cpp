@@ -1,8 +1,8 @@
 // `layersnet bench trade`: speed against accuracy over the model knobs (the sweep:
-// eval/trade.h). Every variant is trained and evaluated by a child process of this program.
+// bench/trade.h). Every variant is trained and evaluated by a child process of this program.
 #include "cli/command_registry.h"
 #include "cli/program_files.h"
-#include "eval/trade.h"
+#include "bench/trade.h"
 
 #include <unistd.h>
 

@@ -1,7 +1,7 @@
-// `layersnet inspect DATASET`: what a data set holds (eval/inspect.h), with patches and world
+// `layersnet inspect DATASET`: what a data set holds (inspect/inspect.h), with patches and world
 // edges at the patch size and world radius of a config or the options.
 #include "cli/command_registry.h"
-#include "eval/inspect.h"
+#include "inspect/inspect.h"
 #include "model/sample_input.h"
 #include "run/config.h"
 

@@ -1,10 +1,12 @@
 // `layersnet simulate --garment G.obj [--garment G2.obj ...] (--body-frames DIR | --body-pc2 F
-// --body-topology OBJ | --body-h5 F) [--checkpoint C] [--wind W] [--fps F] [--scale S] [--up z|y]
-// --out DIR`: the learned simulator on a user's outfit and motion (eval/simulate.h).
+// --body-topology OBJ | --body-h5 F | --motion CLIP.bvh) [--checkpoint C] [--wind W] [--fps F]
+// [--scale S] [--up z|y] --out DIR`: the learned simulator on a user's outfit and motion
+// (simulate/simulate.h; a BVH clip through Blender: simulate/motion.h).
 #include "cli/command_registry.h"
 #include "cli/model_option.h"
 #include "cli/program_files.h"
-#include "eval/simulate.h"
+#include "simulate/motion.h"
+#include "simulate/simulate.h"
 
 #include <Eigen/Core>
 #include <unistd.h>
@@ -25,6 +27,7 @@ struct SimulateCliOptions {
   std::vector<std::string> settings;  // "eval.KEY=VALUE"
   eval::SimulateOutputs outputs;
   std::string out;
+  eval::MotionInput motion;  // --motion: a BVH clip retargeted by Blender
 };
 
 constexpr const char* kShippedModel = "models/medium/model.h5";
@@ -54,7 +57,30 @@ int run_simulate(SimulateCliOptions& o) {
       throw std::runtime_error(std::string(kShippedModel) + " not found in " + cli::program_files_dir().string() +
                                " (where the program's files are installed) or the working directory; pass --checkpoint or --run");
   }
+  eval::check_output_folder(o.out);
+  std::filesystem::path motion_dir;  // Blender's body frames of --motion; removed once read
+  if (!o.motion.bvh.empty()) {
+    if (!o.scene.body.obj_folder.empty() || !o.scene.body.pc2.empty() || !o.scene.body.h5.empty())
+      throw eval::SimulateError("--motion " + o.motion.bvh +
+                                ": give the body motion once (--motion, --body-frames, --body-pc2 or --body-h5)");
+    o.motion.script = cli::find_program_file("generate/retarget_bvh.py").string();
+    o.motion.fps = o.scene.fps;
+    o.motion.scale = o.scene.scale;
+    o.motion.up_axis = o.scene.up_axis;
+    o.motion.frames = o.scene.max_frames;
+    motion_dir = std::filesystem::temp_directory_path() / ("layersnet-motion-" + std::to_string(getpid()));
+    std::filesystem::remove_all(motion_dir);
+    const auto t0 = std::chrono::steady_clock::now();
+    std::fprintf(stderr, "simulate: retargeting %s onto the body rig in Blender (about a minute) ...\n",
+                 o.motion.bvh.c_str());
+    eval::retarget_bvh(o.motion, motion_dir.string());  // on failure the folder and its blender.log stay
+    std::fprintf(stderr, "simulate: motion retargeted in %.0f s\n",
+                 std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+    o.scene.body.pc2 = (motion_dir / "body.pc2").string();
+    o.scene.body.topology = (motion_dir / "body.obj").string();
+  }
   eval::Scene scene = eval::build_scene(o.scene);  // every input checked before the model loads
+  if (!motion_dir.empty()) std::filesystem::remove_all(motion_dir);
   Eigen::setNbThreads(1);  // the model's ops own the threads; nested GEMM threads only contend
   auto model = eval::load_model_predictor(checkpoint, checkpoint, nullptr);
   model->apply_eval_settings(o.settings);
@@ -99,6 +125,14 @@ LAYERSNET_COMMAND(
       sub.add_option("--body-pc2", o->scene.body.pc2, "body motion as a PC2 point cache (with --body-topology)");
       sub.add_option("--body-topology", o->scene.body.topology, "OBJ giving the faces of --body-pc2");
       sub.add_option("--body-h5", o->scene.body.h5, "the body of a D-LAYERS-H5 file (its fps, scale, up axis, root)");
+      sub.add_option("--motion", o->motion.bvh,
+                     "a BVH motion-capture clip (CMU skeleton, e.g. the CMU library): Blender retargets it onto "
+                     "the generator's body; frame 0 is the body's rest pose, then 15 frames ramp into the clip, "
+                     "resampled to --fps; written in --scale / --up units");
+      sub.add_option("--bvh-start", o->motion.bvh_start, "first BVH frame of --motion played (CMU frame 0 is a calibration pose)")
+          ->default_val(1);
+      sub.add_option("--bvh-yaw", o->motion.yaw_deg, "turn the --motion clip about the up axis (degrees)")->default_val(0.f);
+      sub.add_option("--blender", o->motion.blender, "Blender executable for --motion")->default_val("blender");
       o->model.add_to(sub, std::string("model (default: the shipped ") + kShippedModel + ")");
       sub.add_option("--wind", o->scene.wind,
                      "none | constant:dx,dy,dz,strength | CSV of rows frame,dx,dy,dz,strength (frames increasing, "

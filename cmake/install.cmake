@@ -36,7 +36,7 @@ install(FILES models/medium/model.h5 DESTINATION share/layersnet/models/medium)
 
 # --- Libraries and their package config -----------------------------------------------------
 set(LAYERSNET_LIBRARIES)
-foreach(dir autodiff dataset model losses run train eval)
+foreach(dir autodiff dataset model losses run train eval bench simulate inspect)
   if(NOT TARGET layersnet_${dir})
     continue()
   endif()

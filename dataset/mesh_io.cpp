@@ -4,6 +4,7 @@
 #include <array>
 #include <bit>
 #include <cerrno>
+#include <cmath>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
@@ -35,7 +36,8 @@ int parse_floats(const char* s, float* out, int max_count) {
 // 1-based or negative (relative) OBJ index -> 0-based, or -1 when out of range.
 int resolve_index(long index, size_t count) {
   if (index > 0 && static_cast<size_t>(index) <= count) return static_cast<int>(index - 1);
-  if (index < 0 && static_cast<size_t>(-index) <= count) return static_cast<int>(count + index);
+  // -(index + 1) cannot overflow, where -index does for the smallest long (strtol saturates there).
+  if (index < 0 && static_cast<unsigned long>(-(index + 1)) < count) return static_cast<int>(static_cast<long>(count) + index);
   return -1;
 }
 
@@ -58,10 +60,16 @@ ObjMesh read_obj(const std::string& path) {
     if (s[0] == 'v' && (s[1] == ' ' || s[1] == '\t')) {
       float p[3];
       if (parse_floats(s + 2, p, 3) != 3) throw DatasetError(path, line_ref(line), "a 'v' line needs x y z");
+      if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2]))
+        throw DatasetError(path, line_ref(line), "vertex " + std::to_string(v.size() / 3 + 1) +
+                                                     " is not finite (nan or inf); fix or re-export the mesh");
       v.insert(v.end(), p, p + 3);
     } else if (s[0] == 'v' && s[1] == 't' && (s[2] == ' ' || s[2] == '\t')) {
       float p[2];
       if (parse_floats(s + 3, p, 2) != 2) throw DatasetError(path, line_ref(line), "a 'vt' line needs u v");
+      if (!std::isfinite(p[0]) || !std::isfinite(p[1]))
+        throw DatasetError(path, line_ref(line), "texture coordinate " + std::to_string(vt.size() / 2 + 1) +
+                                                     " is not finite (nan or inf); unwrap the mesh again");
       vt.insert(vt.end(), p, p + 2);
     } else if (s[0] == 'f' && (s[1] == ' ' || s[1] == '\t')) {
       std::array<int, 4> pos{}, tex{};
@@ -227,12 +235,17 @@ PointCache read_pc2(const std::string& path) {
   if (h.points <= 0 || h.samples <= 0)
     throw DatasetError(path, "header", "holds " + std::to_string(h.points) + " points x " + std::to_string(h.samples) +
                                            " samples; a point cache needs at least one of each");
-  const std::streamoff expected =
-      static_cast<std::streamoff>(sizeof h) + static_cast<std::streamoff>(h.points) * h.samples * 12;
+  // Both counts are below 2^31, so their product times 12 bytes fits in 64 bits only when
+  // bounded first: a header that claims more than the file could hold is refused below anyway.
+  const std::streamoff per_sample = static_cast<std::streamoff>(h.points) * 12;
+  const std::streamoff expected = h.samples > (size - static_cast<std::streamoff>(sizeof h)) / per_sample
+                                      ? -1
+                                      : static_cast<std::streamoff>(sizeof h) + per_sample * h.samples;
   if (size != expected)
     throw DatasetError(path, "file", std::to_string(size) + " bytes, but its header (" + std::to_string(h.points) +
                                          " points x " + std::to_string(h.samples) + " samples) needs " +
-                                         std::to_string(expected) + ": the file is truncated or damaged");
+                                         (expected < 0 ? std::string("more") : std::to_string(expected)) +
+                                         ": the file is truncated or damaged");
   PointCache cache;
   cache.start_frame = h.start_frame;
   cache.sample_rate = h.sample_rate;
@@ -240,8 +253,14 @@ PointCache read_pc2(const std::string& path) {
   for (Points& frame : cache.frames) {
     frame.resize(h.points, 3);
     in.read(reinterpret_cast<char*>(frame.data()), static_cast<std::streamsize>(frame.size() * sizeof(float)));
+    if (!in) throw DatasetError(path, "file", "read failed");
+    if (!frame.allFinite()) {
+      Eigen::Index row = 0;
+      while (frame.row(row).allFinite()) ++row;
+      throw DatasetError(path, "sample " + std::to_string(&frame - cache.frames.data()),
+                         "point " + std::to_string(row) + " is not finite (nan or inf); bake the cache again");
+    }
   }
-  if (!in) throw DatasetError(path, "file", "read failed");
   return cache;
 }
 

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Fuzz every reader of untrusted files with libFuzzer (clang from Debian): the sequence reader
-# (fuzz/fuzz_reader.cpp) and checkpoint loading (fuzz/fuzz_checkpoint.cpp).
-# Not part of the test suite. Usage: scripts/fuzz.sh [SECONDS=120] [JOBS=1] [TARGETS="reader checkpoint"]
+# (fuzz/fuzz_reader.cpp), checkpoint loading (fuzz/fuzz_checkpoint.cpp), and the files a user
+# hands `simulate`: OBJ, PC2, wind CSV and BVH (fuzz/fuzz_user_files.cpp).
+# Not part of the test suite. Usage: scripts/fuzz.sh [SECONDS=120] [JOBS=1] [TARGETS="reader checkpoint user"]
 # Builds into build-fuzz/ with ASan + UBSan (rebuilt only when their sources changed), seeds
 # each corpus from valid files, runs each target for SECONDS in libFuzzer's fork mode,
 # prints the executions run, and exits non-zero on any crash, hang (10 s) or sanitizer report
@@ -22,7 +23,7 @@ HDF5_CFLAGS=$(pkg-config --cflags hdf5 2>/dev/null || echo "-I/usr/include/hdf5/
 HDF5_LIBS=$(pkg-config --libs hdf5 2>/dev/null || echo "-L/usr/lib/x86_64-linux-gnu/hdf5/serial -lhdf5")
 CXXFLAGS=(-std=c++20 -O1 -g -fno-omit-frame-pointer -I. -I/usr/include/eigen3 $HDF5_CFLAGS -fopenmp=libgomp
           -Wno-unknown-pragmas)
-TARGETS="${3:-reader checkpoint}"
+TARGETS="${3:-reader checkpoint user}"
 # A version header as the CMake build generates it (checkpoints record the program).
 mkdir -p "$OUT/generated"
 version=$(sed -n 's/^project(layersnet VERSION \([0-9.]*\).*/\1/p' CMakeLists.txt)
@@ -31,7 +32,8 @@ CXXFLAGS+=(-I"$OUT/generated")
 READER_SOURCES=(dataset/*.cpp)
 CHECKPOINT_SOURCES=(dataset/*.cpp autodiff/params.cpp autodiff/arena.cpp autodiff/aligned_new.cpp model/params_layout.cpp run/checkpoint.cpp run/config.cpp run/run_dir.cpp)
 SAN=(-fsanitize=fuzzer,address,undefined -fno-sanitize-recover=undefined)
-if [[ ! -x "$OUT/fuzz_reader" || -n "$(find dataset fuzz -newer "$OUT/fuzz_reader" -type f | head -1)" ]]; then
+if [[ " $TARGETS " == *" reader "* ]] &&
+   [[ ! -x "$OUT/fuzz_reader" || -n "$(find dataset fuzz -newer "$OUT/fuzz_reader" -type f | head -1)" ]]; then
   echo "building $OUT/fuzz_reader (clang++, -fsanitize=fuzzer,address,undefined)"
   clang++ "${CXXFLAGS[@]}" "${SAN[@]}" fuzz/fuzz_reader.cpp "${READER_SOURCES[@]}" $HDF5_LIBS -lgomp -o "$OUT/fuzz_reader"
   clang++ "${CXXFLAGS[@]}" fuzz/make_seeds.cpp "${READER_SOURCES[@]}" $HDF5_LIBS -lgomp -o "$OUT/make_seeds"
@@ -44,7 +46,22 @@ if [[ " $TARGETS " == *" checkpoint "* ]] &&
   clang++ "${CXXFLAGS[@]}" fuzz/make_checkpoint_seeds.cpp "${CHECKPOINT_SOURCES[@]}" $HDF5_LIBS -lgomp \
     -o "$OUT/make_checkpoint_seeds"
 fi
-"$OUT/make_seeds" "$OUT/seeds"
+USER_SOURCES=(dataset/*.cpp simulate/wind.cpp simulate/motion.cpp)
+if [[ " $TARGETS " == *" user "* ]] &&
+   [[ ! -x "$OUT/fuzz_user_files" || -n "$(find dataset simulate fuzz -newer "$OUT/fuzz_user_files" -type f | head -1)" ]]; then
+  echo "building $OUT/fuzz_user_files (clang++, -fsanitize=fuzzer,address,undefined)"
+  clang++ "${CXXFLAGS[@]}" "${SAN[@]}" fuzz/fuzz_user_files.cpp "${USER_SOURCES[@]}" $HDF5_LIBS -lgomp \
+    -o "$OUT/fuzz_user_files"
+fi
+[[ " $TARGETS " != *" reader "* ]] || "$OUT/make_seeds" "$OUT/seeds"
+if [[ " $TARGETS " == *" user "* ]]; then
+  # Seeds: one valid file per reader, prefixed with its mode byte (fuzz/fuzz_user_files.cpp).
+  mkdir -p "$OUT/seeds_user"
+  { printf '\x00'; printf 'v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nf 1/1 2/2 3/3 4/4\n'; } > "$OUT/seeds_user/obj"
+  { printf '\x01'; python3 -c 'import struct,sys; sys.stdout.buffer.write(b"POINTCACHE2\0" + struct.pack("<iiffi", 1, 2, 0, 1, 2) + struct.pack("<12f", *range(12)))'; } > "$OUT/seeds_user/pc2"
+  { printf '\x02'; printf 'frame,dx,dy,dz,strength\n0,1,0,0,400\n10,0,1,0,0\n'; } > "$OUT/seeds_user/csv"
+  { printf '\x03'; printf 'HIERARCHY\nROOT Hips\n{\n OFFSET 0 0 0\n CHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation\n JOINT LeftUpLeg\n {\n  OFFSET 1 0 0\n  CHANNELS 3 Zrotation Yrotation Xrotation\n  End Site\n  {\n   OFFSET 0 -1 0\n  }\n }\n}\nMOTION\nFrames: 2\nFrame Time: 0.0083333\n0 0 0 0 0 0 0 0 0\n1 2 3 4 5 6 7 8 9\n'; } > "$OUT/seeds_user/bvh"
+fi
 [[ " $TARGETS " != *" checkpoint "* ]] || "$OUT/make_checkpoint_seeds" "$OUT/seeds_checkpoint" configs/tiny.toml
 cd "$OUT"
 export LSAN_OPTIONS="suppressions=$(pwd)/../fuzz/lsan.supp:print_suppressions=0"
@@ -59,6 +76,7 @@ run_target() {
   local name=$1 max_len=$2 corpus=corpus_$1 seeds=seeds
   [[ $name == reader ]] && corpus=corpus
   [[ $name == checkpoint ]] && seeds=seeds_checkpoint
+  [[ $name == user_files ]] && seeds=seeds_user
   mkdir -p "$corpus" "findings_$name"
   echo "fuzzing $name for ${SECONDS_TO_RUN} s"
   rm -f crash-* leak-* timeout-* oom-*
@@ -101,4 +119,5 @@ run_target() {
 }
 [[ " $TARGETS " != *" reader "* ]] || run_target reader 65536
 [[ " $TARGETS " != *" checkpoint "* ]] || run_target checkpoint 262144
+[[ " $TARGETS " != *" user "* ]] || run_target user_files 65536
 exit $failed
