@@ -35,11 +35,12 @@ int run_pack(const PackOptions& o) {
   }
   const std::filesystem::path parent = std::filesystem::path(o.out).parent_path();
   if (!parent.empty()) std::filesystem::create_directories(parent);
-  layersnet::write_checkpoint(o.out, m.params, m.checkpoint);
-  // Provenance beside the model: what it was packed from, and the data set it names.
-  nlohmann::json prov = {{"model", o.out}, {"model_sha256", layersnet::io::sha256_file(o.out)},
-                         {"sources", nlohmann::json::array()}, {"settings", o.settings}};
+  // Provenance beside the model: what it was packed from (hashed before writing, so a model
+  // re-packed in place names the file it came from), and the data set it names.
+  nlohmann::json prov = {{"model", o.out}, {"sources", nlohmann::json::array()}, {"settings", o.settings}};
   for (const auto& s : sources) prov["sources"].push_back({{"checkpoint", s}, {"sha256", layersnet::io::sha256_file(s)}});
+  layersnet::write_checkpoint(o.out, m.params, m.checkpoint);
+  prov["model_sha256"] = layersnet::io::sha256_file(o.out);
   const std::filesystem::path manifest = std::filesystem::path(m.config.data.dataset) / "dataset.json";
   prov["dataset"] = m.config.data.dataset;
   prov["dataset_manifest_sha256"] =
