@@ -77,6 +77,11 @@ TEST(GenerateGarments, TemplatesHavePanelsMetricUvAndLayerGap) {
   EXPECT_EQ(run("/usr/bin/python3 " + kSource + "/tests/generate/test_garments.py"), 0);
 }
 
+TEST(GenerateMotionWind, ProceduralOverlaysAndHorizontalWind) {
+  if (run("/usr/bin/python3 -c 'import numpy' > /dev/null 2>&1") != 0) GTEST_SKIP() << "no numpy";
+  EXPECT_EQ(run("/usr/bin/python3 " + kSource + "/tests/generate/test_motion_wind.py"), 0);
+}
+
 TEST(GenerateGarments, OlderFilesGetTheGeneratorsPins) {
   if (run("/usr/bin/python3 -c 'import h5py, numpy' > /dev/null 2>&1") != 0) GTEST_SKIP() << "no h5py/numpy";
   EXPECT_EQ(run("/usr/bin/python3 " + kSource + "/tests/generate/test_add_pins.py"), 0);
