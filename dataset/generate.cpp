@@ -335,6 +335,7 @@ GenerateSummary generate_dataset(const GenerateOptions& opt) {
       rep["attempts"] = attempt + 1;
       rep["dataset_seed"] = seed;
       rep["dataset_scene"] = scene;
+      rep["blender_threads"] = opt.threads;  // the solver's trajectory depends on it (re-simulations must match)
       rep["accepted"] = failed.empty();
       rep["failed_gates"] = failed;
       io::write_file_atomic(rep_path, rep.dump(1));

@@ -96,6 +96,8 @@ TEST(GenerateJobs, SeedsPerIndexPeriodicManifestAndResume) {
   EXPECT_EQ(m.extra["subsets"]["test_procedural_motion"].size(), 2u);
   EXPECT_FALSE(m.extra["subsets"].contains("test_seen_outfit"));
   EXPECT_EQ(read(fs::path(o.out) / "generate_report.json")["summary"]["jobs"], 3);
+  // Each report names the Blender thread count (a re-simulation must use the same).
+  EXPECT_EQ(read(fs::path(o.out) / "reports" / "00004.json")["blender_threads"], o.threads);
 
   // A sequence killed mid-way (its file written, its accepted report not yet) is simulated
   // again; the others are kept.
