@@ -16,7 +16,10 @@
 #     JITTER  noise std in scene units (default 0.01 = 1 mm at the D-LAYERS x10 scale)
 #     TWINS   jitter (default) | calm-wind | both
 # Environment: IDS="00744 00745" re-simulates only these test sequences (default: the whole
-# test split); EVAL_FRAMES=N scores N frames from the ramp's end (default: eval.frames).
+# test split); EVAL_FRAMES=N scores N frames from the ramp's end (default: eval.frames); THREADS=N
+# Blender threads per twin (default 2) must be those the data was made with (`generate --threads`,
+# the reports' blender_threads): the cloth solver sums in a thread-dependent order, so another
+# count is another trajectory (12.3 mm apart over 78 frames on a large-recipe sequence).
 # Cost: one Blender run per twin (about 1 min per 100-frame sequence on 2 cores).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -53,7 +56,7 @@ make_twins() {
     [ -f "$dir/$id.h5" ] && continue
     read -r seed split < <($PY -c 'import json,sys; r=json.load(open(sys.argv[1])); print(r["seed"], r["split"])' "$DATA/reports/$id.json")
     echo "predictability: $variant twin of $id (seed $seed, $key $value)"
-    blender -b --factory-startup -t 2 --python generate/make_sequence.py -- --out "$dir/$id.h5.part" \
+    blender -b --factory-startup -t "${THREADS:-2}" --python generate/make_sequence.py -- --out "$dir/$id.h5.part" \
       --report "$dir/reports/$id.json" --seed "$seed" --split "$split" --config "$dir/scene.json" > "$dir/logs/$id.log" 2>&1 \
       || { echo "predictability: Blender failed on $id, see $dir/logs/$id.log" >&2; exit 1; }
     mv "$dir/$id.h5.part" "$dir/$id.h5"
