@@ -37,7 +37,10 @@ LAYERSNET_COMMAND(generate, "Simulate D-LAYERS-like sequences with Blender's clo
   sub.add_option("--frames", opt->frames, "frames per sequence at 30 fps (overrides the recipe)");
   sub.add_option("--seed", opt->seed, "data set seed (overrides the recipe)");
   sub.add_option("--max-attempts", opt->max_attempts, "simulations per sequence before it is dropped");
-  sub.add_option("--threads", opt->threads, "Blender threads (one Blender process runs at a time)");
+  sub.add_option("--threads", opt->threads, "Blender threads per Blender process");
+  sub.add_option("--jobs", opt->jobs, "Blender processes at once (results do not depend on it)")->check(CLI::PositiveNumber);
+  sub.add_option("--manifest-every", opt->manifest_every,
+                 "rewrite dataset.json after every this many finished sequences (0: only at the end)");
   sub.add_option("--blender", opt->blender, "Blender executable");
   sub.add_option("--script", opt->script, "path of generate/make_sequence.py");
   sub.add_option("--splits", opt->only_splits,

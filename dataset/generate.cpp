@@ -5,6 +5,10 @@
 #include "dataset/manifest.h"
 
 #include <algorithm>
+#include <atomic>
+#include <exception>
+#include <mutex>
+#include <thread>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
@@ -164,6 +168,49 @@ std::string generate_report_markdown(const json& rep) {
   return md.str();
 }
 
+namespace {
+
+// dataset.json of the finished entries (index order): splits, tags, the Table-1 subsets
+// (T, T+W, L, L+W) and, for recipes that tag outfits or motions, the named test subsets.
+void write_dataset_manifest(const fs::path& out, const std::string& source, const std::vector<json>& entries) {
+  DatasetManifest manifest;
+  manifest.root = out.string();
+  json tags = json::object();
+  json subsets = {{"T", json::array()}, {"T+W", json::array()}, {"L", json::array()}, {"L+W", json::array()}};
+  bool named = false;
+  for (const json& e : entries) {
+    if (e.is_null() || !e.contains("report")) continue;
+    const std::string id = e.at("id");
+    const std::string split = e.at("split");
+    (split == "train" ? manifest.train : split == "val" ? manifest.val : manifest.test).push_back(id);
+    const json& t = e.at("report").at("tags");
+    tags[id] = t;
+    const std::string base = t.at("inner") == "tight" ? "T" : "L";
+    if (t.at("wind") == "calm") subsets[base].push_back(id);
+    if (t.at("wind") == "windy") subsets[base + "+W"].push_back(id);
+    if (split == "test" && (t.contains("outfit") || t.contains("motion"))) {
+      named = true;
+      if (t.value("outfit", std::string("seen")) == "seen") subsets["test_seen_outfit"].push_back(id);
+      else subsets["test_unseen_outfit"].push_back(id);
+      if (t.at("wind") == "windy") subsets["test_windy"].push_back(id);
+      if (t.at("wind") == "calm") subsets["test_calm"].push_back(id);
+      if (t.value("motion", std::string()) == "procedural") subsets["test_procedural_motion"].push_back(id);
+    }
+  }
+  manifest.source = source;
+  std::string rule =
+      "T/L: tight (pants) / loose (skirt, dress, loose trousers) inner layer; +W: max wind strength > 250; "
+      "without +W: max wind strength <= 50";
+  if (named)
+    rule += ". test_seen_outfit: test sequences (motion blocks no other split uses) whose garment kinds all occur in "
+            "training; test_unseen_outfit: with a kind held out of training (scene key heldout_kinds); test_windy / "
+            "test_calm: max wind strength > 250 / <= 50; test_procedural_motion: with spins, hops or arm swings";
+  manifest.extra = {{"tags", tags}, {"subsets", subsets}, {"subset_rule", rule}};
+  write_manifest(manifest);
+}
+
+}  // namespace
+
 GenerateSummary generate_dataset(const GenerateOptions& opt) {
   const auto t_run = std::chrono::steady_clock::now();
   const fs::path script = opt.script;
@@ -177,6 +224,7 @@ GenerateSummary generate_dataset(const GenerateOptions& opt) {
   if (recipe.contains("gates"))
     check_keys(recipe["gates"], {"max_inside_body_share", "max_outer_inside_inner_share", "max_edge_stretch",
                                  "max_p99_edge_stretch"}, recipe_path.string() + ": /gates");
+  if (opt.jobs < 1) throw GenerateError("--jobs " + std::to_string(opt.jobs) + ": give at least 1 Blender process");
   const int count = opt.count >= 0 ? opt.count : recipe.value("count", 8);
   const long long seed = opt.seed >= 0 ? opt.seed : recipe.value("seed", 1LL);
   const int max_attempts = opt.max_attempts > 0 ? opt.max_attempts : recipe.value("max_attempts", 3);
@@ -201,39 +249,61 @@ GenerateSummary generate_dataset(const GenerateOptions& opt) {
       recipe.contains("split_ranges")
           ? split_names_from_ranges(count, recipe["split_ranges"], recipe_path.string() + ": /split_ranges")
           : split_names(count, recipe.value("val_fraction", 0.125), recipe.value("test_fraction", 0.125));
+  std::ostringstream source_text;
+  source_text << "layersnet generate: Blender cloth (generate/make_sequence.py), recipe " << recipe_path.string()
+              << ", seed " << seed << ", count " << count << ", scene " << scene.dump();
+  const std::string source = source_text.str();
 
-  json sequences = json::array();
-  int accepted = 0, dropped = 0, regenerated = 0, generated_now = 0;
+  // entries[i]: null until sequence i is kept, made or dropped (index order, whatever finishes first).
+  std::vector<json> entries(count);
+  std::vector<int> todo;
+  int accepted = 0, dropped = 0, regenerated = 0, generated_now = 0, finished_now = 0;
   double spent = 0.0, s_per_frame_sum = 0.0;
-  for (int i = 0; i < count; ++i) {
+  auto id_of = [](int i) {
     char idbuf[16];
     std::snprintf(idbuf, sizeof(idbuf), "%05d", i);
-    const std::string id = idbuf;
+    return std::string(idbuf);
+  };
+  for (int i = 0; i < count; ++i) {
+    const std::string id = id_of(i);
     const fs::path h5 = out / (id + ".h5");
     const fs::path final_report = out / "reports" / (id + ".json");
-    json entry = {{"id", id}, {"split", splits[i]}};
     if (fs::exists(h5) && fs::exists(final_report)) {
       json kept = read_json(final_report);
       // Keep it only if it was made for the same data set seed, split and scene settings.
       if (kept.value("accepted", false) && kept.value("dataset_seed", -1LL) == seed &&
           kept.value("split", std::string()) == splits[i] && kept.value("dataset_scene", json()) == scene) {
-        entry.update({{"attempts", kept.value("attempts", 1)}, {"status", "kept"}, {"report", kept}});
+        entries[i] = {{"id", id}, {"split", splits[i]}, {"attempts", kept.value("attempts", 1)}, {"status", "kept"},
+                      {"report", kept}};
         s_per_frame_sum += kept.at("timing").at("blender_s_per_frame").get<double>();
         ++accepted;
-        sequences.push_back(entry);
-        std::printf("[%d/%d] %s kept (resume)\n", i + 1, count, id.c_str());
         continue;
       }
     }
     if (!opt.only_splits.empty() &&
-        std::find(opt.only_splits.begin(), opt.only_splits.end(), splits[i]) == opt.only_splits.end()) {
-      std::printf("[%d/%d] %s %s not requested (--splits)\n", i + 1, count, id.c_str(), splits[i].c_str());
+        std::find(opt.only_splits.begin(), opt.only_splits.end(), splits[i]) == opt.only_splits.end())
       continue;
-    }
+    todo.push_back(i);
+  }
+  std::printf("generate: %d of %d sequences kept (resume), %d to simulate with %d Blender process%s of %d thread%s\n",
+              accepted, count, static_cast<int>(todo.size()), opt.jobs, opt.jobs == 1 ? "" : "es", opt.threads,
+              opt.threads == 1 ? "" : "s");
+  std::fflush(stdout);
+
+  std::mutex mutex;  // guards entries, the counters, stdout and the periodic manifest
+  std::atomic<std::size_t> next{0};
+  std::atomic<bool> stop{false};
+  std::exception_ptr error;
+  auto simulate = [&](int i) {
+    const std::string id = id_of(i);
+    const fs::path h5 = out / (id + ".h5");
+    const fs::path final_report = out / "reports" / (id + ".json");
+    json entry = {{"id", id}, {"split", splits[i]}};
     std::vector<std::string> reasons;
     bool ok = false;
     int attempt = 0;
-    const double spent_before = spent;
+    double seconds = 0.0, s_per_frame = 0.0;
+    int runs = 0;
     for (; attempt < max_attempts && !ok; ++attempt) {
       const long long sseed = sequence_seed(seed, i, attempt);
       const fs::path rep_path = out / "reports" / (id + ".attempt" + std::to_string(attempt) + ".json");
@@ -246,13 +316,13 @@ GenerateSummary generate_dataset(const GenerateOptions& opt) {
                               " --config " + quote(scene_json.string()) + " > " + quote(log.string()) + " 2>&1";
       const auto t0 = std::chrono::steady_clock::now();
       const int rc = std::system(cmd.c_str());
-      const double dt = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-      spent += dt;
-      ++generated_now;
+      seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      ++runs;
       if (rc != 0 || !fs::exists(rep_path)) {
         reasons.push_back("attempt " + std::to_string(attempt) + ": Blender failed (exit " + std::to_string(rc) +
                           "), see " + log.string());
-        if (rc != 0 && attempt == 0 && !fs::exists(rep_path) && i == 0 && std::system((quote(opt.blender) + " --version > /dev/null 2>&1").c_str()) != 0)
+        if (rc != 0 && attempt == 0 && !fs::exists(rep_path) &&
+            std::system((quote(opt.blender) + " --version > /dev/null 2>&1").c_str()) != 0)
           throw GenerateError("cannot run '" + opt.blender + "': install Blender (scripts/setup.sh) or pass --blender PATH");
         continue;
       }
@@ -265,6 +335,7 @@ GenerateSummary generate_dataset(const GenerateOptions& opt) {
       rep["attempts"] = attempt + 1;
       rep["dataset_seed"] = seed;
       rep["dataset_scene"] = scene;
+      rep["blender_threads"] = opt.threads;  // the solver's trajectory depends on it (re-simulations must match)
       rep["accepted"] = failed.empty();
       rep["failed_gates"] = failed;
       io::write_file_atomic(rep_path, rep.dump(1));
@@ -272,8 +343,7 @@ GenerateSummary generate_dataset(const GenerateOptions& opt) {
         ok = true;
         io::write_file_atomic(final_report, rep.dump(1));
         entry.update({{"attempts", attempt + 1}, {"status", attempt ? "regenerated" : "generated"}, {"report", rep}});
-        s_per_frame_sum += rep.at("timing").at("blender_s_per_frame").get<double>();
-        regenerated += attempt > 0;
+        s_per_frame = rep.at("timing").at("blender_s_per_frame").get<double>();
       } else {
         std::string why;
         for (const auto& f : failed) why += (why.empty() ? "" : "; ") + f;
@@ -281,60 +351,75 @@ GenerateSummary generate_dataset(const GenerateOptions& opt) {
         fs::remove(h5);
       }
     }
-    if (!ok) {
-      entry.update({{"attempts", attempt}, {"status", "dropped"}});
-      ++dropped;
-    } else {
-      ++accepted;
-    }
+    if (!ok) entry.update({{"attempts", attempt}, {"status", "dropped"}});
     entry["reasons"] = reasons;
-    sequences.push_back(entry);
-    const double mean = spent / std::max(1, generated_now);
-    const double eta = mean * (count - i - 1);
-    std::printf("[%d/%d] %s %s %s (%d attempt%s, %.1f s); ETA %s\n", i + 1, count, id.c_str(), splits[i].c_str(),
-                entry["status"].get<std::string>().c_str(), attempt, attempt == 1 ? "" : "s", spent - spent_before, fmt_duration(eta).c_str());
-    std::fflush(stdout);
-  }
+    entry["blender_seconds"] = seconds;
 
-  // dataset.json: splits of the accepted ids, tags and Table-1 subsets (T, T+W, L, L+W).
-  DatasetManifest manifest;
-  manifest.root = out.string();
-  json tags = json::object();
-  json subsets = {{"T", json::array()}, {"T+W", json::array()}, {"L", json::array()}, {"L+W", json::array()}};
-  for (const json& e : sequences) {
-    if (!e.contains("report")) continue;
-    const std::string id = e.at("id");
-    const std::string split = e.at("split");
-    (split == "train" ? manifest.train : split == "val" ? manifest.val : manifest.test).push_back(id);
-    const json& t = e.at("report").at("tags");
-    tags[id] = t;
-    const std::string base = t.at("inner") == "tight" ? "T" : "L";
-    if (t.at("wind") == "calm") subsets[base].push_back(id);
-    if (t.at("wind") == "windy") subsets[base + "+W"].push_back(id);
+    std::lock_guard<std::mutex> lock(mutex);
+    entries[i] = entry;
+    spent += seconds;
+    generated_now += runs;
+    ++finished_now;
+    if (ok) {
+      ++accepted;
+      s_per_frame_sum += s_per_frame;
+      regenerated += attempt > 1;
+    } else {
+      ++dropped;
+    }
+    const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_run).count();
+    const int left = static_cast<int>(todo.size()) - finished_now;
+    const double eta = wall / finished_now * left;  // wall time per finished sequence at this many jobs
+    std::printf("[%d/%d] %s %s %s (%d attempt%s, %.1f s Blender); %d left, ETA %s\n", finished_now,
+                static_cast<int>(todo.size()), id.c_str(), splits[i].c_str(), entry["status"].get<std::string>().c_str(),
+                attempt, attempt == 1 ? "" : "s", seconds, left, fmt_duration(eta).c_str());
+    std::fflush(stdout);
+    // An interrupted run leaves a usable dataset.json of what is finished.
+    if (opt.manifest_every > 0 && finished_now % opt.manifest_every == 0 && left > 0)
+      write_dataset_manifest(out, source, entries);
+  };
+  auto worker = [&] {
+    while (!stop) {
+      const std::size_t k = next++;
+      if (k >= todo.size()) return;
+      try {
+        simulate(todo[k]);
+      } catch (...) {
+        std::lock_guard<std::mutex> lock(mutex);
+        if (!error) error = std::current_exception();
+        stop = true;
+      }
+    }
+  };
+  {
+    std::vector<std::thread> pool;
+    const int n = std::min<int>(opt.jobs, std::max<int>(1, static_cast<int>(todo.size())));
+    for (int j = 0; j < n; ++j) pool.emplace_back(worker);
+    for (auto& t : pool) t.join();
   }
-  std::ostringstream source;
-  source << "layersnet generate: Blender cloth (generate/make_sequence.py), recipe " << recipe_path.string()
-         << ", seed " << seed << ", count " << count << ", scene " << scene.dump();
-  manifest.source = source.str();
-  manifest.extra = {{"tags", tags}, {"subsets", subsets},
-                    {"subset_rule", "T/L: tight (pants) / loose (skirt, dress) inner layer; +W: max wind strength > 250; "
-                                    "without +W: max wind strength <= 50"}};
-  write_manifest(manifest);
+  if (error) std::rethrow_exception(error);
+
+  std::vector<json> sequences;
+  for (const json& e : entries)
+    if (!e.is_null()) sequences.push_back(e);
+  write_dataset_manifest(out, source, entries);
   const double run_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_run).count();
-  json report = {{"source", source.str()},
+  json report = {{"source", source},
                  {"gates", {{"max_inside_body_share", gates.max_inside_body_share},
                             {"max_outer_inside_inner_share", gates.max_outer_inside_inner_share},
                             {"max_edge_stretch", gates.max_edge_stretch},
                             {"max_p99_edge_stretch", gates.max_p99_edge_stretch}}},
                  {"summary", {{"accepted", accepted}, {"dropped", dropped}, {"regenerated", regenerated},
                               {"blender_runs_this_run", generated_now}, {"blender_seconds_this_run", spent},
+                              {"jobs", opt.jobs}, {"threads_per_job", opt.threads},
                               {"run_seconds", run_s},
                               {"mean_blender_s_per_frame", accepted ? s_per_frame_sum / accepted : 0.0}}},
                  {"sequences", sequences}};
   io::write_file_atomic(out / "generate_report.json", report.dump(1));
   io::write_file_atomic(out / "generate_report.md", generate_report_markdown(report));
-  std::printf("generate: %d accepted, %d dropped, %d regenerated in %s; report %s\n", accepted, dropped, regenerated,
-              fmt_duration(run_s).c_str(), (out / "generate_report.md").string().c_str());
+  std::printf("generate: %d accepted, %d dropped, %d regenerated in %s (%.0f s of Blender over %d run%s, %d at once); report %s\n",
+              accepted, dropped, regenerated, fmt_duration(run_s).c_str(), spent, generated_now,
+              generated_now == 1 ? "" : "s", opt.jobs, (out / "generate_report.md").string().c_str());
   return {accepted, dropped, regenerated};
 }
 

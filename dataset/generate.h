@@ -1,12 +1,14 @@
 #pragma once
 // The driver of `layersnet generate`: makes a D-LAYERS-like data set with Blender's cloth solver.
 //
-// For each sequence id it runs ONE headless Blender process at a time on
+// For each sequence id it runs a headless Blender process (`jobs` of them at once) on
 // generate/make_sequence.py (which writes <id>.h5 and a JSON report), applies the quality
 // gates to the report, regenerates a failing sequence with another seed (up to
 // max_attempts) or drops it, validates accepted files with the D-LAYERS-H5 checker when one
 // is given, and writes dataset.json (train/val/test + T/T+W/L/L+W subsets, write_manifest)
-// and generate_report.{json,md}. Existing accepted sequences are kept (resume).
+// and generate_report.{json,md}. Existing accepted sequences are kept (resume); a sequence
+// interrupted mid-way is simulated again. dataset.json is also rewritten every
+// `manifest_every` finished sequences, so an interrupted run leaves a usable manifest.
 //
 // Recipe (JSON; the options override it): see generate/recipes/default.json.
 #include <nlohmann/json.hpp>
@@ -31,7 +33,9 @@ struct GenerateOptions {
   int frames = -1;
   long long seed = -1;
   int max_attempts = -1;
-  int threads = 2;
+  int threads = 2;      // Blender threads per process
+  int jobs = 1;         // Blender processes at once (each sequence's result does not depend on it)
+  int manifest_every = 4;  // rewrite dataset.json after every this many finished sequences (0: only at the end)
   std::string blender = "blender";
   // Simulate only the sequences of these splits (empty: all). Sequences of other splits that
   // already exist are kept; the others are left out of the manifest until a later run makes them.

@@ -373,3 +373,78 @@ def triangles(obj):
     tri = np.empty(n * 3, np.int64)
     me.loop_triangles.foreach_get("vertices", tri)
     return tri.reshape(-1, 3)
+
+
+def overlay_procedural(mocap, skel, proc, frames):
+    """Applies `sample_procedural`'s overlays to the (retimed, placed) mocap object: the clip
+    turns about the vertical through its hips by yaw_deg[f] at stored frame f, its travel turns
+    with it (a walk that turns), hops lift it, and the upper arms swing forward and back.
+    Keyed per scene frame (the rig copies the mocap in world space)."""
+    if not proc or not proc["active"]:
+        return
+    if proc["arm_swing"]:
+        _swing_arms(mocap, skel, proc["arm_swing"])
+    scene = bpy.context.scene
+    m0 = mocap.matrix_world.copy()
+    hips = []
+    for f in range(frames):
+        scene.frame_set(f + 1)
+        hips.append(m0 @ mocap.pose.bones["Hips"].head)
+    yaw = proc["yaw_deg"]
+    lift = proc["lift_m"]
+    pos = hips[0].copy()
+    mocap.rotation_mode = "QUATERNION"
+    prev = None
+    for f in range(frames):
+        if f > 0:
+            step = hips[f] - hips[f - 1]
+            pos = pos + mathutils.Matrix.Rotation(math.radians(yaw[f - 1]), 3, "Z") @ step
+        target = pos + mathutils.Vector((0.0, 0.0, lift[f] * S))
+        m = mathutils.Matrix.Translation(target) @ mathutils.Matrix.Rotation(math.radians(yaw[f]), 4, "Z") @ \
+            mathutils.Matrix.Translation(-hips[f]) @ m0
+        loc, rot, scale = m.decompose()
+        if prev is not None and prev.dot(rot) < 0:
+            rot = -rot
+        prev = rot
+        mocap.location, mocap.rotation_quaternion, mocap.scale = loc, rot, scale
+        for path in ("location", "rotation_quaternion", "scale"):
+            mocap.keyframe_insert(path, frame=f + 1)
+    for fc in mocap.animation_data.action.fcurves:
+        if fc.data_path in ("location", "rotation_quaternion", "scale"):
+            for kp in fc.keyframe_points:
+                kp.interpolation = "LINEAR"
+    scene.frame_set(1)
+
+
+def _swing_arms(mocap, skel, swing):
+    """Left-multiplies each upper arm's local rotation by a rotation about the body's left-right
+    axis (world x in the rest frame) of deg * sin(2 pi hz t + phase), t in seconds of scene
+    time from the overlay's start (0 before it); the right arm in opposite phase when
+    `opposite` (a walking swing), else in phase."""
+    action = mocap.animation_data.action
+    for cmu_name, sign in (("LeftArm", 1.0), ("RightArm", -1.0 if swing["opposite"] else 1.0)):
+        name = skel.bone(cmu_name)
+        pb = mocap.pose.bones[name]
+        rest = pb.bone.matrix_local.to_3x3()
+        local_axis = rest.inverted() @ mathutils.Vector((1.0, 0.0, 0.0))
+        path = f'pose.bones["{name}"].rotation_euler'
+        fcs = [action.fcurves.find(path, index=i) for i in range(3)]
+        n = len(fcs[0].keyframe_points)
+        cos = []
+        for fc in fcs:
+            c = np.empty(2 * n)
+            fc.keyframe_points.foreach_get("co", c)
+            cos.append(c.reshape(-1, 2))
+        order = pb.rotation_mode
+        for k in range(n):
+            t = max(0.0, (cos[0][k, 0] - swing["start_frame"]) / 30.0)
+            ramp = min(1.0, t / 0.3)   # eases in over 0.3 s so the arms do not jump
+            angle = math.radians(swing["deg"]) * ramp * sign * math.sin(2 * math.pi * swing["hz"] * t + swing["phase"])
+            q = mathutils.Matrix.Rotation(angle, 3, local_axis)
+            e = mathutils.Euler((cos[0][k, 1], cos[1][k, 1], cos[2][k, 1]), order)
+            e2 = (q @ e.to_matrix()).to_euler(order, e)
+            for i in range(3):
+                cos[i][k, 1] = e2[i]
+        for fc, c in zip(fcs, cos):
+            fc.keyframe_points.foreach_set("co", c.ravel())
+            fc.update()

@@ -265,7 +265,7 @@ def top_ring_pin(rest, faces, up=2, tol=1e-3):
     return pin, None
 
 
-def pants_garment(name, profile, z_waist, z_crotch, z_hem, offset, spacing, cols=40):
+def pants_garment(name, profile, z_waist, z_crotch, z_hem, offset, spacing, cols=40, kind="pants_tight"):
     """Trousers: a hip tube from the waist to the crotch that splits into two leg tubes.
     The crotch seam is a chain of vertices from front centre to back centre shared by
     both legs. Panels: 0 left-front, 1 left-back, 2 right-back, 3 right-front."""
@@ -323,4 +323,4 @@ def pants_garment(name, profile, z_waist, z_crotch, z_hem, offset, spacing, cols
         b.add_block(np.array(ring_ids), top_v0, np.array(panels), anchors)
     pin = np.zeros(len(b.pos))
     pin[hip_ids[0]] = 1.0
-    return b.finish(name, "pants_tight", pin)
+    return b.finish(name, kind, pin)

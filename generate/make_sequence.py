@@ -29,6 +29,7 @@ import body_rig  # noqa: E402
 import motion_blocks  # noqa: E402
 import outfits  # noqa: E402
 import quality  # noqa: E402
+import wind_field  # noqa: E402
 from garments import SCENE_SCALE, BodyProfile  # noqa: E402
 from write_h5 import write_sequence  # noqa: E402
 
@@ -71,6 +72,21 @@ DEFAULTS = {
     # Factor on every drawn wind strength, applied after the draws so nothing else changes: a
     # twin with 0 measures how much of a sequence's cloth motion the wind makes.
     "wind_scale": 1.0,
+    # Opt-in keys of the large recipe (their defaults reproduce the older recipes bit for bit).
+    # "sphere": direction uniform on the sphere; "horizontal": any yaw, elevation uniform within
+    # +-wind_elevation_deg of the ground plane.
+    "wind_direction": "sphere",
+    "wind_elevation_deg": 30.0,
+    # Blender's field strength = stored strength x this factor (the files keep the stored,
+    # D-LAYERS-range value and the factor as attribute wind_field_factor); README "The wind".
+    "wind_field_factor": 1.0,
+    # Procedural overlays on the mocap (spins and turns, hops, arm swings); None: off. Keys:
+    # motion_blocks.PROCEDURAL_DEFAULTS.
+    "procedural": None,
+    # Garment kinds only the test split draws (unseen outfits); test draws an outfit with one
+    # of them with probability heldout_probability, train and val never do.
+    "heldout_kinds": [],
+    "heldout_probability": 0.5,
 }
 SPLIT_CODE = motion_blocks.SPLIT_CODE
 
@@ -148,6 +164,24 @@ def sample_motion(rng, cfg, split):
     return clip, start, speed
 
 
+def sample_outfit_kinds(rng, cfg, split):
+    """(inner, outer) kinds. Train and val draw only from the kinds not held out; test draws
+    an outfit with at least one held-out kind with probability heldout_probability."""
+    held = set(cfg["heldout_kinds"])
+    unknown = held - set(cfg["inner_kinds"]) - set(cfg["outer_kinds"])
+    if unknown:
+        raise SystemExit(f"make_sequence.py: heldout_kinds {sorted(unknown)} are not in inner_kinds or outer_kinds")
+    seen_inner = [k for k in cfg["inner_kinds"] if k not in held]
+    seen_outer = [k for k in cfg["outer_kinds"] if k not in held]
+    if not seen_inner or not seen_outer:
+        raise SystemExit("make_sequence.py: heldout_kinds leave no inner or no outer kind for training")
+    if split == "test" and rng.random() < cfg["heldout_probability"]:
+        pairs = [(i, o) for i in cfg["inner_kinds"] for o in cfg["outer_kinds"] if i in held or o in held]
+        i, o = pairs[int(rng.integers(len(pairs)))]
+        return str(i), str(o)
+    return str(rng.choice(seen_inner)), str(rng.choice(seen_outer))
+
+
 def sample_wind(rng, cfg, T):
     """Piecewise-constant wind: pivots (frame, quaternion wxyz, strength); no wind before
     the first pivot, as in D-LAYERS."""
@@ -164,10 +198,16 @@ def sample_wind(rng, cfg, T):
         strengths = rng.uniform(0, 400, size=n)
     pivots = []
     for s, st in zip(starts, strengths):
-        q = rng.normal(size=4)
-        q /= np.linalg.norm(q)
-        if q[0] < 0:
-            q = -q
+        if cfg["wind_direction"] == "horizontal":
+            q = wind_field.horizontal_wind_quaternion(rng, cfg["wind_elevation_deg"])
+        elif cfg["wind_direction"] == "sphere":
+            q = rng.normal(size=4)
+            q /= np.linalg.norm(q)
+            if q[0] < 0:
+                q = -q
+        else:
+            raise SystemExit(f"make_sequence.py: wind_direction '{cfg['wind_direction']}' is neither 'sphere' nor "
+                             "'horizontal'")
         pivots.append({"frame": s, "rotation": [float(x) for x in q], "strength": float(st)})
     return pivots
 
@@ -183,7 +223,7 @@ def wind_arrays(pivots, T):
     return rot, strength
 
 
-def add_wind(pivots, centre, field_seed):
+def add_wind(pivots, centre, field_seed, field_factor=1.0):
     """A wind force field keyed with constant interpolation; placed 100 units upwind so
     the whole scene is on its +Z side. Stored frame i is scene frame i + 1."""
     bpy.ops.object.effector_add(type="WIND", location=(0, 0, 0))
@@ -199,7 +239,7 @@ def add_wind(pivots, centre, field_seed):
         d = q.to_matrix() @ mathutils.Vector((0, 0, 1))
         wind.rotation_quaternion = q
         wind.location = mathutils.Vector(centre) - 100.0 * d
-        wind.field.strength = p["strength"]
+        wind.field.strength = p["strength"] * field_factor if field_factor != 1.0 else p["strength"]
         f = p["frame"] + 1
         wind.keyframe_insert("rotation_quaternion", frame=f)
         wind.keyframe_insert("location", frame=f)
@@ -289,13 +329,19 @@ def main():
     yaw = float(rng.uniform(*cfg["yaw_range_deg"]))
     mirror = bool(rng.random() < cfg["mirror_probability"])
     abduction = float(rng.uniform(*cfg["arm_abduction_deg"]))
-    inner_kind = str(rng.choice(cfg["inner_kinds"]))
-    outer_kind = str(rng.choice(cfg["outer_kinds"]))
+    if cfg["heldout_kinds"]:
+        inner_kind, outer_kind = sample_outfit_kinds(rng, cfg, args.split)
+    else:
+        inner_kind = str(rng.choice(cfg["inner_kinds"]))
+        outer_kind = str(rng.choice(cfg["outer_kinds"]))
     layer_attrs, body_friction = outfits.sample_attributes(rng, cfg["ranges"])
     pivots = sample_wind(rng, cfg, T)
     for p in pivots:
         p["strength"] *= float(cfg["wind_scale"])
     warp = sample_time_warp(rng, cfg)
+    # Procedural overlays draw from their own generator: every other draw stays as it was.
+    procedural = motion_blocks.sample_procedural(np.random.default_rng([args.seed, 1]), cfg["procedural"], T,
+                                            1 + cfg["rest_frames"] + cfg["ramp_frames"]) if cfg["procedural"] else None
     pose_blend = float(rng.uniform(*cfg["pose_blend_range"])) if cfg["pose_blend_range"][0] < 1 else 1.0
     skel = body_rig.skeleton_of(clip)
     steps = [body_rig.bvh_rate(clip) / 30.0 * speed * u for u in warp]
@@ -314,6 +360,8 @@ def main():
     ramp_start = 1 + cfg["rest_frames"]
     body_rig.retime_mocap(mocap, rig, skel, bvh_start, ramp_start, steps, cfg["time_warp_segment_frames"], yaw,
                           abduction)
+    if procedural:
+        body_rig.overlay_procedural(mocap, skel, procedural, T)
     body_rig.drive_rig(rig, mocap, ramp_start, cfg["ramp_frames"], pose_blend)
     body.modifiers.new("collision", "COLLISION")
     body.collision.cloth_friction = body_friction
@@ -322,7 +370,7 @@ def main():
     garments = outfits.build_outfit(profile, inner_kind, outer_kind, rng, cfg["garment_spacing_m"],
                                     cfg["ring_vertices"])
     cloth, offs = make_cloth(garments, body_w, bone_names, body_rest, layer_attrs, cfg, skel.torso)
-    add_wind(pivots, (0.0, 0.0, 1.0 * SCENE_SCALE), cfg["field_seed"])
+    add_wind(pivots, (0.0, 0.0, 1.0 * SCENE_SCALE), cfg["field_seed"], float(cfg["wind_field_factor"]))
 
     body_faces = body_rig.triangles(body)
     # Faces must wind counter-clockwise seen from outside: check the signed volume.
@@ -373,10 +421,15 @@ def main():
     max_wind = float(wind_strength.max())
     tags = {"inner": "tight" if inner_kind in outfits.TIGHT_INNER else "loose",
             "wind": "windy" if max_wind > 250 else ("calm" if max_wind <= 50 else "moderate")}
+    if cfg["heldout_kinds"]:
+        tags["outfit"] = "unseen" if {inner_kind, outer_kind} & set(cfg["heldout_kinds"]) else "seen"
+    if cfg["procedural"]:
+        tags["motion"] = "procedural" if procedural and procedural["active"] else "mocap"
     report = {
         "seed": args.seed, "split": args.split, "clip": clip, "bvh_start": bvh_start, "speed": speed,
         "yaw_deg": yaw, "mirrored": mirror, "arm_abduction_deg": abduction, "skeleton": skel.name,
-        "time_warp": warp, "pose_blend": pose_blend,
+        "time_warp": warp, "pose_blend": pose_blend, "procedural": procedural,
+        "wind_field_factor": float(cfg["wind_field_factor"]),
         "inner_kind": inner_kind, "outer_kind": outer_kind, "garments": [g["name"] for g in gar],
         "garment_types": [g["type"] for g in gar], "attributes": layer_attrs,
         "body_friction": body_friction, "wind_pivots": pivots, "max_wind_strength": max_wind,
@@ -394,6 +447,12 @@ def main():
              "max_wind_strength": max_wind, "q_blender_s_per_frame": t_sim / T}
     for k, v in q.items():
         extra["q_" + k] = v
+    if cfg["wind_field_factor"] != 1.0:
+        extra["wind_field_factor"] = float(cfg["wind_field_factor"])
+    if "outfit" in tags:
+        extra["tag_outfit"] = tags["outfit"]
+    if "motion" in tags:
+        extra["tag_motion"] = tags["motion"]
     seq = {"fps": 30.0, "gravity": (0.0, 0.0, -9.8), "scale": SCENE_SCALE,
            "body": {"vertices": body_v, "faces": body_faces, "translation": trans, "friction": body_friction},
            "garments": gar, "wind": {"rotation": wind_rot, "strength": wind_strength}, "extra_attrs": extra}

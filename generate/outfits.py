@@ -12,6 +12,10 @@ from garments import SCENE_SCALE, pants_garment, tube_garment, tube_rings, _rows
 S = SCENE_SCALE
 INNER_KINDS = ("pants_tight", "skirt", "dress_strapless")
 OUTER_KINDS = ("coat_sleeveless", "jacket_sleeveless")
+# Families of the large recipe (opt-in through a scene's inner_kinds / outer_kinds): skirts and
+# dresses to the calf or ankle, wide trousers, a coat to the calf. No sleeves yet.
+EXTRA_INNER_KINDS = ("skirt_long", "dress_long", "pants_loose")
+EXTRA_OUTER_KINDS = ("coat_long",)
 TIGHT_INNER = ("pants_tight",)
 GAP = 0.02          # metres between the inner layer and the outer one at rest
 SPACING = 0.045     # metres between garment rows (about the ring edge length)
@@ -26,6 +30,21 @@ def _inner(profile, kind, rng, spacing, cols):
         hem = rng.uniform(0.10, 0.30)
         g = pants_garment("pants", profile, Z_WAIST * S, Z_CROTCH * S, hem * S, off * S, spacing * S, cols)
         return g, (lambda z: off * S), Z_WAIST
+    if kind == "pants_loose":
+        off = rng.uniform(0.04, 0.07)
+        hem = rng.uniform(0.06, 0.25)
+        g = pants_garment("pants", profile, Z_WAIST * S, Z_CROTCH * S, hem * S, off * S, spacing * S, cols,
+                          kind="pants_loose")
+        return g, (lambda z: off * S), Z_WAIST
+    if kind in ("skirt_long", "dress_long"):
+        dress = kind == "dress_long"
+        panels = 4 if dress else int(rng.choice([4, 8]))
+        hem = rng.uniform(0.12, 0.38)
+        base, flare = rng.uniform(0.012, 0.025), rng.uniform(0.12, 0.40)
+        fn = lambda z: (base + flare * max(0.0, Z_HIP - z / S)) * S
+        top = Z_CHEST if dress else Z_WAIST
+        rings = tube_rings(profile, _rows(top * S, hem * S, spacing * S), fn, cols, Z_HIP * S)
+        return tube_garment("dress" if dress else "skirt", kind, rings, panels), fn, top
     if kind == "skirt":
         panels = int(rng.choice([2, 4, 8]))
         hem = rng.uniform(0.42, 0.62)
@@ -39,7 +58,7 @@ def _inner(profile, kind, rng, spacing, cols):
         fn = lambda z: (base + flare * max(0.0, Z_HIP - z / S)) * S
         rings = tube_rings(profile, _rows(Z_CHEST * S, hem * S, spacing * S), fn, cols, Z_HIP * S)
         return tube_garment("dress", "dress_strapless", rings, 2), fn, Z_CHEST
-    raise ValueError(f"outfits.py: unknown inner garment kind '{kind}' (use one of {INNER_KINDS})")
+    raise ValueError(f"outfits.py: unknown inner garment kind '{kind}' (use one of {INNER_KINDS + EXTRA_INNER_KINDS})")
 
 
 def _outer(profile, kind, rng, inner_fn, inner_top, spacing, cols):
@@ -56,10 +75,12 @@ def _outer(profile, kind, rng, inner_fn, inner_top, spacing, cols):
         hem, panels = rng.uniform(0.40, 0.60), 4
     elif kind == "jacket_sleeveless":
         hem, panels = rng.uniform(0.76, 0.88), int(rng.choice([2, 4]))
+    elif kind == "coat_long":
+        hem, panels = rng.uniform(0.15, 0.35), 4
     else:
-        raise ValueError(f"outfits.py: unknown outer garment kind '{kind}' (use one of {OUTER_KINDS})")
+        raise ValueError(f"outfits.py: unknown outer garment kind '{kind}' (use one of {OUTER_KINDS + EXTRA_OUTER_KINDS})")
     rings = tube_rings(profile, _rows(top * S, hem * S, spacing * S), fn, cols, Z_HIP * S)
-    name = "coat" if kind == "coat_sleeveless" else "jacket"
+    name = "coat" if kind in ("coat_sleeveless", "coat_long") else "jacket"
     return tube_garment(name, kind, rings, panels)
 
 

@@ -15,6 +15,11 @@
 #     OUT     output folder (default runs/predictability); resumable: finished twins are kept
 #     JITTER  noise std in scene units (default 0.01 = 1 mm at the D-LAYERS x10 scale)
 #     TWINS   jitter (default) | calm-wind | both
+# Environment: IDS="00744 00745" re-simulates only these test sequences (default: the whole
+# test split); EVAL_FRAMES=N scores N frames from the ramp's end (default: eval.frames); THREADS=N
+# Blender threads per twin (default 2) must be those the data was made with (`generate --threads`,
+# the reports' blender_threads): the cloth solver sums in a thread-dependent order, so another
+# count is another trajectory (12.3 mm apart over 78 frames on a large-recipe sequence).
 # Cost: one Blender run per twin (about 1 min per 100-frame sequence on 2 cores).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -34,7 +39,9 @@ esac
 [ -f "$DATA/dataset.json" ] || { echo "predictability: $DATA/dataset.json not found; make the data with layersnet generate" >&2; exit 2; }
 [ -f "$DATA/scene.json" ] || { echo "predictability: $DATA/scene.json not found: only data sets of layersnet generate can be re-simulated" >&2; exit 2; }
 mkdir -p "$OUT"
-ids=$($PY -c 'import json,sys; print(" ".join(json.load(open(sys.argv[1]))["splits"]["test"]))' "$DATA/dataset.json")
+ids=${IDS:-$($PY -c 'import json,sys; print(" ".join(json.load(open(sys.argv[1]))["splits"]["test"]))' "$DATA/dataset.json")}
+select=(--sequences "$(echo $ids | tr ' ' ',')")
+[ -n "${EVAL_FRAMES:-}" ] && select+=(--frames "$EVAL_FRAMES")
 
 # make_twins VARIANT KEY VALUE IDS...: the sequences IDS re-simulated with scene key KEY = VALUE.
 make_twins() {
@@ -49,7 +56,7 @@ make_twins() {
     [ -f "$dir/$id.h5" ] && continue
     read -r seed split < <($PY -c 'import json,sys; r=json.load(open(sys.argv[1])); print(r["seed"], r["split"])' "$DATA/reports/$id.json")
     echo "predictability: $variant twin of $id (seed $seed, $key $value)"
-    blender -b --factory-startup -t 2 --python generate/make_sequence.py -- --out "$dir/$id.h5.part" \
+    blender -b --factory-startup -t "${THREADS:-2}" --python generate/make_sequence.py -- --out "$dir/$id.h5.part" \
       --report "$dir/reports/$id.json" --seed "$seed" --split "$split" --config "$dir/scene.json" > "$dir/logs/$id.log" 2>&1 \
       || { echo "predictability: Blender failed on $id, see $dir/logs/$id.log" >&2; exit 1; }
     mv "$dir/$id.h5.part" "$dir/$id.h5"
@@ -57,7 +64,7 @@ make_twins() {
 }
 
 make_twins same cloth_jitter 0 "${ids%% *}"
-"$BIN" eval --dataset "$DATA" --split test --max-sequences 1 --replay "$OUT/same" --name "re-simulated, unchanged" \
+"$BIN" eval --dataset "$DATA" --split test --sequences "${ids%% *}" "${select[@]:2}" --replay "$OUT/same" --name "re-simulated, unchanged" \
   --out "$OUT/eval_unchanged"
 $PY -c 'import json,sys
 m = next(m for m in json.load(open(sys.argv[1]))["methods"] if m["kind"] == "replay")
@@ -68,11 +75,11 @@ sys.exit(f"predictability: the unchanged re-simulation differs from the data by 
 for variant in $variants; do
   if [ "$variant" = jitter ]; then
     make_twins jitter cloth_jitter "$JITTER" $ids
-    "$BIN" eval --dataset "$DATA" --split test --replay "$OUT/jitter" --name "re-simulated, cloth nudged ${JITTER} units" \
+    "$BIN" eval --dataset "$DATA" --split test "${select[@]}" --replay "$OUT/jitter" --name "re-simulated, cloth nudged ${JITTER} units" \
       --out "$OUT/eval"
   else
     make_twins calm_wind wind_scale 0 $ids
-    "$BIN" eval --dataset "$DATA" --split test --replay "$OUT/calm_wind" --name "re-simulated without wind" \
+    "$BIN" eval --dataset "$DATA" --split test "${select[@]}" --replay "$OUT/calm_wind" --name "re-simulated without wind" \
       --out "$OUT/eval_calm_wind"
   fi
 done

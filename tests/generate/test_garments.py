@@ -59,7 +59,7 @@ def check(g):
     n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
     c = V[F].mean(1)
     radial = c[:, :2] - np.array([0.0, -0.03 * S])
-    if g.kind == "pants_tight":   # legs: measure from each leg's axis below the crotch
+    if g.kind.startswith("pants"):   # legs: measure from each leg's axis below the crotch
         legs = c[:, 2] < 0.83 * S
         radial[legs, 0] = c[legs, 0] - np.sign(c[legs, 0]) * 0.1 * S
     outward = (n[:, :2] * radial).sum(1) > 0
@@ -74,8 +74,8 @@ def main():
     body = synthetic_body()
     prof = BodyProfile(body, centre=(0.0, -0.03 * S), arm_x=0.25 * S)
     kinds = 0
-    for i, inner in enumerate(outfits.INNER_KINDS):
-        for j, outer in enumerate(outfits.OUTER_KINDS):
+    for i, inner in enumerate(outfits.INNER_KINDS + outfits.EXTRA_INNER_KINDS):
+        for j, outer in enumerate(outfits.OUTER_KINDS + outfits.EXTRA_OUTER_KINDS):
             rng = np.random.default_rng(10 * i + j)
             gs = outfits.build_outfit(prof, inner, outer, rng)
             for g in gs:
@@ -83,7 +83,8 @@ def main():
             # The outer layer starts outside the inner one: at matching heights its radius
             # around the torso axis is larger (ring by ring, compared on common heights).
             a, b = gs[0], gs[1]
-            if inner != "pants_tight":
+            assert (a.kind == inner or a.kind.startswith("skirt_") and inner == "skirt") and b.kind == outer, (a.kind, b.kind)
+            if not inner.startswith("pants"):
                 cols = outfits.COLS
                 ra = a.verts.reshape(-1, cols, 3)
                 rb = b.verts.reshape(-1, cols, 3)
@@ -106,7 +107,18 @@ def main():
     # A finer resolution (the recipe keys garment_spacing_m / ring_vertices) keeps the checks.
     for g in outfits.build_outfit(prof, "pants_tight", "coat_sleeveless", np.random.default_rng(1), 0.025, 64):
         check(g)
-    print(f"ok: {kinds} outfits, {len(outfits.INNER_KINDS) + len(outfits.OUTER_KINDS)} garment kinds")
+    # Long families reach lower than their short ones: hems below the knee (0.48 m).
+    rng = np.random.default_rng(5)
+    for inner in ("skirt_long", "dress_long"):
+        g = outfits.build_outfit(prof, inner, "coat_long", rng)
+        assert g[0].verts[:, 2].min() < 0.40 * S and g[1].verts[:, 2].min() < 0.36 * S, inner
+    # Loose trousers stand farther off the legs than tight ones (same draw otherwise).
+    tight = outfits.build_outfit(prof, "pants_tight", "jacket_sleeveless", np.random.default_rng(2))[0]
+    loose = outfits.build_outfit(prof, "pants_loose", "jacket_sleeveless", np.random.default_rng(2))[0]
+    spread = lambda g: np.ptp(g.verts[g.verts[:, 2] < 0.5 * S][:, 1])
+    assert spread(loose) > spread(tight) + 0.03 * S, (spread(loose), spread(tight))
+    n_kinds = len(outfits.INNER_KINDS + outfits.EXTRA_INNER_KINDS + outfits.OUTER_KINDS + outfits.EXTRA_OUTER_KINDS)
+    print(f"ok: {kinds} outfits, {n_kinds} garment kinds")
 
 
 if __name__ == "__main__":

@@ -69,5 +69,35 @@ def main():
           f"{len(default_train)} default training blocks")
 
 
+def check_large():
+    """The large recipe: no two splits share a BVH frame, together they use every frame of
+    every clip (frame 0 is a calibration pose), each block fits a sequence at the slowest speed;
+    held-out garment kinds exist and leave training kinds."""
+    recipe = json.load(open(os.path.join(RECIPES, "large.json")))
+    scene = recipe["scene"]
+    blocks = motion_blocks.listed_blocks(scene)
+    for a in blocks:
+        for b in blocks:
+            if a is not b:
+                assert not motion_blocks.overlaps([a], [b]), (a, b)
+    moving = scene["frames"] - scene["rest_frames"]
+    for split, clip, lo, hi in blocks:
+        assert hi - lo - 2 >= moving * rate(clip) / 30.0 * 0.8, (split, clip, lo, hi)
+    clips = sorted(f for f in os.listdir(motion_blocks.BVH_DIR) if f.endswith(".bvh"))
+    for clip in clips:
+        covered = sorted((lo, hi) for _, c, lo, hi in blocks if c == clip)
+        assert covered[0][0] == 1 and covered[-1][1] == motion_blocks.bvh_frame_count(clip), (clip, covered)
+        assert all(a[1] == b[0] for a, b in zip(covered, covered[1:])), (clip, covered)
+    held = set(scene["heldout_kinds"])
+    assert held and held <= set(scene["inner_kinds"]) | set(scene["outer_kinds"])
+    assert set(scene["inner_kinds"]) - held and set(scene["outer_kinds"]) - held
+    ranges = recipe["split_ranges"]
+    n_val = sum(b - a for a, b in ranges["val"])
+    n_test = sum(b - a for a, b in ranges["test"])
+    assert recipe["count"] - n_val - n_test >= 720 and n_val >= 24 and n_test >= 48, recipe["count"]
+    print(f"large: {len(blocks)} blocks cover every frame of {clips}; splits disjoint")
+
+
 if __name__ == "__main__":
     main()
+    check_large()
