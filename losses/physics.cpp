@@ -107,8 +107,8 @@ PhysicsInput<float> physics_input_from_sample(const dataset::TrainingSample& s, 
       for (int c = 0; c < 3; ++c) in.external_force[3 * gv + c] = static_cast<float>(mesh.attributes.mass * g[c]);
     }
   }
-  // Rest shape per garment (scene units, double): the template, else the first input frame's
-  // shape (lengths then come from the UVs below).
+  // Rest shape per garment (scene units, double): the template, else x_t (then rest lengths come
+  // from the sample structure's UV lengths and rest angles are flat).
   std::vector<std::vector<Eigen::Vector3d>> rest(G);
   std::vector<bool> has_rest(G);
   for (int k = 0; k < G; ++k) {
