@@ -176,6 +176,25 @@ const Schema& schema() {
     k.add("loss.collision_eps", [](Config& c) -> double& { return c.loss.collision_eps; }, "collision margin d_eps (scene units)", {0, 10, {}});
     k.add("loss.orthogonality", [](Config& c) -> double& { return c.loss.orthogonality; }, "W_R orthogonality penalty weight", weight);
     k.add("loss.edge_strain", [](Config& c) -> double& { return c.loss.edge_strain; }, "edge-length strain weight (not in the paper; 0 = off)", weight);
+    // [physics]
+    k.add("physics.weight", [](Config& c) -> double& { return c.physics.weight; }, "weight of the physics energy (losses/physics.h, per garment vertex) beside the supervised loss; 0 = off", weight);
+    k.add("physics.ramp_steps", [](Config& c) -> int& { return c.physics.ramp_steps; }, "physics.weight grows linearly from 0 over this many updates (0 = at once)", {0, 1e9, {}});
+    k.add("physics.self_fed_only", [](Config& c) -> bool& { return c.physics.self_fed_only; }, "score the physics energy only on samples whose input is the model's own prediction (T_n > 0)");
+    k.add("physics.inertia", [](Config& c) -> double& { return c.physics.inertia; }, "physics: inertia term weight (1 = as the simulator)", weight);
+    k.add("physics.drag", [](Config& c) -> double& { return c.physics.drag; }, "physics: air drag term weight", weight);
+    k.add("physics.stretch", [](Config& c) -> double& { return c.physics.stretch; }, "physics: structural spring term weight", weight);
+    k.add("physics.bending", [](Config& c) -> double& { return c.physics.bending; }, "physics: angular bending term weight", weight);
+    k.add("physics.gravity", [](Config& c) -> double& { return c.physics.gravity; }, "physics: gravity work term weight", weight);
+    k.add("physics.wind", [](Config& c) -> double& { return c.physics.wind; }, "physics: wind work term weight", weight);
+    k.add("physics.collision_body", [](Config& c) -> double& { return c.physics.collision_body; }, "physics: body collision penalty weight", weight);
+    k.add("physics.collision_layer", [](Config& c) -> double& { return c.physics.collision_layer; }, "physics: outer-inner layer collision penalty weight", weight);
+    k.add("physics.air_damping", [](Config& c) -> double& { return c.physics.air_damping; }, "physics: the simulator's air damping (Blender default 1)", {0, 1e6, {}});
+    k.add("physics.body_margin", [](Config& c) -> double& { return c.physics.body_margin; }, "physics: distance kept from the body (scene units; Blender's push-out distance of the generator's settings)", {0, 10, {}});
+    k.add("physics.layer_margin", [](Config& c) -> double& { return c.physics.layer_margin; }, "physics: distance kept between the layers (scene units)", {0, 10, {}});
+    k.add("physics.collision_stiffness_start", [](Config& c) -> double& { return c.physics.collision_stiffness_start; }, "physics: collision stiffness k_c before the ramp", {0, 1e12, {}});
+    k.add("physics.collision_stiffness_max", [](Config& c) -> double& { return c.physics.collision_stiffness_max; }, "physics: collision stiffness k_c after the ramp", {0, 1e12, {}});
+    k.add("physics.collision_ramp_start", [](Config& c) -> int& { return c.physics.collision_ramp_start; }, "physics: updates before k_c starts growing", {0, 1e9, {}});
+    k.add("physics.collision_ramp_steps", [](Config& c) -> int& { return c.physics.collision_ramp_steps; }, "physics: updates over which k_c grows linearly from start to max (0 = at once)", {0, 1e9, {}});
     // [data]
     k.add("data.dataset", [](Config& c) -> std::string& { return c.data.dataset; }, "data set folder");
     k.add("data.stats", [](Config& c) -> std::string& { return c.data.stats; }, "statistics file to train with (empty: DATASET/stats.h5, from the training split)");

@@ -90,9 +90,28 @@ struct EvalConfig {
   bool pins = true;
 };
 
+// The physics energy of losses/physics.h on the self-fed steps of the curriculum (not in the
+// paper). Off by default (weight 0): it has not yet won on validation.
+struct PhysicsConfig {
+  double weight = 0.0;           // weight of the energy per garment vertex beside the supervised loss; 0 = off
+  int ramp_steps = 0;            // the weight grows linearly from 0 over this many updates (0 = at once)
+  bool self_fed_only = true;     // only samples whose input is the model's own (T_n > 0), where the data is silent
+  // Terms inside the energy (1 = as Blender's solver weighs them; 0 = term absent).
+  double inertia = 1, drag = 1, stretch = 1, bending = 1, gravity = 1, wind = 1, collision_body = 1, collision_layer = 1;
+  double air_damping = 1.0;      // Blender's air_damping the data was made with (its default)
+  double body_margin = (0.1 + 0.02) * 8.0 / 9.0;   // scene units: Blender's push-out distance (generator's settings)
+  double layer_margin = 2 * 0.06 * 8.0 / 9.0;      // scene units, cloth-cloth
+  // Collision stiffness k_c ramped as HOOD ramps its collision weight: start, then linear to max.
+  double collision_stiffness_start = 1e2;
+  double collision_stiffness_max = 1e4;
+  int collision_ramp_start = 0;  // updates before the ramp begins
+  int collision_ramp_steps = 2000;
+};
+
 struct Config {
   ModelConfig model;
   LossConfig loss;
+  PhysicsConfig physics;
   DataConfig data;
   TrainConfig train;
   EvalConfig eval;

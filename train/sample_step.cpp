@@ -2,6 +2,7 @@
 
 #include "autodiff/ops_dense.h"
 #include "losses/losses.h"
+#include "losses/physics.h"
 #include "losses/sample_loss_input.h"
 #include "model/layersnet.h"
 #include "model/sample_input.h"
@@ -30,7 +31,7 @@ ad::Var<float> next_garment_state(ad::Tape<float>& tape, const model::Prediction
 LossParts& LossParts::operator+=(const LossParts& o) {
   total += o.total, vertex += o.vertex, patch += o.patch, normal += o.normal;
   collision_body += o.collision_body, collision_layer += o.collision_layer, orthogonality += o.orthogonality;
-  edge_strain += o.edge_strain;
+  edge_strain += o.edge_strain, physics += o.physics, physics_weighted += o.physics_weighted;
   return *this;
 }
 
@@ -38,6 +39,7 @@ LossParts LossParts::scaled(double s) const {
   LossParts p = *this;
   p.total *= s, p.vertex *= s, p.patch *= s, p.normal *= s;
   p.collision_body *= s, p.collision_layer *= s, p.orthogonality *= s, p.edge_strain *= s;
+  p.physics *= s, p.physics_weighted *= s;
   return p;
 }
 
@@ -45,11 +47,32 @@ LossParts LossParts::weighted(const LossConfig& w) const {
   LossParts p = *this;
   p.vertex *= w.vertex, p.patch *= w.patch, p.normal *= w.normal, p.collision_body *= w.collision_body;
   p.collision_layer *= w.collision_layer, p.orthogonality *= w.orthogonality, p.edge_strain *= w.edge_strain;
+  p.physics = p.physics_weighted;  // the weight is ramped per update: what it added is kept
   return p;
 }
 
+PhysicsStep physics_step_at(const PhysicsConfig& pc, int64_t update) {
+  if (pc.weight <= 0) return {};
+  return {losses::ramped(0.0, pc.weight, update, 0, pc.ramp_steps),
+          losses::ramped(pc.collision_stiffness_start, pc.collision_stiffness_max, update, pc.collision_ramp_start,
+                         pc.collision_ramp_steps)};
+}
+
+namespace {
+
+losses::PhysicsSettings physics_settings(const PhysicsConfig& pc, double collision_stiffness) {
+  losses::PhysicsSettings s;
+  s.inertia = pc.inertia, s.drag = pc.drag, s.stretch = pc.stretch, s.bending = pc.bending, s.gravity = pc.gravity;
+  s.wind = pc.wind, s.collision_body = pc.collision_body, s.collision_layer = pc.collision_layer;
+  s.air_damping = pc.air_damping, s.body_margin = pc.body_margin, s.layer_margin = pc.layer_margin;
+  s.collision_stiffness = collision_stiffness;
+  return s;
+}
+
+}  // namespace
+
 SampleOutcome train_sample(const TrainData& data, Window& window, int t, int self_fed, const Config& config,
-                           ad::Tape<float>& tape, ad::ParamStore<float>& params) {
+                           ad::Tape<float>& tape, ad::ParamStore<float>& params, const PhysicsStep& physics) {
   using clock = std::chrono::steady_clock;
   SampleOutcome out;
   const int recorded = std::min(config.train.bptt_steps, self_fed);
@@ -90,6 +113,7 @@ SampleOutcome train_sample(const TrainData& data, Window& window, int t, int sel
               terms.collision_body, terms.collision_layer, terms.orthogonality, terms.edge_strain};
     ++scored;
   };
+  const bool score_physics = physics.weight > 0 && (self_fed > 0 || !config.physics.self_fed_only);
   for (int f = t - recorded; f < t; ++f) {
     const auto [s, input] = build_input(f);
     const auto start = clock::now();
@@ -112,7 +136,19 @@ SampleOutcome train_sample(const TrainData& data, Window& window, int t, int sel
   out.build_seconds += seconds_since(start);
   start = clock::now();
   const auto pred = model::forward(tape, params, config.model, input, {}, state);
-  add_loss(losses::compute_losses(tape, params, config.model, config.loss, target, pred));
+  losses::LossTerms<float> final_terms = losses::compute_losses(tape, params, config.model, config.loss, target, pred);
+  if (score_physics) {
+    // Beside the supervised loss: the energy of this prediction given its own (self-fed) state.
+    const losses::PhysicsSettings settings = physics_settings(config.physics, physics.collision_stiffness);
+    const losses::PhysicsInput<float> physics_input = losses::physics_input_from_sample(s, *window.info, settings);
+    const losses::PhysicsTerms<float> energy =
+        losses::physics_energy(tape, ad::slice_cols(tape, pred.vertex, 0, 3), physics_input, settings);
+    const ad::Var<float> added = ad::scale(tape, energy.total, static_cast<float>(physics.weight));
+    final_terms.total = ad::add(tape, final_terms.total, added);
+    parts.physics += energy.total.scalar();
+    parts.physics_weighted += added.scalar();
+  }
+  add_loss(final_terms);
   const ad::Var<float> objective = scored > 1 ? ad::scale(tape, step_losses, 1.f / static_cast<float>(scored)) : step_losses;
   out.loss = parts.scaled(1.0 / scored);
   out.loss_finite = std::isfinite(objective.scalar());

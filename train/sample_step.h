@@ -21,6 +21,9 @@ namespace layersnet {
 struct LossParts {
   double total = 0, vertex = 0, patch = 0, normal = 0, collision_body = 0, collision_layer = 0, orthogonality = 0,
          edge_strain = 0;
+  // The physics energy per garment vertex (losses/physics.h) and what it added to total (× its
+  // ramped weight); 0 on samples it does not score.
+  double physics = 0, physics_weighted = 0;
   LossParts& operator+=(const LossParts& o);
   LossParts scaled(double s) const;
   // Each term times its weight in `weights`: what it adds to total (total itself unchanged).
@@ -42,8 +45,19 @@ struct SampleOutcome {
 // with train.bptt_score_every_step the loss is the mean of theirs and the final step's. The
 // earlier ones run without recording. `window` must hold frames t − self_fed − 2 .. t + 1;
 // its garment frames are overwritten.
+// The physics energy's schedule at one update: its weight (0 = off) and collision stiffness.
+struct PhysicsStep {
+  double weight = 0;
+  double collision_stiffness = 0;
+};
+// physics.weight ramped linearly over physics.ramp_steps, k_c ramped from start to max (HOOD's
+// schedule); `update` counts the optimizer steps taken before this one.
+PhysicsStep physics_step_at(const PhysicsConfig& physics, int64_t update);
+
+// With physics.weight > 0 the loss step also scores the physics energy of its prediction
+// (weight × energy per vertex, on self-fed samples only unless physics.self_fed_only is off).
 SampleOutcome train_sample(const TrainData& data, Window& window, int t, int self_fed, const Config& config,
-                           ad::Tape<float>& tape, ad::ParamStore<float>& params);
+                           ad::Tape<float>& tape, ad::ParamStore<float>& params, const PhysicsStep& physics = {});
 
 // Mean per-vertex Euclidean error ‖x̂_{t+1} − x_{t+1}‖ (scene units) of one step from the
 // ground-truth state at t, without recording (params are only read).

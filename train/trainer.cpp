@@ -83,7 +83,8 @@ nlohmann::ordered_json json_parts(const LossParts& p, double orthogonality_exces
           {"collision_layer", json_number(p.collision_layer)},
           {"orthogonality", json_number(p.orthogonality)},
           {"orthogonality_excess", json_number(orthogonality_excess)},
-          {"edge_strain", json_number(p.edge_strain)}};
+          {"edge_strain", json_number(p.edge_strain)},
+          {"physics", json_number(p.physics)}};
 }
 
 std::string duration_text(double s) {
@@ -103,20 +104,20 @@ bool all_finite(std::span<const float> values) {
 
 // The outcomes of all n samples of a batch on every rank, in sample order (local: this rank's).
 std::vector<SampleOutcome> gather_outcomes(const Ranks& ranks, const std::vector<SampleOutcome>& local, int n) {
-  constexpr int kWidth = 12;
+  constexpr int kWidth = 14;
   std::vector<double> packed;
   for (const auto& o : local) {
     const LossParts& l = o.loss;
     packed.insert(packed.end(), {l.total, l.vertex, l.patch, l.normal, l.collision_body, l.collision_layer,
                                  l.orthogonality, l.edge_strain, o.loss_finite ? 1.0 : 0.0, o.grad_finite ? 1.0 : 0.0,
-                                 o.build_seconds, o.model_seconds});
+                                 o.build_seconds, o.model_seconds, l.physics, l.physics_weighted});
   }
   const std::vector<double> all = ranks.gather_items(packed, n, kWidth);
   std::vector<SampleOutcome> out(static_cast<std::size_t>(n));
   for (int i = 0; i < n; ++i) {
     const double* v = all.data() + static_cast<std::ptrdiff_t>(i) * kWidth;
     SampleOutcome& o = out[static_cast<std::size_t>(i)];
-    o.loss = {v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7]};
+    o.loss = {v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[12], v[13]};
     o.loss_finite = v[8] != 0;
     o.grad_finite = v[9] != 0;
     o.build_seconds = v[10];
@@ -455,6 +456,7 @@ bool Run::run_batch(int epoch, int ngs, const std::vector<int64_t>& order) {
     std::copy(params_.values().begin(), params_.values().end(), dst.begin());
   }
   const auto t1 = Clock::now();
+  const PhysicsStep physics = physics_step_at(config_.physics, adam_->step_count());
   std::vector<SampleOutcome> local(static_cast<std::size_t>(nl));
   std::vector<std::string> errors(static_cast<std::size_t>(nl));
   // One sample per iteration; kernels inside run single-threaded (no nested parallelism),
@@ -466,7 +468,7 @@ bool Run::run_batch(int epoch, int ngs, const std::vector<int64_t>& order) {
       const int i = ranks_.rank() + j * ranks_.size();
       local[k] = train_sample(*train_, windows[k], refs[static_cast<std::size_t>(i)].t,
                               self_fed[static_cast<std::size_t>(i)], config_,
-                              *tapes_[static_cast<std::size_t>(omp_get_thread_num())], *slots_[k]);
+                              *tapes_[static_cast<std::size_t>(omp_get_thread_num())], *slots_[k], physics);
     } catch (const std::exception& e) {
       errors[static_cast<std::size_t>(j)] = e.what();
     }
@@ -578,7 +580,9 @@ void Run::log_progress(int epoch) {
                 static_cast<long long>(train_->num_samples()), rate, duration_text(eta).c_str(),
                 learning_rate_at(tc, epoch), loss.total - config_.loss.orthogonality * orth_floor, loss.vertex, loss.patch, loss.normal, loss.collision_body,
                 loss.collision_layer, orth_excess, loss.edge_strain, 100 * share);
-  out_ << line << std::endl;
+  out_ << line;
+  if (config_.physics.weight > 0) out_ << "  physics " << loss.physics << " (weighted " << loss.physics_weighted << ")";
+  out_ << std::endl;
   metric({{"event", "train"},
           {"epoch", epoch + 1},
           {"step", adam_->step_count()},

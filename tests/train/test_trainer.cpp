@@ -412,6 +412,48 @@ TEST_F(TrainerTest, GradientThroughSelfFedStepsMatchesFiniteDifferences) {
   EXPECT_LT(std::sqrt(err_every), 0.05 * std::sqrt(norm_every)) << "the mean loss's gradient is not its derivative";
 }
 
+// physics.weight: on a self-fed sample the loss gains weight × the physics energy of the final
+// prediction and the gradient changes; on a sample fed the ground truth (T_n = 0) nothing changes
+// while physics.self_fed_only holds; weight 0 (the default) leaves loss and gradient bit-identical.
+TEST_F(TrainerTest, PhysicsEnergyJoinsTheLossOnSelfFedSamplesOnly) {
+  const std::string data = make_dataset(1, 1, 10);
+  const Config off = tiny_config(data, {"train.threads=1"});
+  const Config on = tiny_config(data, {"train.threads=1", "physics.weight=0.5"});
+  const dataset::DatasetManifest manifest = dataset::read_manifest(data);
+  const dataset::NormalisationStats stats = dataset::read_stats(manifest.stats_path());
+  TrainData train_data(manifest, "train", stats, off);
+  ad::ParamStore<float> params = initialised_params(off);
+  ad::Tape<float> tape;
+  const int t = train_data.first_t(0) + 4;
+  auto run = [&](const Config& c, int self_fed, const PhysicsStep& step) {
+    Window w = train_data.read_window(0, t - self_fed, t);
+    SampleOutcome o = train_sample(train_data, w, t, self_fed, c, tape, params, step);
+    EXPECT_TRUE(o.loss_finite && o.grad_finite);
+    return std::pair{o.loss, std::vector<float>(params.grads().begin(), params.grads().end())};
+  };
+  const PhysicsStep step = physics_step_at(on.physics, 0);
+  EXPECT_EQ(step.weight, 0.5);
+  EXPECT_EQ(step.collision_stiffness, on.physics.collision_stiffness_start);
+  EXPECT_EQ(physics_step_at(off.physics, 0).weight, 0.0);
+  for (const int self_fed : {0, 2}) {
+    const auto [loss_off, grad_off] = run(off, self_fed, physics_step_at(off.physics, 0));
+    const auto [loss_on, grad_on] = run(on, self_fed, step);
+    if (self_fed == 0) {
+      EXPECT_EQ(loss_on.total, loss_off.total);
+      EXPECT_EQ(grad_on, grad_off) << "a ground-truth-fed sample must not see the physics energy";
+      EXPECT_EQ(loss_on.physics, 0.0);
+      continue;
+    }
+    EXPECT_NE(loss_on.physics, 0.0);
+    EXPECT_NEAR(loss_on.physics_weighted, 0.5 * loss_on.physics, 1e-6 * std::abs(loss_on.physics) + 1e-9);
+    EXPECT_NEAR(loss_on.total, loss_off.total + loss_on.physics_weighted, 1e-5 * std::abs(loss_on.total));
+    EXPECT_EQ(loss_on.vertex, loss_off.vertex);
+    double diff = 0;
+    for (std::size_t i = 0; i < grad_on.size(); ++i) diff += std::abs(grad_on[i] - grad_off[i]);
+    EXPECT_GT(diff, 0.0) << "the physics energy did not reach the gradient";
+  }
+}
+
 // train.init_from starts a new run from another run's weights (a full checkpoint or a packed
 // model): after one Adam update every weight lies within about one learning rate of them, the
 // optimizer starts over (step 1), and the run keeps the source's statistics.

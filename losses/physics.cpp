@@ -1,0 +1,354 @@
+#include "losses/physics.h"
+
+#include "autodiff/ops_dense.h"
+#include "autodiff/ops_geometry.h"
+#include "autodiff/ops_graph.h"
+#include "dataset/neighbours.h"
+#include "dataset/wind.h"
+#include "model/tape_helpers.h"
+
+#include <Eigen/Geometry>
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <utility>
+
+namespace layersnet::losses {
+namespace {
+
+using ad::Var;
+
+// Blender's vertex-group scaled setting: base + w·|max − base| (the absolute value is Blender's).
+double group_scaled(double base, double max, double weight) { return base + weight * std::fabs(max - base); }
+
+// Unit normal of the triangle (p, q, r) as wound, in double.
+Eigen::Vector3d unit_normal(const Eigen::Vector3d& p, const Eigen::Vector3d& q, const Eigen::Vector3d& r) {
+  const Eigen::Vector3d n = (q - p).cross(r - p);
+  const double len = n.norm();
+  return len > 0 ? Eigen::Vector3d(n / len) : Eigen::Vector3d::Zero();
+}
+
+template <class T>
+Var<T> column(ad::Tape<T>& tape, const std::vector<T>& v, int64_t cols) {
+  return model::constant(tape, v, static_cast<int64_t>(v.size()) / cols, cols);
+}
+
+// Σ_rows weight_r · value_r for (R, 1) tensors.
+template <class T>
+Var<T> weighted_sum(ad::Tape<T>& tape, const Var<T>& value, const std::vector<T>& weight) {
+  return ad::sum_all(tape, ad::mul(tape, value, column(tape, weight, 1)));
+}
+
+template <class T>
+Var<T> collision(ad::Tape<T>& tape, const Var<T>& x, const Var<T>& anchor, const Var<T>& normal, double margin,
+                 double stiffness, int64_t* contacts) {
+  const Var<T> d = ad::row_sum(tape, ad::mul(tape, ad::sub(tape, x, anchor), normal));  // (Q, 1)
+  const Var<T> pen = ad::hinge_sq(tape, d, static_cast<T>(margin));
+  if (contacts) {
+    *contacts = 0;
+    for (int64_t i = 0; i < pen.rows; ++i) *contacts += pen.value[i] > T(0);
+  }
+  return ad::scale(tape, ad::sum_all(tape, pen), static_cast<T>(stiffness / 2));
+}
+
+// Nearest anchor rows (indices) of the query rows, on current values.
+template <class T>
+std::vector<int32_t> nearest(const T* query, int64_t q0, int64_t q1, const T* anchors, int64_t a0, int64_t a1) {
+  auto pts = [](const T* xyz, int64_t r0, int64_t r1) {
+    dataset::Points out(r1 - r0, 3);
+    for (int64_t i = r0; i < r1; ++i)
+      for (int c = 0; c < 3; ++c) out(i - r0, c) = static_cast<float>(xyz[3 * i + c]);
+    return out;
+  };
+  return dataset::nearest_body(pts(query, q0, q1), pts(anchors, a0, a1)).index;
+}
+
+}  // namespace
+
+double ramped(double start, double end, int64_t step, int64_t ramp_start, int64_t ramp_steps) {
+  if (step < ramp_start) return start;
+  if (ramp_steps <= 0) return end;
+  const double f = std::min(1.0, static_cast<double>(step - ramp_start) / static_cast<double>(ramp_steps));
+  return start + f * (end - start);
+}
+
+PhysicsInput<float> physics_input_from_sample(const dataset::TrainingSample& s, const dataset::SequenceInfo& info,
+                                              const PhysicsSettings& settings) {
+  LAYERSNET_CHECK(s.structure != nullptr && static_cast<int>(s.structure->vertex_offsets.size()) == info.num_garments() + 1,
+                  "physics_input_from_sample: sample '" << s.sequence_id << "' does not match the SequenceInfo's garments");
+  const auto& offsets = s.structure->vertex_offsets;
+  const int G = info.num_garments();
+  const int64_t N = s.num_vertices(), B = s.body_state.rows();
+  const int t = s.frame;
+  PhysicsInput<float> in;
+  in.garment_offsets = offsets;
+  // x_t and x_{t−1} in frame t+1's root coordinates: x̃_f + r_f − r_{t+1}.
+  const Eigen::Vector3f shift_t = (info.translation.row(t) - info.translation.row(t + 1)).transpose();
+  const Eigen::Vector3f shift_tm1 = (info.translation.row(t - 1) - info.translation.row(t + 1)).transpose();
+  in.x_t.resize(N * 3), in.x_tm1.resize(N * 3);
+  for (int64_t v = 0; v < N; ++v)
+    for (int c = 0; c < 3; ++c) {
+      const float xt = s.state(v, c), vt = s.state(v, 3 + c);  // x̃_t, v_t = x̃_t − x̃_{t−1}
+      in.x_t[3 * v + c] = xt + shift_t[c];
+      in.x_tm1[3 * v + c] = xt - vt + shift_tm1[c];
+    }
+  // Per-vertex mass, drag and gravity; pinned vertices follow the body instead.
+  const Eigen::Vector3d g = 1e-3 * info.gravity.cast<double>();
+  const double drag = settings.air_damping * 0.01;
+  in.inertia_weight.assign(N, 0.f), in.drag_weight.assign(N, 0.f), in.external_force.assign(N * 3, 0.f);
+  for (int k = 0; k < G; ++k) {
+    const auto& mesh = info.garments[k];
+    for (int v = 0; v < mesh.num_vertices; ++v) {
+      if (mesh.pinned(v)) continue;
+      const int64_t gv = offsets[k] + v;
+      in.inertia_weight[gv] = static_cast<float>(mesh.attributes.mass / 2.0);
+      in.drag_weight[gv] = static_cast<float>(drag / 2);
+      for (int c = 0; c < 3; ++c) in.external_force[3 * gv + c] = static_cast<float>(mesh.attributes.mass * g[c]);
+    }
+  }
+  // Rest shape per garment (scene units, double): the template, else x_t (then rest lengths come
+  // from the sample structure's UV lengths and rest angles are flat).
+  std::vector<std::vector<Eigen::Vector3d>> rest(G);
+  std::vector<bool> has_rest(G);
+  for (int k = 0; k < G; ++k) {
+    const auto& mesh = info.garments[k];
+    has_rest[k] = mesh.rest.rows() == mesh.num_vertices;
+    for (int v = 0; v < mesh.num_vertices; ++v)
+      rest[k].push_back(has_rest[k] ? mesh.rest.row(v).transpose().cast<double>()
+                                    : Eigen::Vector3d(in.x_t[3 * (offsets[k] + v)], in.x_t[3 * (offsets[k] + v) + 1],
+                                                      in.x_t[3 * (offsets[k] + v) + 2]));
+  }
+  // Structural springs: every mesh edge with its rest length; the average over the whole cloth
+  // object (all layers: the generator makes one) sets Blender's stiffness scale.
+  struct Side {
+    int32_t p, q, opposite;  // directed edge p -> q of a face as wound, and its third vertex
+  };
+  const double base_tension = info.garments.front().attributes.tension_stiffness;
+  const double max_tension = info.garments.back().attributes.tension_stiffness;
+  const double base_bending = info.garments.front().attributes.bending_stiffness;
+  const double max_bending = info.garments.back().attributes.bending_stiffness;
+  std::vector<double> edge_rest_d, edge_group;
+  struct HingeD {
+    int32_t i, j, a, p, q, b;
+    double rest_length, cos0, sin0, group;
+  };
+  std::vector<HingeD> hinges;
+  // Rest length of a mesh edge as the sample structure holds it (template, else UV × scale).
+  const auto& csr = s.structure->vertex_neighbours;
+  auto structure_rest = [&](int32_t a, int32_t b) {
+    for (int32_t k = csr.offsets[a]; k < csr.offsets[a + 1]; ++k)
+      if (csr.items[k] == b) return static_cast<double>(s.structure->neighbour_rest[k]);
+    return 0.0;
+  };
+  for (int k = 0; k < G; ++k) {
+    const auto& mesh = info.garments[k];
+    const double group = (G >= 2 && k == G - 1) ? 1.0 : 0.0;  // the 'outer' vertex group
+    std::map<std::pair<int32_t, int32_t>, std::vector<Side>> sides;
+    for (int f = 0; f < mesh.num_faces(); ++f)
+      for (int c = 0; c < 3; ++c) {
+        const int32_t a = mesh.faces(f, c), b = mesh.faces(f, (c + 1) % 3), o = mesh.faces(f, (c + 2) % 3);
+        sides[{std::min(a, b), std::max(a, b)}].push_back({a, b, o});
+      }
+    for (const auto& [key, list] : sides) {
+      const auto [a, b] = key;
+      double len = (rest[k][a] - rest[k][b]).norm();
+      if (!has_rest[k]) len = structure_rest(offsets[k] + a, offsets[k] + b);  // UV length × scale
+      in.edge_i.push_back(offsets[k] + a), in.edge_j.push_back(offsets[k] + b);
+      edge_rest_d.push_back(len), edge_group.push_back(group);
+      if (list.size() != 2) continue;  // boundary (or non-manifold) edge: no bending spring
+      const Side& A = list[0];
+      const Side& Bs = list[1];
+      const Eigen::Vector3d nA = unit_normal(rest[k][A.p], rest[k][A.q], rest[k][A.opposite]);
+      const Eigen::Vector3d nB = unit_normal(rest[k][Bs.p], rest[k][Bs.q], rest[k][Bs.opposite]);
+      Eigen::Vector3d e = rest[k][A.p] - rest[k][A.q];
+      e = e.norm() > 0 ? Eigen::Vector3d(e.normalized()) : e;
+      double c0 = has_rest[k] ? nA.dot(nB) : 1.0, s0 = has_rest[k] ? nA.cross(nB).dot(e) : 0.0;
+      if (!has_rest[k] && A.p == Bs.p) c0 = -1.0;  // inconsistent winding: flat means opposite normals
+      const int32_t o = offsets[k];
+      hinges.push_back({o + A.p, o + A.q, o + A.opposite, o + Bs.p, o + Bs.q, o + Bs.opposite, len, c0, s0, group});
+    }
+  }
+  double avg = 0;
+  for (double l : edge_rest_d) avg += l;
+  avg = edge_rest_d.empty() ? 1.0 : avg / static_cast<double>(edge_rest_d.size());
+  constexpr double kFltEpsilon = 1.1920929e-7;  // Blender adds FLT_EPSILON to the average
+  for (std::size_t e = 0; e < edge_rest_d.size(); ++e) {
+    const double k = group_scaled(base_tension, max_tension, edge_group[e]) / (avg + kFltEpsilon);
+    in.edge_rest.push_back(static_cast<float>(edge_rest_d[e]));
+    in.edge_half_k.push_back(static_cast<float>(k / 2));
+  }
+  for (const HingeD& h : hinges) {
+    const double k = group_scaled(base_bending, max_bending, h.group) * h.rest_length * 0.1;
+    in.hinge_i.push_back(h.i), in.hinge_j.push_back(h.j), in.hinge_a.push_back(h.a);
+    in.hinge_p.push_back(h.p), in.hinge_q.push_back(h.q), in.hinge_b.push_back(h.b);
+    in.hinge_k_cos0.push_back(static_cast<float>(k * h.cos0));
+    in.hinge_k_sin0.push_back(static_cast<float>(k * h.sin0));
+    in.hinge_k_sum += k;
+  }
+  for (int k = 0; k < G; ++k) {
+    const auto& f = info.garments[k].faces;
+    for (Eigen::Index i = 0; i < f.rows(); ++i)
+      for (int c = 0; c < 3; ++c) in.faces.push_back(f(i, c) + offsets[k]);
+  }
+  // Face wind at x_t: Blender's effector wind is strength × the field's z axis; each face gives
+  // its corners 0.02 · area/3 · (w·n) n.
+  in.wind_force.assign(N * 3, 0.f);
+  if (info.has_wind && info.wind_strength[t + 1] != 0.f) {
+    const Eigen::Vector3d w =
+        static_cast<double>(info.wind_strength[t + 1]) *
+        dataset::wind_direction(info.wind_rotation.row(t + 1).transpose()).cast<double>();
+    std::vector<double> force(N * 3, 0.0);
+    for (std::size_t f = 0; f < in.faces.size() / 3; ++f) {
+      Eigen::Vector3d p[3];
+      for (int c = 0; c < 3; ++c)
+        p[c] = Eigen::Vector3d(in.x_t[3 * in.faces[3 * f + c]], in.x_t[3 * in.faces[3 * f + c] + 1],
+                               in.x_t[3 * in.faces[3 * f + c] + 2]);
+      const Eigen::Vector3d cr = (p[1] - p[0]).cross(p[2] - p[0]);
+      const double area = cr.norm() / 2;
+      if (area <= 0) continue;
+      const Eigen::Vector3d n = cr.normalized();
+      const Eigen::Vector3d fv = 0.02 * area / 3.0 * w.dot(n) * n;
+      for (int c = 0; c < 3; ++c)
+        for (int d = 0; d < 3; ++d) force[3 * in.faces[3 * f + c] + d] += fv[d];
+    }
+    for (int k = 0; k < G; ++k)
+      for (int v = 0; v < info.garments[k].num_vertices; ++v) {
+        if (info.garments[k].pinned(v)) continue;
+        const int64_t gv = offsets[k] + v;
+        for (int d = 0; d < 3; ++d) in.wind_force[3 * gv + d] = static_cast<float>(force[3 * gv + d]);
+      }
+  }
+  in.body_pos.resize(B * 3), in.body_normals.resize(B * 3);
+  for (int64_t b = 0; b < B; ++b)
+    for (int c = 0; c < 3; ++c) in.body_pos[3 * b + c] = s.body_state(b, c), in.body_normals[3 * b + c] = s.body_normals_next(b, c);
+  return in;
+}
+
+template <class T>
+Var<T> inertia_energy(ad::Tape<T>& tape, const Var<T>& x, const PhysicsInput<T>& in) {
+  std::vector<T> target(in.x_t.size());
+  for (std::size_t k = 0; k < target.size(); ++k) target[k] = 2 * in.x_t[k] - in.x_tm1[k];
+  return weighted_sum(tape, ad::squared_error(tape, x, column(tape, target, 3)), in.inertia_weight);
+}
+
+template <class T>
+Var<T> drag_energy(ad::Tape<T>& tape, const Var<T>& x, const PhysicsInput<T>& in) {
+  return weighted_sum(tape, ad::squared_error(tape, x, column(tape, in.x_t, 3)), in.drag_weight);
+}
+
+template <class T>
+Var<T> stretch_energy(ad::Tape<T>& tape, const Var<T>& x, const PhysicsInput<T>& in) {
+  const Var<T> length = ad::row_norm(tape, ad::sub(tape, ad::gather_rows(tape, x, in.edge_i), ad::gather_rows(tape, x, in.edge_j)));
+  return weighted_sum(tape, ad::squared_error(tape, length, column(tape, in.edge_rest, 1)), in.edge_half_k);
+}
+
+template <class T>
+Var<T> bending_energy(ad::Tape<T>& tape, const Var<T>& x, const PhysicsInput<T>& in) {
+  auto at = [&](const std::vector<int32_t>& idx) { return ad::gather_rows(tape, x, idx); };
+  const Var<T> xi = at(in.hinge_i), xj = at(in.hinge_j), xa = at(in.hinge_a);
+  const Var<T> xp = at(in.hinge_p), xq = at(in.hinge_q), xb = at(in.hinge_b);
+  const Var<T> nA = ad::row_normalize(tape, ad::cross3(tape, ad::sub(tape, xj, xi), ad::sub(tape, xa, xi)));
+  const Var<T> nB = ad::row_normalize(tape, ad::cross3(tape, ad::sub(tape, xq, xp), ad::sub(tape, xb, xp)));
+  const Var<T> e = ad::row_normalize(tape, ad::sub(tape, xi, xj));
+  const Var<T> cos_t = ad::row_sum(tape, ad::mul(tape, nA, nB));                          // cos θ
+  const Var<T> sin_t = ad::row_sum(tape, ad::mul(tape, ad::cross3(tape, nA, nB), e));    // sin θ
+  // Σ k (1 − cos θ cos θ0 − sin θ sin θ0) = Σ k − Σ k cos θ0 · cos θ − Σ k sin θ0 · sin θ.
+  const Var<T> aligned = ad::add(tape, weighted_sum(tape, cos_t, in.hinge_k_cos0), weighted_sum(tape, sin_t, in.hinge_k_sin0));
+  const T k_sum = static_cast<T>(in.hinge_k_sum);
+  return ad::sub(tape, tape.constant(&k_sum, 1, 1), aligned);
+}
+
+template <class T>
+Var<T> work_energy(ad::Tape<T>& tape, const Var<T>& x, const PhysicsInput<T>& in, const std::vector<T>& force) {
+  const Var<T> dx = ad::sub(tape, x, column(tape, in.x_t, 3));
+  return ad::scale(tape, ad::sum_all(tape, ad::mul(tape, dx, column(tape, force, 3))), T(-1));
+}
+
+template <class T>
+Var<T> body_collision_energy(ad::Tape<T>& tape, const Var<T>& x, const PhysicsInput<T>& in, double margin,
+                             double stiffness, int64_t* contacts) {
+  const int64_t B = static_cast<int64_t>(in.body_pos.size() / 3);
+  const auto idx = nearest(x.value, 0, x.rows, in.body_pos.data(), 0, B);
+  const Var<T> h = ad::gather_rows(tape, column(tape, in.body_pos, 3), idx);
+  const Var<T> n = ad::gather_rows(tape, column(tape, in.body_normals, 3), idx);
+  return collision(tape, x, h, n, margin, stiffness, contacts);
+}
+
+template <class T>
+Var<T> layer_collision_energy(ad::Tape<T>& tape, const Var<T>& x, const PhysicsInput<T>& in, double margin,
+                              double stiffness, int64_t* contacts) {
+  const int64_t G = static_cast<int64_t>(in.garment_offsets.size()) - 1;
+  LAYERSNET_CHECK(G >= 2, "layer_collision_energy needs two garments or more (has " << G << ")");
+  const int64_t o0 = in.garment_offsets[G - 1], o1 = in.garment_offsets[G];
+  // Indices into the inner vertices [0, o0) are global vertex ids.
+  const auto idx = nearest(x.value, o0, o1, x.value, 0, o0);
+  // Inner normals from the inner garments' faces only (the outer's faces are not their neighbours).
+  std::vector<int32_t> inner_faces;
+  for (std::size_t f = 0; f < in.faces.size() / 3; ++f)
+    if (in.faces[3 * f] < o0) inner_faces.insert(inner_faces.end(), in.faces.begin() + 3 * f, in.faces.begin() + 3 * f + 3);
+  const Var<T> inner = model::rows_of(x, 0, o0);
+  // Unit vertex normals: normalised sum of the unit face normals (as losses::vertex_normals).
+  const int64_t F = static_cast<int64_t>(inner_faces.size() / 3);
+  std::vector<int32_t> corner[3];
+  for (int k = 0; k < 3; ++k)
+    for (int64_t f = 0; f < F; ++f) corner[k].push_back(inner_faces[3 * f + k]);
+  const Var<T> v0 = ad::gather_rows(tape, inner, corner[0]), v1 = ad::gather_rows(tape, inner, corner[1]),
+               v2 = ad::gather_rows(tape, inner, corner[2]);
+  const Var<T> fn = ad::row_normalize(tape, ad::cross3(tape, ad::sub(tape, v2, v1), ad::sub(tape, v0, v1)));
+  std::vector<int32_t> all(corner[0]);
+  all.insert(all.end(), corner[1].begin(), corner[1].end());
+  all.insert(all.end(), corner[2].begin(), corner[2].end());
+  const Var<T> normals =
+      ad::row_normalize(tape, ad::scatter_add_rows(tape, ad::concat_rows(tape, ad::concat_rows(tape, fn, fn), fn), all, o0));
+  return collision(tape, model::rows_of(x, o0, o1), ad::gather_rows(tape, inner, idx), ad::gather_rows(tape, normals, idx),
+                   margin, stiffness, contacts);
+}
+
+template <class T>
+PhysicsTerms<T> physics_energy(ad::Tape<T>& tape, const Var<T>& x, const PhysicsInput<T>& in, const PhysicsSettings& ps) {
+  const int64_t N = x.rows;
+  LAYERSNET_CHECK(x.cols == 3 && static_cast<int64_t>(in.x_t.size()) == 3 * N,
+                  "physics_energy: x (" << x.rows << ", " << x.cols << ") does not match the input's " << in.x_t.size() / 3
+                                        << " vertices");
+  PhysicsTerms<T> out;
+  std::vector<Var<T>> weighted;
+  const T per_vertex = T(1) / static_cast<T>(std::max<int64_t>(N, 1));
+  auto add = [&](double weight, double& value, auto make) {
+    if (weight == 0) return;
+    const Var<T> term = ad::scale(tape, make(), per_vertex);
+    value = static_cast<double>(term.scalar());
+    weighted.push_back(ad::scale(tape, term, static_cast<T>(weight)));
+  };
+  add(ps.inertia, out.inertia, [&] { return inertia_energy(tape, x, in); });
+  add(ps.drag, out.drag, [&] { return drag_energy(tape, x, in); });
+  if (!in.edge_i.empty()) add(ps.stretch, out.stretch, [&] { return stretch_energy(tape, x, in); });
+  if (!in.hinge_i.empty()) add(ps.bending, out.bending, [&] { return bending_energy(tape, x, in); });
+  add(ps.gravity, out.gravity, [&] { return work_energy(tape, x, in, in.external_force); });
+  add(ps.wind, out.wind, [&] { return work_energy(tape, x, in, in.wind_force); });
+  if (!in.body_pos.empty())
+    add(ps.collision_body, out.collision_body,
+        [&] { return body_collision_energy(tape, x, in, ps.body_margin, ps.collision_stiffness, &out.body_contacts); });
+  if (in.garment_offsets.size() >= 3)
+    add(ps.collision_layer, out.collision_layer,
+        [&] { return layer_collision_energy(tape, x, in, ps.layer_margin, ps.collision_stiffness, &out.layer_contacts); });
+  LAYERSNET_CHECK(!weighted.empty(), "physics_energy: every term's weight is 0");
+  out.total = weighted[0];
+  for (std::size_t k = 1; k < weighted.size(); ++k) out.total = ad::add(tape, out.total, weighted[k]);
+  return out;
+}
+
+#define LAYERSNET_PHYSICS_INSTANTIATE(T)                                                                              \
+  template Var<T> inertia_energy(ad::Tape<T>&, const Var<T>&, const PhysicsInput<T>&);                                \
+  template Var<T> drag_energy(ad::Tape<T>&, const Var<T>&, const PhysicsInput<T>&);                                   \
+  template Var<T> stretch_energy(ad::Tape<T>&, const Var<T>&, const PhysicsInput<T>&);                                \
+  template Var<T> bending_energy(ad::Tape<T>&, const Var<T>&, const PhysicsInput<T>&);                                \
+  template Var<T> work_energy(ad::Tape<T>&, const Var<T>&, const PhysicsInput<T>&, const std::vector<T>&);            \
+  template Var<T> body_collision_energy(ad::Tape<T>&, const Var<T>&, const PhysicsInput<T>&, double, double, int64_t*); \
+  template Var<T> layer_collision_energy(ad::Tape<T>&, const Var<T>&, const PhysicsInput<T>&, double, double, int64_t*); \
+  template PhysicsTerms<T> physics_energy(ad::Tape<T>&, const Var<T>&, const PhysicsInput<T>&, const PhysicsSettings&);
+LAYERSNET_PHYSICS_INSTANTIATE(float)
+LAYERSNET_PHYSICS_INSTANTIATE(double)
+#undef LAYERSNET_PHYSICS_INSTANTIATE
+
+}  // namespace layersnet::losses

@@ -1,0 +1,144 @@
+#pragma once
+// A physics energy of one predicted frame, matched to the simulator that makes the ground truth:
+// Blender's cloth, a mass-spring system integrated implicitly (docs/decisions.md, "Physics
+// loss"). It needs no ground truth at t+1: it scores x̂_{t+1} given the state (x_t, x_{t−1}), the
+// body at t+1, the wind and the garments' attributes, so it applies to every self-fed step.
+//
+// Units are Blender's own: positions in scene units (the data's `scale` × metres), time in
+// frames (Blender's cloth step is time_scale / quality, and `quality` substeps make one frame),
+// mass in the cloth's mass unit (`mass` attribute, per vertex). Energies are in
+// mass · unit² / frame². One frame is one implicit step here (Blender takes `quality`, e.g. 30).
+//
+//   inertia    Σ_v m_v/2 ‖x_v − (2 x_t,v − x_{t−1},v)‖²               (Δt = 1 frame)
+//   drag       Σ_v c/2 ‖x_v − x_t,v‖², c = air_damping × 0.01          (Blender's air drag −c·v,
+//              as its backward-Euler potential)
+//   stretch    Σ_e k_e/2 (‖x_i − x_j‖ − L_e)², k_e = tension_e / avg_spring_len, L_e the rest
+//              length: one structural spring per mesh edge (a triangle mesh has no shear springs)
+//   bending    Σ_h k_h (1 − cos(θ_h − θ0_h)) ≈ k_h/2 (θ_h − θ0_h)², θ the dihedral angle at an
+//              interior edge, θ0 at rest, k_h = bending_h × L_h × 0.1 (Blender's angular model)
+//   gravity    −Σ_v m_v g·(x_v − x_t,v), g = 0.001 × the file's gravity (Blender's factor)
+//   wind       −Σ_v F_v·(x_v − x_t,v), F the face wind at x_t: each face gives its three corners
+//              0.02 × area/3 × (w·n) n, w = strength × direction (Blender's face wind)
+//   collision_body   k_c/2 Σ_v min((x_v − h_a)·n_a − d_b, 0)², a = nearest body vertex at t+1
+//   collision_layer  k_c/2 Σ_v min((x_v − y_a)·n_a − d_l, 0)² over the outer garment's vertices,
+//              y_a the nearest inner-garment vertex (predicted), n_a its predicted normal
+//
+// Per-layer stiffness follows Blender's vertex-group rule as the generator sets it (one cloth
+// object, inner values as the base, the outer's as the maximum, group weight 1 on the outer
+// layer): value = base + w·|max − base|. Pinned vertices (pin ≥ 0.5) carry no inertia, drag,
+// gravity or wind (Blender moves them with the body); their springs stay.
+// total = Σ weight_k · term_k / N (per garment vertex), weights from PhysicsSettings.
+//
+// Where each constant comes from in Blender's sources (3.x, the version the generator runs):
+// spring stiffness scales and the bending factor 0.1 in cloth_calc_spring_force, gravity × 0.001
+// and drag = air_damping × 0.01 in cloth_calc_force (simulation/intern/SIM_mass_spring.cpp);
+// the linear spring force k(L − L0), the angular bending force k(θ − θ0) with θ from atan2 of
+// the two face normals, and the face wind 0.02 · area/3 · (w·n) n in implicit_blender.c;
+// dt = time_scale / quality per substep (blenkernel cloth.c); collision distances and their
+// 8/9 push-out factor in blenkernel collision.c. Deviations: one step per frame instead of
+// `quality`; compression uses the same quadratic as tension (Blender's angular model uses the
+// Choi-Ko buckling curve for compression); 1 − cos(θ − θ0) stands for (θ − θ0)²/2 (equal to
+// second order; no atan2 op is needed); collisions are vertex-to-nearest-vertex planes, not
+// triangle pairs; friction and self-collision within a layer are not modelled.
+#include "autodiff/tape.h"
+#include "dataset/sample.h"
+#include "dataset/sequence.h"
+
+#include <cstdint>
+#include <vector>
+
+namespace layersnet::losses {
+
+struct PhysicsSettings {
+  // Weight of each term inside the energy (1 = as Blender; 0 = term absent, no op recorded).
+  double inertia = 1, drag = 1, stretch = 1, bending = 1, gravity = 1, wind = 1, collision_body = 1,
+         collision_layer = 1;
+  double air_damping = 1.0;  // Blender's air_damping (Cvi), default 1; the generator keeps it
+  // Collision target distances (scene units): Blender pushes to 8/9 of its detection distance,
+  // (distance_min + the body's thickness_outer) for the body and 2 × self_distance_min for cloth;
+  // the generator sets 0.1 (+ 0.02 default thickness) and 0.06.
+  double body_margin = (0.1 + 0.02) * 8.0 / 9.0;
+  double layer_margin = 2 * 0.06 * 8.0 / 9.0;
+  double collision_stiffness = 1e3;  // k_c (mass / frame²), the ramp's current value
+};
+
+// Constants of one sample (N garment vertices, E edges, H interior edges, B body vertices).
+// Positions are root-relative in frame t+1's coordinates (the predictions' frame).
+template <class T>
+struct PhysicsInput {
+  std::vector<T> x_t, x_tm1;        // (N, 3) x_t and x_{t−1}, shifted by the root's motion to t+1
+  std::vector<T> inertia_weight;    // (N, 1) m_v/2, 0 when pinned
+  std::vector<T> drag_weight;       // (N, 1) c/2, 0 when pinned
+  std::vector<T> external_force;    // (N, 3) m_v g, 0 when pinned
+  std::vector<T> wind_force;        // (N, 3) F_v at x_t, 0 when pinned
+  std::vector<int32_t> edge_i, edge_j;  // (E) structural springs
+  std::vector<T> edge_rest;         // (E, 1) L_e
+  std::vector<T> edge_half_k;       // (E, 1) k_e / 2
+  // Interior edges: face A = (i, j, a) as wound, face B = (p, q, b) as wound, {p, q} = {i, j}.
+  std::vector<int32_t> hinge_i, hinge_j, hinge_a, hinge_p, hinge_q, hinge_b;
+  std::vector<T> hinge_k_cos0, hinge_k_sin0;  // (H, 1) k_h cos θ0, k_h sin θ0
+  double hinge_k_sum = 0;                     // Σ k_h
+  std::vector<int32_t> faces;                 // (F, 3) global vertex ids
+  std::vector<int32_t> garment_offsets;       // (G + 1), inner -> outer
+  std::vector<T> body_pos, body_normals;      // (B, 3) at t+1
+};
+
+// Builds the constants from a training sample (its state holds x_t, x_{t−1}, possibly the
+// model's own, self-fed) and its sequence's static data (attributes, rest shapes, pins,
+// translation, gravity, wind).
+PhysicsInput<float> physics_input_from_sample(const dataset::TrainingSample& sample, const dataset::SequenceInfo& info,
+                                              const PhysicsSettings& settings);
+
+template <class U, class T>
+PhysicsInput<U> cast_physics_input(const PhysicsInput<T>& in) {
+  auto cv = [](const std::vector<T>& v) { return std::vector<U>(v.begin(), v.end()); };
+  PhysicsInput<U> o;
+  o.x_t = cv(in.x_t), o.x_tm1 = cv(in.x_tm1), o.inertia_weight = cv(in.inertia_weight);
+  o.drag_weight = cv(in.drag_weight), o.external_force = cv(in.external_force), o.wind_force = cv(in.wind_force);
+  o.edge_i = in.edge_i, o.edge_j = in.edge_j, o.edge_rest = cv(in.edge_rest), o.edge_half_k = cv(in.edge_half_k);
+  o.hinge_i = in.hinge_i, o.hinge_j = in.hinge_j, o.hinge_a = in.hinge_a;
+  o.hinge_p = in.hinge_p, o.hinge_q = in.hinge_q, o.hinge_b = in.hinge_b;
+  o.hinge_k_cos0 = cv(in.hinge_k_cos0), o.hinge_k_sin0 = cv(in.hinge_k_sin0), o.hinge_k_sum = in.hinge_k_sum;
+  o.faces = in.faces, o.garment_offsets = in.garment_offsets;
+  o.body_pos = cv(in.body_pos), o.body_normals = cv(in.body_normals);
+  return o;
+}
+
+// Unweighted values of each term (energy / N) and the weighted total on the tape.
+template <class T>
+struct PhysicsTerms {
+  ad::Var<T> total;  // (1, 1) Σ weight_k term_k / N
+  double inertia = 0, drag = 0, stretch = 0, bending = 0, gravity = 0, wind = 0, collision_body = 0,
+         collision_layer = 0;
+  int64_t body_contacts = 0, layer_contacts = 0;  // vertices inside a margin
+};
+
+// x: (N, 3) predicted positions at t+1 (root-relative, on the tape).
+template <class T>
+PhysicsTerms<T> physics_energy(ad::Tape<T>& tape, const ad::Var<T>& x, const PhysicsInput<T>& input,
+                               const PhysicsSettings& settings);
+
+// The single terms (each (1, 1), unweighted, not divided by N), for tests and the table above.
+template <class T>
+ad::Var<T> inertia_energy(ad::Tape<T>& tape, const ad::Var<T>& x, const PhysicsInput<T>& in);
+template <class T>
+ad::Var<T> drag_energy(ad::Tape<T>& tape, const ad::Var<T>& x, const PhysicsInput<T>& in);
+template <class T>
+ad::Var<T> stretch_energy(ad::Tape<T>& tape, const ad::Var<T>& x, const PhysicsInput<T>& in);
+template <class T>
+ad::Var<T> bending_energy(ad::Tape<T>& tape, const ad::Var<T>& x, const PhysicsInput<T>& in);
+// −f·(x − x_t) summed, for the per-vertex force f (N, 3): gravity (external_force) or wind.
+template <class T>
+ad::Var<T> work_energy(ad::Tape<T>& tape, const ad::Var<T>& x, const PhysicsInput<T>& in, const std::vector<T>& force);
+template <class T>
+ad::Var<T> body_collision_energy(ad::Tape<T>& tape, const ad::Var<T>& x, const PhysicsInput<T>& in, double margin,
+                                 double stiffness, int64_t* contacts = nullptr);
+template <class T>
+ad::Var<T> layer_collision_energy(ad::Tape<T>& tape, const ad::Var<T>& x, const PhysicsInput<T>& in, double margin,
+                                  double stiffness, int64_t* contacts = nullptr);
+
+// The HOOD-style schedule: `start` until step `ramp_start`, then linear to `end` over
+// `ramp_steps` updates (0 = `end` at once after ramp_start).
+double ramped(double start, double end, int64_t step, int64_t ramp_start, int64_t ramp_steps);
+
+}  // namespace layersnet::losses

@@ -1,0 +1,253 @@
+// The physics energy (losses/physics.h): each term's gradient against central differences in
+// double precision, hand-counted values on two triangles, the ramp, and — where Blender is
+// installed — a generated Blender sequence whose frames have lower energy than the same
+// frames perturbed.
+#include "autodiff/gradcheck.h"
+#include "autodiff/ops_dense.h"
+#include "dataset/sample.h"
+#include "dataset/sequence.h"
+#include "dataset/synthetic.h"
+#include "losses/physics.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <functional>
+#include <random>
+#include <string>
+
+namespace layersnet::losses {
+namespace {
+
+namespace fs = std::filesystem;
+
+// A sample of a two-layer synthetic scene with wind at frame t (ground-truth state).
+dataset::TrainingSample synthetic_sample(const dataset::Sequence& seq, int t) {
+  return dataset::build_sample(seq.info, seq.frames, t, dataset::NormalisationStats{},
+                               dataset::build_structure(seq.info, dataset::kDefaultPatchSize));
+}
+
+dataset::Sequence two_layers_with_wind() {
+  dataset::SyntheticOptions o;
+  o.garments = 2;
+  o.wind = true;
+  o.frames = 8;
+  return dataset::make_synthetic_sequence(o);
+}
+
+// x̂ = the target at t+1 plus a fixed noise of `sigma` scene units (N, 3).
+ad::RowMat<double> noisy_target(const dataset::TrainingSample& s, double sigma, unsigned seed) {
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> noise(0.0, sigma);
+  ad::RowMat<double> x(s.num_vertices(), 3);
+  for (int v = 0; v < s.num_vertices(); ++v)
+    for (int c = 0; c < 3; ++c) x(v, c) = s.target(v, c) + noise(rng);
+  return x;
+}
+
+using Term = std::function<ad::Var<double>(ad::Tape<double>&, const ad::Var<double>&, const PhysicsInput<double>&)>;
+
+class PhysicsGradcheck : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    seq_ = two_layers_with_wind();
+    const auto s = synthetic_sample(seq_, 4);
+    PhysicsSettings settings;
+    input_ = cast_physics_input<double>(physics_input_from_sample(s, seq_.info, settings));
+    // Large enough that the margins are crossed by some vertices, not at a kink.
+    x_ = noisy_target(s, 0.08, 7);
+  }
+  void check(const Term& term) {
+    const auto f = [&](ad::Tape<double>& tape, const std::vector<ad::Var<double>>& in) { return term(tape, in[0], input_); };
+    const ad::GradcheckReport report = ad::gradcheck(f, {ad::GradcheckInput{x_}});
+    EXPECT_TRUE(report.finite) << report.failures;
+    EXPECT_TRUE(report.ok) << report.failures;
+    EXPECT_GT(report.coords_checked, 0);
+    std::printf("gradcheck: %d coordinates, max |analytic - numeric| = %.3g, value %.6g\n", report.coords_checked,
+                report.max_abs_error, report.output(0, 0));
+  }
+  dataset::Sequence seq_;
+  PhysicsInput<double> input_;
+  ad::RowMat<double> x_;
+};
+
+TEST_F(PhysicsGradcheck, Inertia) { check([](auto& t, const auto& x, const auto& in) { return inertia_energy(t, x, in); }); }
+TEST_F(PhysicsGradcheck, Drag) { check([](auto& t, const auto& x, const auto& in) { return drag_energy(t, x, in); }); }
+TEST_F(PhysicsGradcheck, Stretch) { check([](auto& t, const auto& x, const auto& in) { return stretch_energy(t, x, in); }); }
+TEST_F(PhysicsGradcheck, Bending) { check([](auto& t, const auto& x, const auto& in) { return bending_energy(t, x, in); }); }
+TEST_F(PhysicsGradcheck, Gravity) {
+  check([](auto& t, const auto& x, const auto& in) { return work_energy(t, x, in, in.external_force); });
+}
+TEST_F(PhysicsGradcheck, Wind) {
+  double norm = 0;
+  for (double f : input_.wind_force) norm += f * f;
+  ASSERT_GT(norm, 0) << "the synthetic scene's wind blows at frame 5";
+  check([](auto& t, const auto& x, const auto& in) { return work_energy(t, x, in, in.wind_force); });
+}
+TEST_F(PhysicsGradcheck, BodyCollision) {
+  int64_t contacts = 0;
+  {
+    ad::Tape<double> tape;
+    body_collision_energy(tape, tape.constant(x_.data(), x_.rows(), 3), input_, 0.5, 1e3, &contacts);
+  }
+  ASSERT_GT(contacts, 0) << "the check must cross the margin somewhere";
+  check([](auto& t, const auto& x, const auto& in) { return body_collision_energy(t, x, in, 0.5, 1e3); });
+}
+TEST_F(PhysicsGradcheck, LayerCollision) {
+  int64_t contacts = 0;
+  {
+    ad::Tape<double> tape;
+    layer_collision_energy(tape, tape.constant(x_.data(), x_.rows(), 3), input_, 0.3, 1e3, &contacts);
+  }
+  ASSERT_GT(contacts, 0) << "the check must cross the margin somewhere";
+  check([](auto& t, const auto& x, const auto& in) { return layer_collision_energy(t, x, in, 0.3, 1e3); });
+}
+TEST_F(PhysicsGradcheck, Total) {
+  PhysicsSettings settings;
+  settings.body_margin = 0.5, settings.layer_margin = 0.3;
+  check([&](auto& t, const auto& x, const auto& in) { return physics_energy(t, x, in, settings).total; });
+}
+
+// Two triangles sharing the edge (0, 1): rest flat, the hinge vertex 3 folded up by 90°.
+PhysicsInput<double> two_triangles(double k) {
+  PhysicsInput<double> in;
+  in.x_t = {0, 0, 0, 1, 0, 0, 0.5, 1, 0, 0.5, -1, 0};
+  in.x_tm1 = in.x_t;
+  in.edge_i = {0}, in.edge_j = {1}, in.edge_rest = {0.5}, in.edge_half_k = {k / 2};
+  // Face A = (0, 1, 2), face B = (1, 0, 3) as wound: flat rest, cos θ0 = 1, sin θ0 = 0.
+  in.hinge_i = {0}, in.hinge_j = {1}, in.hinge_a = {2}, in.hinge_p = {1}, in.hinge_q = {0}, in.hinge_b = {3};
+  in.hinge_k_cos0 = {k}, in.hinge_k_sin0 = {0};
+  in.hinge_k_sum = k;
+  in.inertia_weight = {0.25, 0.25, 0.25, 0.25};
+  return in;
+}
+
+TEST(Physics, HandCountedTwoTriangles) {
+  const PhysicsInput<double> in = two_triangles(3.0);
+  ad::Tape<double> tape;
+  // Vertex 3 rotated about the x axis from (0.5, -1, 0) to (0.5, 0, 1): a 90° fold.
+  std::vector<double> x = {0, 0, 0, 1, 0, 0, 0.5, 1, 0, 0.5, 0, 1};
+  const ad::Var<double> X = tape.constant(x.data(), 4, 3);
+  EXPECT_NEAR(bending_energy(tape, X, in).scalar(), 3.0 * (1 - std::cos(M_PI / 2)), 1e-12);
+  // Edge (0, 1) has length 1 against rest 0.5: k/2 · 0.5².
+  EXPECT_NEAR(stretch_energy(tape, X, in).scalar(), 1.5 * 0.25, 1e-12);
+  // Inertia: only vertex 3 moved from its (resting) x_t, by √2: 0.25 · 2.
+  EXPECT_NEAR(inertia_energy(tape, X, in).scalar(), 0.5, 1e-12);
+  // Flat: no bending energy; the sign of the fold does not matter for a flat rest.
+  x[10] = -1, x[11] = 0;
+  EXPECT_NEAR(bending_energy(tape, tape.constant(x.data(), 4, 3), in).scalar(), 0.0, 1e-12);
+  x[10] = 0, x[11] = -1;
+  EXPECT_NEAR(bending_energy(tape, tape.constant(x.data(), 4, 3), in).scalar(), 3.0, 1e-12);
+}
+
+TEST(Physics, RampFollowsHoodSchedule) {
+  EXPECT_DOUBLE_EQ(ramped(1e2, 1e4, 0, 10, 100), 1e2);
+  EXPECT_DOUBLE_EQ(ramped(1e2, 1e4, 10, 10, 100), 1e2);
+  EXPECT_DOUBLE_EQ(ramped(1e2, 1e4, 60, 10, 100), 1e2 + 0.5 * (1e4 - 1e2));
+  EXPECT_DOUBLE_EQ(ramped(1e2, 1e4, 1000, 10, 100), 1e4);
+  EXPECT_DOUBLE_EQ(ramped(0, 2, 5, 0, 0), 2);
+}
+
+TEST(Physics, InputMatchesBlenderRules) {
+  const dataset::Sequence seq = two_layers_with_wind();
+  const auto s = synthetic_sample(seq, 4);
+  const PhysicsInput<float> in = physics_input_from_sample(s, seq.info, PhysicsSettings{});
+  const auto& inner = seq.info.garments.front().attributes;
+  const auto& outer = seq.info.garments.back().attributes;
+  // Springs: k = (base + w |max − base|) / average rest length; w = 1 on the outer layer.
+  double avg = 0;
+  for (float l : in.edge_rest) avg += l;
+  avg /= static_cast<double>(in.edge_rest.size());
+  const double k_inner = inner.tension_stiffness / avg;
+  const double k_outer = (inner.tension_stiffness + std::fabs(outer.tension_stiffness - inner.tension_stiffness)) / avg;
+  const int32_t first_outer = in.garment_offsets[1];
+  for (std::size_t e = 0; e < in.edge_i.size(); ++e)
+    EXPECT_NEAR(2 * in.edge_half_k[e], in.edge_i[e] < first_outer ? k_inner : k_outer, 1e-3 * k_outer);
+  // Gravity: mass × 0.001 × the file's gravity, per vertex.
+  EXPECT_NEAR(in.external_force[2], inner.mass * 1e-3 * seq.info.gravity.z(), 1e-9);
+  EXPECT_NEAR(in.inertia_weight[0], inner.mass / 2, 1e-7);
+  // x_t and x_{t−1} shifted into frame t+1's root coordinates: the world positions agree.
+  const int t = 4;
+  for (int c = 0; c < 3; ++c) {
+    EXPECT_NEAR(in.x_t[c] + seq.info.translation(t + 1, c), seq.garment_at(0, t)(0, c), 1e-4);
+    EXPECT_NEAR(in.x_tm1[c] + seq.info.translation(t + 1, c), seq.garment_at(0, t - 1)(0, c), 1e-4);
+  }
+}
+
+// ---- Blender ---------------------------------------------------------------------------------
+
+bool have_blender() { return std::system("blender --version > /dev/null 2>&1") == 0; }
+
+std::string slurp(const fs::path& p) {
+  std::FILE* f = std::fopen(p.c_str(), "r");
+  if (!f) return "";
+  std::string out;
+  char buf[4096];
+  for (std::size_t n; (n = std::fread(buf, 1, sizeof buf, f)) > 0;) out.append(buf, n);
+  std::fclose(f);
+  return out;
+}
+
+double energy_of(const PhysicsInput<float>& in, const ad::RowMat<double>& x, const PhysicsSettings& settings,
+                 PhysicsTerms<double>* terms = nullptr) {
+  const PhysicsInput<double> d = cast_physics_input<double>(in);
+  ad::Tape<double> tape;
+  const PhysicsTerms<double> t = physics_energy(tape, tape.constant(x.data(), x.rows(), 3), d, settings);
+  if (terms) *terms = t;
+  return t.total.scalar();
+}
+
+// A tiny Blender sequence (the generator's tiny recipe, 10 frames): on every frame, the energy of
+// Blender's x_{t+1} (given Blender's x_t, x_{t−1}) is lower than that of the same frame with
+// 1 cm of noise. The per-frame figures are printed (they go into docs/decisions.md).
+// LAYERSNET_PHYSICS_SEQUENCE=<file.h5> scores an existing Blender sequence instead (no Blender
+// run), e.g. a sequence of a generated data set.
+TEST(PhysicsBlender, GroundTruthFramesHaveLowerEnergyThanPerturbed) {
+  const fs::path dir = fs::temp_directory_path() / "layersnet_test_physics_blender";
+  const char* given = std::getenv("LAYERSNET_PHYSICS_SEQUENCE");
+  fs::path file = given ? fs::path(given) : dir / "00000.h5";
+  if (!given) {
+    if (!have_blender()) GTEST_SKIP() << "blender not installed";
+    fs::remove_all(dir);
+    const std::string cmd = std::string(LAYERSNET_BINARY) + " generate --recipe " + LAYERSNET_SOURCE_DIR +
+                            "/generate/recipes/tiny.json --count 1 --frames 10 --seed 5 --out " + dir.string() + " > " +
+                            dir.string() + ".stdout 2>&1";
+    ASSERT_EQ(std::system(cmd.c_str()), 0) << slurp(dir.string() + ".stdout");
+  }
+  const dataset::Sequence seq = dataset::read_sequence(file.string());
+  ASSERT_GE(seq.info.num_garments(), 1);
+  const auto structure = dataset::build_structure(seq.info, dataset::kDefaultPatchSize);
+  PhysicsSettings settings;
+  settings.collision_stiffness = 1e3;
+  int lower = 0, frames = 0;
+  std::printf("frame | E(Blender) | E(+1 cm noise) | E(x_t, frozen) | E(2x_t - x_{t-1}) | stretch | bending | body | layer\n");
+  for (int t = 2; t + 1 < seq.info.num_frames; ++t) {
+    const dataset::TrainingSample s = dataset::build_sample(seq.info, seq.frames, t, dataset::NormalisationStats{}, structure);
+    const PhysicsInput<float> in = physics_input_from_sample(s, seq.info, settings);
+    ad::RowMat<double> truth(s.num_vertices(), 3), frozen(s.num_vertices(), 3), coast(s.num_vertices(), 3);
+    for (int v = 0; v < s.num_vertices(); ++v)
+      for (int c = 0; c < 3; ++c) {
+        truth(v, c) = s.target(v, c);
+        frozen(v, c) = in.x_t[3 * v + c];
+        coast(v, c) = 2.0 * in.x_t[3 * v + c] - in.x_tm1[3 * v + c];
+      }
+    PhysicsTerms<double> terms;
+    const double e_truth = energy_of(in, truth, settings, &terms);
+    const double e_noisy = energy_of(in, noisy_target(s, 0.1, 100 + t), settings);
+    const double e_frozen = energy_of(in, frozen, settings);
+    const double e_coast = energy_of(in, coast, settings);
+    std::printf("%5d | %10.5g | %14.5g | %14.5g | %17.5g | %7.4g | %7.4g | %6.4g | %6.4g\n", t + 1, e_truth, e_noisy,
+                e_frozen, e_coast, terms.stretch, terms.bending, terms.collision_body, terms.collision_layer);
+    EXPECT_LT(e_truth, e_noisy) << "frame " << t + 1;
+    lower += e_truth < e_noisy;
+    ++frames;
+  }
+  EXPECT_EQ(lower, frames);
+  if (!given) fs::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace layersnet::losses
