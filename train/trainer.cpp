@@ -8,6 +8,7 @@
 #include "model/params_layout.h"
 #include "run/checkpoint.h"
 #include "train/distributed.h"
+#include "train/eta.h"
 #include "train/gsl_random.h"
 #include "run/run_dir.h"
 #include "train/sample_step.h"
@@ -179,6 +180,7 @@ class Run {
          window_reduce_s_ = 0;
   int64_t window_sent_bytes_ = 0;
   double total_wall_s_ = 0;
+  TrainingEta eta_;  // the run's time left, from the cost of each batch's samples and self-fed steps
   int64_t total_samples_ = 0;
   Clock::time_point window_start_ = Clock::now();
 };
@@ -549,6 +551,9 @@ bool Run::run_batch(int epoch, int ngs, const std::vector<int64_t>& order) {
   for (const auto& o : outcomes) window_build_s_ += o.build_seconds, window_model_s_ += o.model_seconds;
   total_wall_s_ += seconds(t0, t3);
   total_samples_ += nb;
+  int64_t steps = 0;
+  for (const int n : self_fed) steps += n;
+  eta_.add_batch(seconds(t0, t3), nb, steps);
   summary_.wall_seconds += seconds(t0, t3);
   summary_.read_seconds += seconds(t0, t1);
   summary_.optimizer_seconds += seconds(t3r, t3);
@@ -560,9 +565,11 @@ bool Run::run_batch(int epoch, int ngs, const std::vector<int64_t>& order) {
 void Run::log_progress(int epoch) {
   const TrainConfig& tc = config_.train;
   const double rate = window_wall_s_ > 0 ? static_cast<double>(window_samples_) / window_wall_s_ : 0;
-  // Remaining samples of the run (later epochs are slower with longer rollouts: a lower bound).
-  const int64_t remaining = (tc.epochs - epoch) * train_->num_samples() - state_.position;
-  const double eta = rate > 0 ? static_cast<double>(remaining) / rate : -1;
+  // Later epochs run longer self-fed rollouts: their cost comes from the fitted cost per step.
+  std::vector<int> later_steps;
+  for (int e = epoch + 1; e < tc.epochs; ++e) later_steps.push_back(rollout_steps_at(tc, e));
+  const double eta = eta_.remaining_seconds(train_->num_samples() - state_.position, rollout_steps_at(tc, epoch),
+                                            train_->num_samples(), later_steps);
   const LossParts loss = window_batches_ > 0 ? window_loss_.scaled(1.0 / static_cast<double>(window_batches_)) : LossParts{};
   const LossParts weighted = loss.weighted(config_.loss);
   // The penalty's floor is a constant Σ(d − c) (312 at the default sizes) that would hide every
