@@ -299,16 +299,16 @@ def retime_mocap(mocap, rig, skel, bvh_start, scene_start, steps, segment_frames
     bpy.context.view_layer.update()
 
 
-def _abduct_arms(mocap, deg, skel):
-    """Left-multiplies each upper arm's local rotation by a rotation about the axis that
-    raises the arm sideways in the rest frame (world -y for the left arm, +y for the right)."""
+def _rotate_arm_keys(mocap, skel, arms):
+    """Left-multiplies the local rotation of each upper arm at every key by a rotation about a
+    world axis of the rest frame. arms: (CMU bone name, world axis, angle_at(key frame) in
+    radians)."""
     action = mocap.animation_data.action
-    for cmu_name, axis in (("LeftArm", (0, -1, 0)), ("RightArm", (0, 1, 0))):
+    for cmu_name, axis, angle_at in arms:
         name = skel.bone(cmu_name)
         pb = mocap.pose.bones[name]
         rest = pb.bone.matrix_local.to_3x3()
         local_axis = rest.inverted() @ mathutils.Vector(axis)
-        q = mathutils.Matrix.Rotation(math.radians(deg), 3, local_axis)
         path = f'pose.bones["{name}"].rotation_euler'
         fcs = [action.fcurves.find(path, index=i) for i in range(3)]
         n = len(fcs[0].keyframe_points)
@@ -319,6 +319,7 @@ def _abduct_arms(mocap, deg, skel):
             cos.append(c.reshape(-1, 2))
         order = pb.rotation_mode
         for k in range(n):
+            q = mathutils.Matrix.Rotation(angle_at(cos[0][k, 0]), 3, local_axis)
             e = mathutils.Euler((cos[0][k, 1], cos[1][k, 1], cos[2][k, 1]), order)
             e2 = (q @ e.to_matrix()).to_euler(order, e)
             for i in range(3):
@@ -326,6 +327,14 @@ def _abduct_arms(mocap, deg, skel):
         for fc, c in zip(fcs, cos):
             fc.keyframe_points.foreach_set("co", c.ravel())
             fc.update()
+
+
+def _abduct_arms(mocap, deg, skel):
+    """Raises each upper arm sideways by deg about the rest frame's axis that does so (world -y
+    for the left arm, +y for the right)."""
+    angle = math.radians(deg)
+    _rotate_arm_keys(mocap, skel, [("LeftArm", (0, -1, 0), lambda f: angle),
+                                   ("RightArm", (0, 1, 0), lambda f: angle)])
 
 
 def drive_rig(rig, mocap, ramp_start, ramp_frames, pose_blend=1.0):
@@ -417,34 +426,15 @@ def overlay_procedural(mocap, skel, proc, frames):
 
 
 def _swing_arms(mocap, skel, swing):
-    """Left-multiplies each upper arm's local rotation by a rotation about the body's left-right
-    axis (world x in the rest frame) of deg * sin(2 pi hz t + phase), t in seconds of scene
-    time from the overlay's start (0 before it); the right arm in opposite phase when
-    `opposite` (a walking swing), else in phase."""
-    action = mocap.animation_data.action
-    for cmu_name, sign in (("LeftArm", 1.0), ("RightArm", -1.0 if swing["opposite"] else 1.0)):
-        name = skel.bone(cmu_name)
-        pb = mocap.pose.bones[name]
-        rest = pb.bone.matrix_local.to_3x3()
-        local_axis = rest.inverted() @ mathutils.Vector((1.0, 0.0, 0.0))
-        path = f'pose.bones["{name}"].rotation_euler'
-        fcs = [action.fcurves.find(path, index=i) for i in range(3)]
-        n = len(fcs[0].keyframe_points)
-        cos = []
-        for fc in fcs:
-            c = np.empty(2 * n)
-            fc.keyframe_points.foreach_get("co", c)
-            cos.append(c.reshape(-1, 2))
-        order = pb.rotation_mode
-        for k in range(n):
-            t = max(0.0, (cos[0][k, 0] - swing["start_frame"]) / 30.0)
+    """Swings each upper arm about the body's left-right axis (world x in the rest frame) by
+    deg * sin(2 pi hz t + phase), t in seconds of scene time from the overlay's start (0 before
+    it); the right arm in opposite phase when `opposite` (a walking swing), else in phase."""
+    def angle_at(sign):
+        def at(frame):
+            t = max(0.0, (frame - swing["start_frame"]) / 30.0)
             ramp = min(1.0, t / 0.3)   # eases in over 0.3 s so the arms do not jump
-            angle = math.radians(swing["deg"]) * ramp * sign * math.sin(2 * math.pi * swing["hz"] * t + swing["phase"])
-            q = mathutils.Matrix.Rotation(angle, 3, local_axis)
-            e = mathutils.Euler((cos[0][k, 1], cos[1][k, 1], cos[2][k, 1]), order)
-            e2 = (q @ e.to_matrix()).to_euler(order, e)
-            for i in range(3):
-                cos[i][k, 1] = e2[i]
-        for fc, c in zip(fcs, cos):
-            fc.keyframe_points.foreach_set("co", c.ravel())
-            fc.update()
+            return math.radians(swing["deg"]) * ramp * sign * math.sin(2 * math.pi * swing["hz"] * t + swing["phase"])
+        return at
+    right = -1.0 if swing["opposite"] else 1.0
+    _rotate_arm_keys(mocap, skel, [("LeftArm", (1.0, 0.0, 0.0), angle_at(1.0)),
+                                   ("RightArm", (1.0, 0.0, 0.0), angle_at(right))])
