@@ -58,6 +58,7 @@ void run_evaluation(EvalRunOptions o) {
   const bool any_bf16 = std::count(o.precisions.begin(), o.precisions.end(), ad::MatmulPrecision::kBFloat16) > 0;
   std::vector<std::unique_ptr<Predictor>> owned;
   std::vector<std::string> kinds, paths;
+  std::vector<bool> model_post;  // the post-processing settings the models run with
   for (size_t i = 0; i < o.checkpoints.size(); ++i) {
     const Config c = parse_config_text(read_checkpoint_config(o.checkpoints[i]), o.checkpoints[i]);
     const std::string name = i < o.names.size() ? o.names[i] : default_name(o.checkpoints[i], c);
@@ -65,6 +66,7 @@ void run_evaluation(EvalRunOptions o) {
     std::vector<bool> constrained;
     for (const auto& setting : o.constraints) constrained.push_back(setting == "on");
     if (constrained.empty()) constrained.push_back(c.eval.constraints);
+    model_post.insert(model_post.end(), constrained.begin(), constrained.end());
     for (const bool constrain : constrained)
       for (const double tether : tethers)
         for (const ad::MatmulPrecision precision : o.precisions) {
@@ -98,11 +100,9 @@ void run_evaluation(EvalRunOptions o) {
   // with baselines that get the same.
   Config post = base;
   for (const auto& a : o.settings) apply_rollout_override(post, a);
-  std::vector<bool> baseline_post;
-  for (const auto& setting : o.constraints) baseline_post.push_back(setting == "on");
-  if (o.constraints.empty())
-    for (const auto& path : o.checkpoints)
-      baseline_post.push_back(parse_config_text(read_checkpoint_config(path), path).eval.constraints);
+  std::vector<bool> baseline_post = model_post;
+  if (baseline_post.empty())  // no model: --constraints alone says how the baselines run
+    for (const auto& setting : o.constraints) baseline_post.push_back(setting == "on");
   if (baseline_post.empty()) baseline_post.push_back(false);
   std::sort(baseline_post.begin(), baseline_post.end());
   baseline_post.erase(std::unique(baseline_post.begin(), baseline_post.end()), baseline_post.end());

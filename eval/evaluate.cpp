@@ -328,13 +328,17 @@ Summary summarise(const MethodResult& m) {
 
 std::vector<Comparison> compare_with_baselines(const std::vector<MethodResult>& methods) {
   std::vector<Comparison> out;
-  for (const MethodResult& m : methods) {
+  std::vector<Summary> sums;  // each method summarised once
+  for (const MethodResult& m : methods) sums.push_back(summarise(m));
+  for (size_t mi = 0; mi < methods.size(); ++mi) {
+    const MethodResult& m = methods[mi];
     if (m.kind != "model") continue;
-    const Summary sm = summarise(m);
+    const Summary& sm = sums[mi];
     const size_t first = out.size();
-    for (const MethodResult& b : methods) {
+    for (size_t bi = 0; bi < methods.size(); ++bi) {
+      const MethodResult& b = methods[bi];
       if (b.kind != "baseline" || b.post_processed != m.post_processed) continue;
-      const Summary sb = summarise(b);
+      const Summary& sb = sums[bi];
       Comparison c;
       c.model = m.name;
       c.baseline = b.name;

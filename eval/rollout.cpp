@@ -64,22 +64,16 @@ void SkinnedToBody::begin(const dataset::Sequence& seq) {
     std::sort(n.begin(), n.end());
     n.erase(std::unique(n.begin(), n.end()), n.end());
   }
+  // The tangent of body vertex i points to its lowest-numbered neighbour (itself when it has none).
+  tangent_neighbour_.resize(body_neighbours_.size());
+  for (size_t i = 0; i < body_neighbours_.size(); ++i)
+    tangent_neighbour_[i] = body_neighbours_[i].empty() ? static_cast<int32_t>(i) : body_neighbours_[i].front();
   bindings_.clear();
 }
 
-namespace {
-// The tangent of body vertex i points to its lowest-numbered neighbour (itself when it has none).
-std::vector<int32_t> tangent_neighbours(const std::vector<std::vector<int32_t>>& neighbours) {
-  std::vector<int32_t> out(neighbours.size());
-  for (size_t i = 0; i < neighbours.size(); ++i)
-    out[i] = neighbours[i].empty() ? static_cast<int32_t>(i) : neighbours[i].front();
-  return out;
-}
-}  // namespace
-
 void SkinnedToBody::bind(const dataset::Sequence& seq, int t, const Points& x) {
   const Points body = seq.body_at(t);
-  const auto frames = body_frames(body, seq.info.body_faces, tangent_neighbours(body_neighbours_));
+  const auto frames = body_frames(body, seq.info.body_faces, tangent_neighbour_);
   const dataset::NearestBody nearest = dataset::nearest_body(x, body);
   bindings_.assign(static_cast<size_t>(x.rows()), {});
   for (Eigen::Index v = 0; v < x.rows(); ++v) {
@@ -114,7 +108,7 @@ Points SkinnedToBody::step(const dataset::Sequence& seq, int t, const Points&, c
   if (bindings_.size() != static_cast<size_t>(x_now.rows())) bind(seq, t, x_now);
   const Points body = seq.body_at(t + 1);
   Eigen::Matrix<float, Eigen::Dynamic, 9, Eigen::RowMajor> frames;
-  if (rotate_) frames = body_frames(body, seq.info.body_faces, tangent_neighbours(body_neighbours_));
+  if (rotate_) frames = body_frames(body, seq.info.body_faces, tangent_neighbour_);
   Points x(x_now.rows(), 3);
   for (Eigen::Index v = 0; v < x.rows(); ++v) {
     Eigen::Vector3f p = Eigen::Vector3f::Zero();

@@ -86,6 +86,7 @@ class SkinnedToBody : public Predictor {
   void bind(const dataset::Sequence& seq, int t, const Points& x);
   bool rotate_;
   std::vector<std::vector<int32_t>> body_neighbours_;  // (B,) mesh neighbours, ascending
+  std::vector<int32_t> tangent_neighbour_;             // (B,) the neighbour each local frame's tangent points to
   std::vector<std::vector<Binding>> bindings_;         // (N,) empty until the first step
 };
 
