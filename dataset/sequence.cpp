@@ -153,6 +153,17 @@ void read_root_attributes(hid_t file, SequenceInfo& info) {
       if (!(f >= 0 && f <= INT32_MAX)) root.fail(std::string("attribute '") + name + "' must be >= 0, is " + std::to_string(f));
       *value = static_cast<int>(std::lround(f));
     }
+  if (h5::has_attr(file, "wind_field_factor")) {
+    info.wind_field_factor = static_cast<float>(read_float32_attr(file, "wind_field_factor", root));
+    if (!(info.wind_field_factor >= 0))
+      root.fail("attribute 'wind_field_factor' must be >= 0, is " + std::to_string(info.wind_field_factor));
+  }
+  if (h5::has_attr(file, "stiffness_groups")) {
+    const std::string rule = h5::read_string_attr(file, "stiffness_groups", root);
+    if (rule != "per_layer" && rule != "outer_max")
+      root.fail("attribute 'stiffness_groups' must be \"per_layer\" or \"outer_max\", is \"" + rule + "\"");
+    info.stiffness_per_layer = rule == "per_layer";
+  }
 }
 
 void read_body(hid_t file, SequenceInfo& info) {

@@ -85,6 +85,13 @@ struct SequenceInfo {
   // motion (0 when absent).
   int rest_frames = 0;
   int ramp_frames = 0;
+  // Optional root attrs of `layersnet generate` that say how Blender was driven:
+  // wind_field_factor: Blender's field strength = stored strength x this (1 when absent);
+  // stiffness_groups "per_layer": every layer was simulated with its stored tension and bending;
+  // absent or "outer_max": with base inner + |outer - inner| on the outer layer (so an outer value
+  // below the inner one was simulated as 2 x inner - outer).
+  float wind_field_factor = 1.f;
+  bool stiffness_per_layer = false;
 
   // First frame after the rest pose and the ramp: where the motion proper starts.
   int settled_frame() const { return rest_frames + ramp_frames; }

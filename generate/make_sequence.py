@@ -80,6 +80,12 @@ DEFAULTS = {
     # Blender's field strength = stored strength x this factor (the files keep the stored,
     # D-LAYERS-range value and the factor as attribute wind_field_factor); README "The wind".
     "wind_field_factor": 1.0,
+    # How the two layers' stiffness reaches Blender's one cloth object. "outer_max": base = inner,
+    # maximum = outer, group weight 1 on the outer layer; Blender uses base + w*|max - base|, so
+    # an outer value below the inner one is simulated as 2*inner - outer (the older recipes).
+    # "per_layer": base = the smaller value, weight 1 on the layer with the larger one, per
+    # property: each layer is simulated with the value its file stores.
+    "stiffness_groups": "outer_max",
     # Procedural overlays on the mocap (spins and turns, hops, arm swings); None: off. Keys:
     # motion_blocks.PROCEDURAL_DEFAULTS.
     "procedural": None,
@@ -271,7 +277,10 @@ def make_cloth(garments, body_w, bone_names, body_rest, layer_attrs, cfg, torso_
     # (they cost most of the solver time otherwise).
     outer_hem = garments[-1].verts[:, 2].min()
     no_self = ((outer == 0) & (verts[:, 2] < outer_hem - 0.1 * SCENE_SCALE)).astype(float)
-    for name, w in (("pin", pin), ("outer", outer), ("no_self_collision", no_self)):
+    stiffness, stiffness_weights = outfits.stiffness_groups(layer_attrs, cfg["stiffness_groups"])
+    layer_of_vertex = np.concatenate([np.full(len(g.verts), i) for i, g in enumerate(garments)])
+    vertex_groups = [("pin", pin)] + [(name, np.asarray(w)[layer_of_vertex]) for name, w in stiffness_weights]
+    for name, w in vertex_groups + [("no_self_collision", no_self)]:
         vg = obj.vertex_groups.new(name=name)
         for i in np.nonzero(w > 0)[0]:
             vg.add([int(i)], float(w[i]), "REPLACE")
@@ -298,16 +307,15 @@ def make_cloth(garments, body_w, bone_names, body_rest, layer_attrs, cfg, torso_
     arm.object = bpy.data.objects["rig"]
     mod = obj.modifiers.new("cloth", "CLOTH")
     s, c = mod.settings, mod.collision_settings
-    inner_a, outer_a = layer_attrs[0], layer_attrs[-1]
+    inner_a = layer_attrs[0]
     s.quality = cfg["cloth_quality"]
     s.mass = inner_a["mass"]
-    # Per-layer stiffness: value = min + group weight * (max - min), group 'outer'.
-    s.tension_stiffness = s.compression_stiffness = inner_a["tension_stiffness"]
-    s.tension_stiffness_max = s.compression_stiffness_max = outer_a["tension_stiffness"]
-    s.bending_stiffness = inner_a["bending_stiffness"]
-    s.bending_stiffness_max = outer_a["bending_stiffness"]
-    s.vertex_group_structural_stiffness = "outer"
-    s.vertex_group_bending = "outer"
+    # Per-layer stiffness through vertex groups (outfits.stiffness_groups).
+    tension_group, s.tension_stiffness, s.tension_stiffness_max = stiffness["tension"]
+    s.compression_stiffness, s.compression_stiffness_max = s.tension_stiffness, s.tension_stiffness_max
+    bending_group, s.bending_stiffness, s.bending_stiffness_max = stiffness["bending"]
+    s.vertex_group_structural_stiffness = tension_group
+    s.vertex_group_bending = bending_group
     s.vertex_group_mass = "pin"
     c.use_collision = True
     c.distance_min = cfg["distance_body"]
@@ -429,7 +437,7 @@ def main():
         "seed": args.seed, "split": args.split, "clip": clip, "bvh_start": bvh_start, "speed": speed,
         "yaw_deg": yaw, "mirrored": mirror, "arm_abduction_deg": abduction, "skeleton": skel.name,
         "time_warp": warp, "pose_blend": pose_blend, "procedural": procedural,
-        "wind_field_factor": float(cfg["wind_field_factor"]),
+        "wind_field_factor": float(cfg["wind_field_factor"]), "stiffness_groups": cfg["stiffness_groups"],
         "inner_kind": inner_kind, "outer_kind": outer_kind, "garments": [g["name"] for g in gar],
         "garment_types": [g["type"] for g in gar], "attributes": layer_attrs,
         "body_friction": body_friction, "wind_pivots": pivots, "max_wind_strength": max_wind,
@@ -449,6 +457,8 @@ def main():
         extra["q_" + k] = v
     if cfg["wind_field_factor"] != 1.0:
         extra["wind_field_factor"] = float(cfg["wind_field_factor"])
+    if cfg["stiffness_groups"] != "outer_max":
+        extra["stiffness_groups"] = cfg["stiffness_groups"]
     if "outfit" in tags:
         extra["tag_outfit"] = tags["outfit"]
     if "motion" in tags:

@@ -107,3 +107,31 @@ def sample_attributes(rng, ranges):
     layers = [{"tension_stiffness": u("tension_stiffness"), "bending_stiffness": u("bending_stiffness"),
                **shared} for _ in range(2)]
     return layers, u("body_friction")
+
+
+def stiffness_groups(layer_attrs, rule):
+    """How the layers' tension and bending reach Blender's one cloth object, whose setting per
+    vertex is base + w * |max - base| (w the vertex's weight in the setting's vertex group).
+    Returns {"tension": (group, base, max), "bending": (group, base, max)} and the groups as
+    [(name, weight per layer)], in creation order.
+      "outer_max": base = inner, max = outer, group 'outer' (weight 1 on the outer layer) for
+                   both; an outer value below the inner one is simulated as 2*inner - outer.
+      "per_layer": base = the smaller value, max = the larger, each property with its own group
+                   weighting the layer with the larger value: every layer gets its stored value."""
+    inner, outer = layer_attrs[0], layer_attrs[-1]
+    n = len(layer_attrs)
+    if rule == "outer_max":
+        settings = {p: ("outer", inner[p + "_stiffness"], outer[p + "_stiffness"]) for p in ("tension", "bending")}
+        return settings, [("outer", [float(i == n - 1) for i in range(n)])]
+    if rule != "per_layer":
+        raise ValueError(f"stiffness_groups must be 'outer_max' or 'per_layer', not {rule!r}")
+    settings, groups = {}, []
+    for p in ("tension", "bending"):
+        values = [a[p + "_stiffness"] for a in layer_attrs]
+        lo, hi = min(values), max(values)
+        if any(v not in (lo, hi) for v in values):
+            raise ValueError(f"per_layer stiffness groups hold two values per property, the layers have {values}")
+        name = "stiff_" + p
+        settings[p] = (name, lo, hi)
+        groups.append((name, [float(v == hi and hi > lo) for v in values]))
+    return settings, groups

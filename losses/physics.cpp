@@ -124,14 +124,23 @@ PhysicsInput<float> physics_input_from_sample(const dataset::TrainingSample& s, 
   struct Side {
     int32_t p, q, opposite;  // directed edge p -> q of a face as wound, and its third vertex
   };
-  const double base_tension = info.garments.front().attributes.tension_stiffness;
-  const double max_tension = info.garments.back().attributes.tension_stiffness;
-  const double base_bending = info.garments.front().attributes.bending_stiffness;
-  const double max_bending = info.garments.back().attributes.bending_stiffness;
-  std::vector<double> edge_rest_d, edge_group;
+  // The stiffness Blender simulated each layer with (SequenceInfo::stiffness_per_layer).
+  std::vector<double> layer_tension(G), layer_bending(G);
+  for (int k = 0; k < G; ++k) {
+    const auto& inner = info.garments.front().attributes;
+    const auto& own = info.garments[k].attributes;
+    const double outer_group = (G >= 2 && k == G - 1) ? 1.0 : 0.0;
+    layer_tension[k] = info.stiffness_per_layer
+                           ? own.tension_stiffness
+                           : group_scaled(inner.tension_stiffness, info.garments.back().attributes.tension_stiffness, outer_group);
+    layer_bending[k] = info.stiffness_per_layer
+                           ? own.bending_stiffness
+                           : group_scaled(inner.bending_stiffness, info.garments.back().attributes.bending_stiffness, outer_group);
+  }
+  std::vector<double> edge_rest_d, edge_tension;
   struct HingeD {
     int32_t i, j, a, p, q, b;
-    double rest_length, cos0, sin0, group;
+    double rest_length, cos0, sin0, bending;
   };
   std::vector<HingeD> hinges;
   // Rest length of a mesh edge as the sample structure holds it (template, else UV × scale).
@@ -143,7 +152,6 @@ PhysicsInput<float> physics_input_from_sample(const dataset::TrainingSample& s, 
   };
   for (int k = 0; k < G; ++k) {
     const auto& mesh = info.garments[k];
-    const double group = (G >= 2 && k == G - 1) ? 1.0 : 0.0;  // the 'outer' vertex group
     std::map<std::pair<int32_t, int32_t>, std::vector<Side>> sides;
     for (int f = 0; f < mesh.num_faces(); ++f)
       for (int c = 0; c < 3; ++c) {
@@ -155,7 +163,7 @@ PhysicsInput<float> physics_input_from_sample(const dataset::TrainingSample& s, 
       double len = (rest[k][a] - rest[k][b]).norm();
       if (!has_rest[k]) len = structure_rest(offsets[k] + a, offsets[k] + b);  // UV length × scale
       in.edge_i.push_back(offsets[k] + a), in.edge_j.push_back(offsets[k] + b);
-      edge_rest_d.push_back(len), edge_group.push_back(group);
+      edge_rest_d.push_back(len), edge_tension.push_back(layer_tension[k]);
       if (list.size() != 2) continue;  // boundary (or non-manifold) edge: no bending spring
       const Side& A = list[0];
       const Side& Bs = list[1];
@@ -166,7 +174,7 @@ PhysicsInput<float> physics_input_from_sample(const dataset::TrainingSample& s, 
       double c0 = has_rest[k] ? nA.dot(nB) : 1.0, s0 = has_rest[k] ? nA.cross(nB).dot(e) : 0.0;
       if (!has_rest[k] && A.p == Bs.p) c0 = -1.0;  // inconsistent winding: flat means opposite normals
       const int32_t o = offsets[k];
-      hinges.push_back({o + A.p, o + A.q, o + A.opposite, o + Bs.p, o + Bs.q, o + Bs.opposite, len, c0, s0, group});
+      hinges.push_back({o + A.p, o + A.q, o + A.opposite, o + Bs.p, o + Bs.q, o + Bs.opposite, len, c0, s0, layer_bending[k]});
     }
   }
   double avg = 0;
@@ -174,12 +182,12 @@ PhysicsInput<float> physics_input_from_sample(const dataset::TrainingSample& s, 
   avg = edge_rest_d.empty() ? 1.0 : avg / static_cast<double>(edge_rest_d.size());
   constexpr double kFltEpsilon = 1.1920929e-7;  // Blender adds FLT_EPSILON to the average
   for (std::size_t e = 0; e < edge_rest_d.size(); ++e) {
-    const double k = group_scaled(base_tension, max_tension, edge_group[e]) / (avg + kFltEpsilon);
+    const double k = edge_tension[e] / (avg + kFltEpsilon);
     in.edge_rest.push_back(static_cast<float>(edge_rest_d[e]));
     in.edge_half_k.push_back(static_cast<float>(k / 2));
   }
   for (const HingeD& h : hinges) {
-    const double k = group_scaled(base_bending, max_bending, h.group) * h.rest_length * 0.1;
+    const double k = h.bending * h.rest_length * 0.1;
     in.hinge_i.push_back(h.i), in.hinge_j.push_back(h.j), in.hinge_a.push_back(h.a);
     in.hinge_p.push_back(h.p), in.hinge_q.push_back(h.q), in.hinge_b.push_back(h.b);
     in.hinge_k_cos0.push_back(static_cast<float>(k * h.cos0));
@@ -191,12 +199,12 @@ PhysicsInput<float> physics_input_from_sample(const dataset::TrainingSample& s, 
     for (Eigen::Index i = 0; i < f.rows(); ++i)
       for (int c = 0; c < 3; ++c) in.faces.push_back(f(i, c) + offsets[k]);
   }
-  // Face wind at x_t: Blender's effector wind is strength × the field's z axis; each face gives
-  // its corners 0.02 · area/3 · (w·n) n.
+  // Face wind at x_t: Blender's effector wind is field strength (stored strength × the file's
+  // wind_field_factor) × the field's z axis; each face gives its corners 0.02 · area/3 · (w·n) n.
   in.wind_force.assign(N * 3, 0.f);
   if (info.has_wind && info.wind_strength[t + 1] != 0.f) {
     const Eigen::Vector3d w =
-        static_cast<double>(info.wind_strength[t + 1]) *
+        static_cast<double>(info.wind_strength[t + 1]) * static_cast<double>(info.wind_field_factor) *
         dataset::wind_direction(info.wind_rotation.row(t + 1).transpose()).cast<double>();
     std::vector<double> force(N * 3, 0.0);
     for (std::size_t f = 0; f < in.faces.size() / 3; ++f) {

@@ -23,9 +23,10 @@
 //   collision_layer  k_c/2 Σ_v min((x_v − y_a)·n_a − d_l, 0)² over the outer garment's vertices,
 //              y_a the nearest inner-garment vertex (predicted), n_a its predicted normal
 //
-// Per-layer stiffness follows Blender's vertex-group rule as the generator sets it (one cloth
-// object, inner values as the base, the outer's as the maximum, group weight 1 on the outer
-// layer): value = base + w·|max − base|. Pinned vertices (pin ≥ 0.5) carry no inertia, drag,
+// Per-layer stiffness is what Blender simulated (SequenceInfo::stiffness_per_layer): each
+// layer's stored value, or under the older generator rule (one cloth object, inner values as the
+// base, the outer's as the maximum, group weight 1 on the outer layer) base + w·|max − base|.
+// w = strength × the file's wind_field_factor × direction. Pinned vertices (pin ≥ 0.5) carry no inertia, drag,
 // gravity or wind (Blender moves them with the body); their springs stay.
 // total = Σ weight_k · term_k / N (per garment vertex), weights from PhysicsSettings.
 //

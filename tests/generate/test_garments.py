@@ -117,8 +117,34 @@ def main():
     loose = outfits.build_outfit(prof, "pants_loose", "jacket_sleeveless", np.random.default_rng(2))[0]
     spread = lambda g: np.ptp(g.verts[g.verts[:, 2] < 0.5 * S][:, 1])
     assert spread(loose) > spread(tight) + 0.03 * S, (spread(loose), spread(tight))
+    check_stiffness_groups()
     n_kinds = len(outfits.INNER_KINDS + outfits.EXTRA_INNER_KINDS + outfits.OUTER_KINDS + outfits.EXTRA_OUTER_KINDS)
     print(f"ok: {kinds} outfits, {n_kinds} garment kinds")
+
+
+
+def check_stiffness_groups():
+    """What Blender simulates each layer with (base + w * |max - base| per vertex group) under
+    both rules, for an outer layer stiffer and softer than the inner one."""
+    for inner_t, outer_t in ((20.0, 80.0), (80.0, 20.0)):
+        layers = [{"tension_stiffness": inner_t, "bending_stiffness": outer_t},
+                  {"tension_stiffness": outer_t, "bending_stiffness": inner_t}]
+        for rule in ("outer_max", "per_layer"):
+            settings, groups = outfits.stiffness_groups(layers, rule)
+            weights = dict(groups)
+            for prop in ("tension", "bending"):
+                group, base, top = settings[prop]
+                simulated = [base + w * abs(top - base) for w in weights[group]]
+                stored = [a[prop + "_stiffness"] for a in layers]
+                if rule == "per_layer" or stored[1] >= stored[0]:
+                    assert simulated == stored, (rule, prop, simulated, stored)
+                else:  # the older rule: an outer value below the inner is mirrored about it
+                    assert simulated == [stored[0], 2 * stored[0] - stored[1]], (rule, prop, simulated)
+    try:
+        outfits.stiffness_groups(layers, "outer")
+        raise AssertionError("an unknown rule was accepted")
+    except ValueError as e:
+        assert "per_layer" in str(e)
 
 
 if __name__ == "__main__":

@@ -177,6 +177,54 @@ TEST(Physics, InputMatchesBlenderRules) {
   }
 }
 
+// An outer layer softer than the inner one: the older generator rule simulated it with
+// 2 × inner − outer, a "per_layer" file with its stored values; the wind field factor scales
+// the face wind.
+TEST(Physics, StiffnessRuleAndWindFactorFollowTheFile) {
+  dataset::Sequence seq = two_layers_with_wind();
+  auto& inner = seq.info.garments.front().attributes;
+  auto& outer = seq.info.garments.back().attributes;
+  outer.tension_stiffness = inner.tension_stiffness / 2;
+  outer.bending_stiffness = inner.bending_stiffness / 3;
+  const auto s = synthetic_sample(seq, 4);
+  const int32_t first_outer = seq.info.garments.front().num_vertices;
+  auto spring_and_hinge_of_outer = [&](const PhysicsInput<float>& in) {
+    double avg = 0;
+    for (float l : in.edge_rest) avg += l;
+    avg /= static_cast<double>(in.edge_rest.size());
+    std::size_t e = 0, h = 0;
+    while (in.edge_i[e] < first_outer) ++e;
+    while (in.hinge_i[h] < first_outer) ++h;
+    // (k cos θ0, k sin θ0) has length k = bending × rest length × 0.1; the rest length is the
+    // same under both rules, so the ratio of two inputs' k is the ratio of their bending.
+    return std::pair<double, double>{2 * in.edge_half_k[e] * avg, std::hypot(in.hinge_k_cos0[h], in.hinge_k_sin0[h])};
+  };
+  ASSERT_FALSE(seq.info.stiffness_per_layer);
+  const PhysicsInput<float> older = physics_input_from_sample(s, seq.info, PhysicsSettings{});
+  seq.info.stiffness_per_layer = true;
+  const PhysicsInput<float> per_layer = physics_input_from_sample(s, seq.info, PhysicsSettings{});
+  const auto [tension_older, hinge_older] = spring_and_hinge_of_outer(older);
+  const auto [tension_per_layer, hinge_per_layer] = spring_and_hinge_of_outer(per_layer);
+  EXPECT_NEAR(tension_older, 2 * inner.tension_stiffness - outer.tension_stiffness, 1e-3 * inner.tension_stiffness);
+  EXPECT_NEAR(tension_per_layer, outer.tension_stiffness, 1e-3 * inner.tension_stiffness);
+  ASSERT_NE(hinge_older, 0.0);
+  EXPECT_NEAR(hinge_per_layer / hinge_older, outer.bending_stiffness / (2 * inner.bending_stiffness - outer.bending_stiffness),
+              1e-5);
+  // The inner layer keeps its value under both rules.
+  EXPECT_EQ(older.edge_half_k[0], per_layer.edge_half_k[0]);
+
+  seq.info.wind_field_factor = 2.5f;
+  const PhysicsInput<float> windier = physics_input_from_sample(s, seq.info, PhysicsSettings{});
+  double norm = 0, norm_windier = 0;
+  for (std::size_t i = 0; i < per_layer.wind_force.size(); ++i) {
+    norm += std::fabs(per_layer.wind_force[i]);
+    norm_windier += std::fabs(windier.wind_force[i]);
+    EXPECT_NEAR(windier.wind_force[i], 2.5f * per_layer.wind_force[i], 1e-5f * (1 + std::fabs(per_layer.wind_force[i])));
+  }
+  ASSERT_GT(norm, 0.0);  // the scene has wind at frame 5
+  EXPECT_NEAR(norm_windier / norm, 2.5, 1e-4);
+}
+
 // ---- Blender ---------------------------------------------------------------------------------
 
 bool have_blender() { return std::system("blender --version > /dev/null 2>&1") == 0; }
