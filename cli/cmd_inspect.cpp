@@ -39,6 +39,9 @@ LAYERSNET_COMMAND(inspect, "Summarise a D-LAYERS-H5 data set (sequences, garment
                                  "measure the training split's ground-truth collision distances (for loss.collision_eps)");
                     sub.add_flag("--pins", opts->options.pins,
                                  "measure how closely pinned vertices carried with the body (eval.pins) follow the ground truth");
+                    sub.add_flag("--motion", opts->options.motion,
+                                 "per split: body speed and turn rate, share of frames with wind, garment speed "
+                                 "against the body on calm and windy frames (reads every frame after the ramp)");
                     sub.add_option("--world-radius", opts->world_radius,
                                    "patch-to-patch world-edge radius, scene units (default: the config's, else 0.4)");
                     return [opts] { return run_inspect(*opts); };

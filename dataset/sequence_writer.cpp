@@ -104,6 +104,8 @@ void write_sequence_contents(hid_t r, const Sequence& seq, const SequenceWriteOp
   h5::write_float_attr(r, "scale", s.scale);
   if (s.rest_frames > 0) h5::write_int_attr(r, "rest_frames", s.rest_frames);
   if (s.ramp_frames > 0) h5::write_int_attr(r, "ramp_frames", s.ramp_frames);
+  if (s.wind_field_factor != 1.f) h5::write_float_attr(r, "wind_field_factor", s.wind_field_factor);
+  if (s.stiffness_per_layer) h5::write_string_attr(r, "stiffness_groups", "per_layer");
   const h5::Where wb{path, "/body"};
   h5::Handle body = h5::create_group(r, "body", wb);
   h5::write_floats(body.get(), "vertices", seq.frames.body.data(),

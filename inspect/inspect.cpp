@@ -1,6 +1,7 @@
 // `layersnet inspect` (see inspect.h).
 #include "inspect/inspect.h"
 
+#include "autodiff/check.h"
 #include "dataset/manifest.h"
 #include "dataset/patches.h"
 #include "dataset/sequence.h"
@@ -12,6 +13,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <iterator>
 #include <cstdio>
 #include <filesystem>
@@ -208,7 +210,87 @@ std::vector<float> carried_pin_errors(const Sequence& seq, int first) {
   return errors;
 }
 
+// Per-frame motion statistics of one split (every frame after each sequence's ramp).
+struct MotionTally {
+  static constexpr float kWindy = 50.f, kStrong = 250.f;  // the generator's calm / windy bounds
+  std::vector<float> body_speed, turn_rate;                // per frame
+  std::vector<float> cloth_speed_calm, cloth_speed_wind;   // per frame, mean over free vertices, m/s
+  int64_t frames = 0, windy = 0, strong = 0;
+  int sequences = 0;
+  void add_sequence(const SequenceFile& f) {
+    const SequenceInfo& info = f.info();
+    const int first = std::min(info.settled_frame(), info.num_frames - 2);
+    const FrameWindow w = f.read_frames(first, info.num_frames - first);
+    ++sequences;
+    const double to_m_per_s = info.fps / info.scale;
+    for (int t = first + 1; t < info.num_frames; ++t) {
+      const Points body_before = w.body_at(t - 1, info.num_body_vertices), body = w.body_at(t, info.num_body_vertices);
+      const BodyStep step = body_step(body_before, body, info.up_axis, info.fps, info.scale);
+      body_speed.push_back(static_cast<float>(step.speed));
+      turn_rate.push_back(static_cast<float>(step.turn_rate));
+      const Eigen::RowVector3f body_shift = body.colwise().mean() - body_before.colwise().mean();
+      double sum = 0;
+      int64_t count = 0;
+      for (int k = 0; k < info.num_garments(); ++k) {
+        const GarmentMesh& g = info.garments[k];
+        const Points a = w.garment_at(k, t - 1, g.num_vertices), b = w.garment_at(k, t, g.num_vertices);
+        for (int v = 0; v < g.num_vertices; ++v)
+          if (!g.pinned(v)) sum += (b.row(v) - a.row(v) - body_shift).norm(), ++count;
+      }
+      const float strength = info.has_wind ? info.wind_strength[t] : 0.f;
+      ++frames, windy += strength > kWindy, strong += strength > kStrong;
+      if (count > 0)
+        (strength > kWindy ? cloth_speed_wind : cloth_speed_calm)
+            .push_back(static_cast<float>(sum / static_cast<double>(count) * to_m_per_s));
+    }
+  }
+  static std::string summary(std::vector<float> v) {
+    if (v.empty()) return "none";
+    std::sort(v.begin(), v.end());
+    const std::vector<double> d(v.begin(), v.end());
+    double sum = 0;
+    for (double x : d) sum += x;
+    char buf[160];
+    std::snprintf(buf, sizeof buf, "mean %.3g, p50 %.3g, p90 %.3g, p99 %.3g, max %.3g", sum / static_cast<double>(d.size()),
+                  quantile(d, 0.5), quantile(d, 0.9), quantile(d, 0.99), d.back());
+    return buf;
+  }
+  void print(const char* split) const {
+    if (frames == 0) {
+      std::printf("  %-5s no frames after the ramp\n", split);
+      return;
+    }
+    const auto share = [&](int64_t n) { return 100.0 * static_cast<double>(n) / static_cast<double>(frames); };
+    int64_t fast_turns = 0;
+    for (float r : turn_rate) fast_turns += r > 0.5f;
+    std::printf("  %-5s %d sequences, %ld frames\n", split, sequences, static_cast<long>(frames));
+    std::printf("        body speed, m/s: %s\n", summary(body_speed).c_str());
+    std::printf("        turn rate, turns/s: %s; %.1f%% of frames above 0.5\n", summary(turn_rate).c_str(), share(fast_turns));
+    std::printf("        wind above %g: %.1f%% of frames, above %g: %.1f%%\n", kWindy, share(windy), kStrong, share(strong));
+    std::printf("        garment speed against the body's centroid (mean over unpinned vertices), m/s: calm frames %s\n",
+                summary(cloth_speed_calm).c_str());
+    std::printf("          frames with wind above %g: %s\n", kWindy, summary(cloth_speed_wind).c_str());
+  }
+};
+
 }  // namespace
+
+BodyStep body_step(const Points& before, const Points& after, char up_axis, float fps, float scale) {
+  LAYERSNET_CHECK(before.rows() == after.rows() && before.rows() > 0, "body_step: frames of different vertex counts");
+  const Eigen::RowVector3f c0 = before.colwise().mean(), c1 = after.colwise().mean();
+  BodyStep s;
+  s.speed = static_cast<double>((c1 - c0).norm()) * fps / scale;
+  // Horizontal axes: the two that are not up (z up: x, y; y up: z, x, keeping a right-handed yaw).
+  const int a = up_axis == 'z' ? 0 : 2, b = up_axis == 'z' ? 1 : 0;
+  double cross = 0, dot = 0;
+  for (Eigen::Index i = 0; i < before.rows(); ++i) {
+    const double pa = before(i, a) - c0[a], pb = before(i, b) - c0[b];
+    const double qa = after(i, a) - c1[a], qb = after(i, b) - c1[b];
+    cross += pa * qb - pb * qa, dot += pa * qa + pb * qb;
+  }
+  s.turn_rate = std::fabs(std::atan2(cross, dot)) / (2 * M_PI) * fps;
+  return s;
+}
 
 void inspect_dataset(const InspectOptions& o, const SampleOptions& sample_options) {
   const float patch_size = sample_options.patch_size;
@@ -289,6 +371,14 @@ void inspect_dataset(const InspectOptions& o, const SampleOptions& sample_option
     MarginTally::print_ratios("far-corner distance of triangles sharing an edge / rest - 1 (eval.fold_limit bounds "
                               "its shortening)", tally.fold);
     tally.print_slip();
+  }
+  if (o.motion) {
+    std::printf("motion after the ramp (what the data can teach about dynamics):\n");
+    for (const char* split : {"train", "val", "test"}) {
+      MotionTally tally;
+      for (const auto& id : m.split(split)) tally.add_sequence(SequenceFile(m.sequence_path(id)));
+      tally.print(split);
+    }
   }
   if (o.pins) {
     std::printf("pinned vertices carried with the body (eval.pins) from the first frame after the ramp to the last, "

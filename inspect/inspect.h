@@ -8,7 +8,10 @@
 // to choose loss.collision_eps and eval.collision_shell from the data, and the ground truth's
 // edge strain, to choose eval.strain_limit. --pins carries each sequence's pinned vertices with
 // the body as the cloth constraints do (eval.pins), from the first frame after the ramp to the
-// last, and measures how far they end up from the ground truth's.
+// last, and measures how far they end up from the ground truth's. --motion reads every frame
+// after the ramp and prints, per split, what the data can teach about dynamics: the body's
+// speed and turn rate, the share of frames with wind, and how fast the garments move against
+// the body on calm and on windy frames.
 #include "dataset/sample.h"
 
 #include <string>
@@ -21,7 +24,16 @@ struct InspectOptions {
   bool brief = false;    // totals only
   bool margins = false;  // the training split's ground-truth collision distances and strain
   bool pins = false;     // how closely pinned vertices carried with the body follow the ground truth
+  bool motion = false;   // per split: body speed and turn rate, wind share, garment speed with and without wind
 };
+
+// How a body moves between two frames (rows: the same vertices, scene units).
+struct BodyStep {
+  double speed = 0;       // m/s of the vertices' centroid
+  double turn_rate = 0;   // turns/s about the up axis (absolute), from a least-squares yaw of the
+                          // centroid-relative horizontal positions
+};
+BodyStep body_step(const dataset::Points& before, const dataset::Points& after, char up_axis, float fps, float scale);
 
 // Prints the summary; patches and world edges at `sample_options` (patch size, world radius).
 // Throws DatasetError for an unreadable data set.

@@ -1,4 +1,5 @@
 // Reader/writer round trips, data-set folders, and agreement with the Python validator.
+#include "dataset/h5.h"
 #include "dataset/manifest.h"
 #include "dataset/sequence.h"
 #include "dataset/synthetic.h"
@@ -89,6 +90,36 @@ TEST(SequenceIo, RestAndRampFramesRoundTripAndDefaultToZero) {
   EXPECT_EQ(r.rest_frames, 3);
   EXPECT_EQ(r.ramp_frames, 2);
   EXPECT_EQ(r.settled_frame(), 5);
+}
+
+// How Blender was driven (physics loss): absent means field factor 1 and the older stiffness rule.
+TEST(SequenceIo, WindFieldFactorAndStiffnessGroupsRoundTrip) {
+  const auto dir = temp_dir("driven");
+  Sequence s = make_synthetic_sequence();
+  write_sequence((dir / "none.h5").string(), s);
+  const SequenceInfo none = read_sequence((dir / "none.h5").string()).info;
+  EXPECT_EQ(none.wind_field_factor, 1.f);
+  EXPECT_FALSE(none.stiffness_per_layer);
+  s.info.wind_field_factor = 2.5f;
+  s.info.stiffness_per_layer = true;
+  write_sequence((dir / "set.h5").string(), s);
+  const SequenceInfo set = read_sequence((dir / "set.h5").string()).info;
+  EXPECT_EQ(set.wind_field_factor, 2.5f);
+  EXPECT_TRUE(set.stiffness_per_layer);
+  // An unknown rule is refused by file and attribute.
+  {
+    h5::Handle f(H5Fopen((dir / "set.h5").c_str(), H5F_ACC_RDWR, H5P_DEFAULT), H5Fclose);
+    H5Adelete(f.get(), "stiffness_groups");
+    h5::write_string_attr(f.get(), "stiffness_groups", "outer");
+  }
+  try {
+    (void)read_sequence((dir / "set.h5").string());
+    FAIL() << "an unknown stiffness_groups value was accepted";
+  } catch (const DatasetError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("set.h5"), std::string::npos) << what;
+    EXPECT_NE(what.find("stiffness_groups"), std::string::npos) << what;
+  }
 }
 
 TEST(SequenceIo, PinWeightsRoundTripAndAreOptional) {

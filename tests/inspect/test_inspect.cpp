@@ -3,9 +3,12 @@
 #include "dataset/manifest.h"
 #include "dataset/sequence.h"
 #include "dataset/synthetic.h"
+#include "inspect/inspect.h"
 #include "tests/dataset/test_util.h"
 
+#include <cmath>
 #include <cstdio>
+#include <random>
 #include <filesystem>
 #include <string>
 
@@ -69,11 +72,43 @@ TEST(Inspect, AfterPrepare) {
   EXPECT_NE(out.find("garment to nearest body vertex (" + std::to_string(all) + " vertex-frames)"), std::string::npos) << out;
   EXPECT_NE(out.find("outer garment to nearest inner vertex (" + std::to_string(outer) + " vertex-frames)"), std::string::npos)
       << out;
+  // Motion: every frame after the ramp (no ramp attrs: from frame 0, so T - 1 steps each).
+  out = run(std::string(LAYERSNET_BINARY) + " inspect --brief --motion " + dir.string(), &status);
+  EXPECT_EQ(status, 0) << out;
+  EXPECT_NE(out.find("train 2 sequences, " + std::to_string(2 * (o.frames - 1)) + " frames"), std::string::npos) << out;
+  EXPECT_NE(out.find("body speed, m/s: mean "), std::string::npos) << out;
+  EXPECT_NE(out.find("garment speed against the body"), std::string::npos) << out;
   // A broken data set: the error names the file and the problem, exit status 1.
   std::filesystem::resize_file(dir / "s0001.h5", 100);
   out = run(std::string(LAYERSNET_BINARY) + " inspect " + dir.string(), &status);
   EXPECT_EQ(status, 1) << out;
   EXPECT_NE(out.find("s0001.h5: /: cannot be opened as HDF5"), std::string::npos) << out;
+}
+
+// A cloud turned about the up axis and moved: the step recovers speed and turn rate, for z up
+// and y up, and a still body has neither.
+TEST(Inspect, BodyStepRecoversSpeedAndTurnRate) {
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> u(-2.f, 2.f);
+  Points before(200, 3);
+  for (Eigen::Index i = 0; i < before.rows(); ++i) before.row(i) << u(rng), u(rng), u(rng);
+  before.rowwise() -= before.colwise().mean().eval();  // turned about its centroid, which stays put
+  const double yaw = 0.05, fps = 30, scale = 10;
+  for (char up : {'z', 'y'}) {
+    const int a = up == 'z' ? 0 : 2, b = up == 'z' ? 1 : 0;
+    Points after = before;
+    for (Eigen::Index i = 0; i < before.rows(); ++i) {
+      after(i, a) = static_cast<float>(std::cos(yaw) * before(i, a) - std::sin(yaw) * before(i, b));
+      after(i, b) = static_cast<float>(std::sin(yaw) * before(i, a) + std::cos(yaw) * before(i, b));
+    }
+    after.col(a).array() += 0.06f, after.col(b).array() -= 0.08f;  // 0.1 units per frame
+    const eval::BodyStep step = eval::body_step(before, after, up, fps, scale);
+    EXPECT_NEAR(step.speed, 0.1 * fps / scale, 1e-5) << up;
+    EXPECT_NEAR(step.turn_rate, yaw / (2 * M_PI) * fps, 1e-5) << up;
+    const eval::BodyStep still = eval::body_step(before, before, up, fps, scale);
+    EXPECT_EQ(still.speed, 0.0);
+    EXPECT_NEAR(still.turn_rate, 0.0, 1e-9);
+  }
 }
 
 }  // namespace
