@@ -22,6 +22,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <concepts>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -46,7 +47,7 @@ double learning_rate_at(const TrainConfig& train, int epoch) {
 
 int rollout_steps_at(const TrainConfig& train, int epoch) {
   if (train.rollout_steps.empty()) return 0;
-  return train.rollout_steps[static_cast<std::size_t>(std::min<int>(epoch, static_cast<int>(train.rollout_steps.size()) - 1))];
+  return train.rollout_steps[std::min(static_cast<std::size_t>(epoch), train.rollout_steps.size() - 1)];
 }
 
 Config run_config(const std::string& run_dir, const std::vector<std::string>& overrides) {
@@ -114,10 +115,10 @@ std::vector<SampleOutcome> gather_outcomes(const Ranks& ranks, const std::vector
                                  o.build_seconds, o.model_seconds, l.physics, l.physics_weighted});
   }
   const std::vector<double> all = ranks.gather_items(packed, n, kWidth);
-  std::vector<SampleOutcome> out(static_cast<std::size_t>(n));
-  for (int i = 0; i < n; ++i) {
-    const double* v = all.data() + static_cast<std::ptrdiff_t>(i) * kWidth;
-    SampleOutcome& o = out[static_cast<std::size_t>(i)];
+  std::vector<SampleOutcome> out(all.size() / kWidth);
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    const double* v = all.data() + i * kWidth;
+    SampleOutcome& o = out[i];
     o.loss = {v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[12], v[13]};
     o.loss_finite = v[8] != 0;
     o.grad_finite = v[9] != 0;
@@ -126,6 +127,98 @@ std::vector<SampleOutcome> gather_outcomes(const Ranks& ranks, const std::vector
   }
   return out;
 }
+
+// v[i] for the int and int64_t indices the trainer counts samples and sequences with.
+template <class Vector>
+auto& element(Vector& v, std::integral auto i) {
+  return v[static_cast<std::size_t>(i)];
+}
+
+// The j-th of this rank's items (samples of a batch, validation items): item rank + j·R.
+std::size_t item_of_local(const Ranks& ranks, std::size_t j) {
+  return static_cast<std::size_t>(ranks.rank()) + j * static_cast<std::size_t>(ranks.size());
+}
+
+// run(j, tape) for j = 0..m-1 on the OpenMP threads, one item per iteration, each thread on its
+// own tape (tapes[thread]); the kernels inside run single-threaded (no nested parallelism), a lone
+// item keeps the threads for its kernels. The first error (by index) is rethrown.
+template <class Work>
+void for_each_on_threads(std::size_t m, const std::vector<std::unique_ptr<ad::Tape<float>>>& tapes, Work&& run) {
+  std::vector<std::string> errors(m);
+#pragma omp parallel for schedule(dynamic, 1) if (m > 1)
+  for (std::size_t j = 0; j < m; ++j) {
+    try {
+      run(j, *tapes[static_cast<std::size_t>(omp_get_thread_num())]);
+    } catch (const std::exception& e) {
+      errors[j] = e.what();
+    }
+  }
+  for (const auto& e : errors)
+    if (!e.empty()) throw std::runtime_error(e);
+}
+
+// Seconds since the previous lap (or the start), and from the start to the last lap.
+class Stopwatch {
+ public:
+  double lap() {
+    const auto now = Clock::now();
+    const double s = seconds(last_, now);
+    last_ = now;
+    return s;
+  }
+  double total() const { return seconds(start_, last_); }
+
+ private:
+  Clock::time_point start_ = Clock::now(), last_ = start_;
+};
+
+// What training batches cost. read (drawing, reading and the weight copies), reduce (summing the
+// gradient, with R > 1 ranks the exchange) and optimizer (the finiteness check and the step) are
+// wall time on the main thread, as is wall; build and model are summed over the threads.
+struct Timing {
+  int64_t samples = 0;
+  double wall = 0, read = 0, build = 0, model = 0, optimizer = 0, reduce = 0;
+  int64_t sent_bytes = 0;  // to other ranks (0 with one rank)
+
+  Timing& operator+=(const Timing& o) {
+    samples += o.samples;
+    wall += o.wall, read += o.read, build += o.build, model += o.model, optimizer += o.optimizer, reduce += o.reduce;
+    sent_bytes += o.sent_bytes;
+    return *this;
+  }
+  double samples_per_second() const { return wall > 0 ? static_cast<double>(samples) / wall : 0; }
+};
+
+// Since the last progress line.
+struct ProgressWindow {
+  LossParts loss;        // summed over the applied updates
+  double grad_norm = 0;  // summed over the applied updates
+  int64_t updates = 0;   // applied updates (skipped ones have no finite loss)
+  Timing cost;           // every batch, skipped ones too
+};
+
+// One batch: its samples as drawn on every rank, and the frames of this rank's.
+struct Batch {
+  int64_t begin = 0;                      // position of sample 0 in the epoch's order
+  std::vector<SampleRef> refs;            // (n,) sequence and loss frame t of sample i
+  std::vector<int> self_fed;              // (n,) T_n of sample i
+  std::vector<std::vector<float>> noise;  // (n,) input noise of sample i, (garment vertices · 3,); empty when off
+  std::vector<Window> windows;            // this rank's samples' frames, local j = sample rank + j·R
+
+  int size() const { return static_cast<int>(refs.size()); }
+  int64_t self_fed_steps() const {
+    int64_t steps = 0;
+    for (const int n : self_fed) steps += n;
+    return steps;
+  }
+};
+
+// The batch's mean loss and gradient norm, and whether the update may be applied.
+struct BatchLoss {
+  LossParts mean;
+  double grad_norm = 0;
+  bool finite = true;  // every sample's loss and gradient, and the norm
+};
 
 // Everything of one run that lives across epochs.
 class Run {
@@ -139,6 +232,16 @@ class Run {
   void start_from(const std::string& path);  // train.init_from
   void run_epoch(int epoch);
   bool run_batch(int epoch, int ngs, const std::vector<int64_t>& order);  // false: max_steps reached
+  // The steps of run_batch, in order.
+  Batch draw_batch(int ngs, const std::vector<int64_t>& order);
+  void read_windows(Batch& batch);
+  void replicate_weights();
+  std::vector<SampleOutcome> train_samples(Batch& batch);
+  std::vector<SampleOutcome> reduce_gradients(const std::vector<SampleOutcome>& local, int n, int64_t& sent_bytes);
+  BatchLoss batch_loss(const std::vector<SampleOutcome>& outcomes) const;
+  void apply_update(const BatchLoss& loss);
+  void skip_update(int epoch, const Batch& batch, const std::vector<SampleOutcome>& outcomes, double grad_norm);
+  void record(Timing cost, const Batch& batch, const std::vector<SampleOutcome>& outcomes);
   bool step_cap_reached() const {
     return config_.train.max_steps > 0 && batches_before_ + summary_.batches >= config_.train.max_steps;
   }
@@ -172,17 +275,9 @@ class Run {
   int64_t batches_per_epoch_ = 0;
   int64_t batches_before_ = 0;  // batches of the run before this process started (resume)
   TrainSummary summary_;
-  // Progress window (since the last log line).
-  LossParts window_loss_;
-  int64_t window_batches_ = 0, window_samples_ = 0;
-  double window_grad_norm_ = 0;
-  double window_data_s_ = 0, window_build_s_ = 0, window_model_s_ = 0, window_optim_s_ = 0, window_wall_s_ = 0,
-         window_reduce_s_ = 0;
-  int64_t window_sent_bytes_ = 0;
-  double total_wall_s_ = 0;
-  TrainingEta eta_;  // the run's time left, from the cost of each batch's samples and self-fed steps
-  int64_t total_samples_ = 0;
-  Clock::time_point window_start_ = Clock::now();
+  ProgressWindow window_;  // since the last progress line
+  Timing total_;           // every batch of this process
+  TrainingEta eta_;        // the run's time left, from the cost of each batch's samples and self-fed steps
 };
 
 Run::Run(const Config& config, const TrainOptions& options)
@@ -365,7 +460,6 @@ TrainSummary Run::execute() {
 
   // max_steps counts every batch of the run, those before a resume too.
   batches_before_ = state_.epoch * batches_per_epoch_ + (state_.position + tc.batch_size - 1) / tc.batch_size;
-  window_start_ = Clock::now();
   while (state_.epoch < tc.epochs) {
     if (step_cap_reached()) break;
     run_epoch(static_cast<int>(state_.epoch));
@@ -377,7 +471,14 @@ TrainSummary Run::execute() {
     if (!fs::exists(checkpoint_path(options_.run_dir, batches))) save_step_checkpoint();
   }
   summary_.updates = adam_->step_count();
-  summary_.samples_per_second = total_wall_s_ > 0 ? static_cast<double>(total_samples_) / total_wall_s_ : 0;
+  summary_.samples_per_second = total_.samples_per_second();
+  summary_.wall_seconds = total_.wall;
+  summary_.read_seconds = total_.read;
+  summary_.build_seconds = total_.build;
+  summary_.model_seconds = total_.model;
+  summary_.optimizer_seconds = total_.optimizer;
+  summary_.reduce_seconds = total_.reduce;
+  summary_.sent_bytes = total_.sent_bytes;
   metric({{"event", "stop"},
           {"updates", summary_.updates},
           {"epoch", state_.epoch},
@@ -391,7 +492,7 @@ void Run::run_epoch(int epoch) {
   const int ngs = rollout_steps_at(tc, epoch);
   // The order of the epoch: regenerated from the saved generator state on resume.
   shuffle_at_epoch_start_ = shuffle_rng_.state();
-  std::vector<int64_t> order(static_cast<std::size_t>(train_->num_samples()));
+  std::vector<int64_t> order(train_->samples().size());
   for (std::size_t i = 0; i < order.size(); ++i) order[i] = static_cast<int64_t>(i);
   shuffle_rng_.shuffle(order);
   while (state_.position < train_->num_samples()) {
@@ -425,160 +526,187 @@ void Run::run_epoch(int epoch) {
   if (config_.train.epoch_checkpoints || state_.epoch == config_.train.epochs) save_step_checkpoint();
 }
 
+// One update, as its steps: draw the batch, read this rank's frames, train its samples, reduce
+// the gradients, then apply the update (or skip a non-finite one) and record what it cost.
 bool Run::run_batch(int epoch, int ngs, const std::vector<int64_t>& order) {
-  const TrainConfig& tc = config_.train;
   if (step_cap_reached()) return false;
-  const auto t0 = Clock::now();
-  const int64_t begin = state_.position;
-  const int nb = static_cast<int>(std::min<int64_t>(tc.batch_size, train_->num_samples() - begin));
-  const int nl = ranks_.local_count(nb);  // this rank's samples: i = rank, rank + R, ...
-  // Draws on this thread in sample order, for the whole batch on every rank (the generators
-  // stay in step); file reads only of this rank's samples (HDF5 is not thread-safe).
-  std::vector<SampleRef> refs(static_cast<std::size_t>(nb));
-  std::vector<int> self_fed(static_cast<std::size_t>(nb));
-  std::vector<Window> windows;
-  windows.reserve(static_cast<std::size_t>(nl));
-  for (int i = 0; i < nb; ++i) {
-    const SampleRef r = train_->samples()[static_cast<std::size_t>(order[static_cast<std::size_t>(begin + i)])];
-    refs[static_cast<std::size_t>(i)] = r;
+  Stopwatch clock;
+  Timing cost;
+  Batch batch = draw_batch(ngs, order);
+  read_windows(batch);
+  replicate_weights();
+  cost.read = clock.lap();
+  const std::vector<SampleOutcome> local = train_samples(batch);
+  clock.lap();  // the samples time their own building and model
+  const std::vector<SampleOutcome> outcomes = reduce_gradients(local, batch.size(), cost.sent_bytes);
+  cost.reduce = clock.lap();
+  if (options_.after_gradients) options_.after_gradients(summary_.batches, params_);
+  const BatchLoss loss = batch_loss(outcomes);
+  ++summary_.batches;
+  state_.position = batch.begin + batch.size();
+  if (loss.finite) apply_update(loss);
+  else skip_update(epoch, batch, outcomes, loss.grad_norm);
+  cost.optimizer = clock.lap();
+  cost.wall = clock.total();
+  record(cost, batch, outcomes);
+  if (summary_.batches % config_.train.log_every == 0 || state_.position >= train_->num_samples()) log_progress(epoch);
+  return true;
+}
+
+// The next batch_size samples of the epoch's order, each with T_n ~ U{0..ngs} (clipped so that
+// no rollout starts before the sequence's first sample frame) and its input noise. Drawn on this
+// thread in sample order for the whole batch on every rank: the generators stay in step, and the
+// numbers are the same for any thread or rank count.
+Batch Run::draw_batch(int ngs, const std::vector<int64_t>& order) {
+  const TrainConfig& tc = config_.train;
+  Batch batch;
+  batch.begin = state_.position;
+  const int64_t n = std::min<int64_t>(tc.batch_size, train_->num_samples() - batch.begin);
+  for (int64_t i = batch.begin; i < batch.begin + n; ++i) {
+    const SampleRef r = element(train_->samples(), element(order, i));
     const int drawn = rollout_rng_.uniform_int_inclusive(ngs);
-    const int n = std::min(drawn, r.t - train_->first_t(r.sequence));  // no rollout before the first sample frame
-    self_fed[static_cast<std::size_t>(i)] = n;
     std::vector<float> noise;
-    if (tc.input_noise > 0) {  // drawn here, in sample order: the same numbers for any thread or rank count
+    if (tc.input_noise > 0) {
       noise.resize(static_cast<std::size_t>(train_->garment_vertices(r.sequence)) * 3);
       for (float& e : noise) e = static_cast<float>(gsl_ran_gaussian(rollout_rng_.get(), tc.input_noise));
     }
-    if (!ranks_.owns(i)) continue;
-    windows.push_back(train_->read_window(r.sequence, r.t - n, r.t));
-    windows.back().input_noise = std::move(noise);
+    batch.refs.push_back(r);
+    batch.self_fed.push_back(std::min(drawn, r.t - train_->first_t(r.sequence)));
+    batch.noise.push_back(std::move(noise));
   }
-  for (int j = 0; j < nl; ++j) {
-    auto dst = slots_[static_cast<std::size_t>(j)]->values();
+  return batch;
+}
+
+// The frames of this rank's samples, t − T_n − 2 .. t + 1, read on this thread (HDF5 is not
+// thread-safe), with their input noise.
+void Run::read_windows(Batch& batch) {
+  const std::size_t local = static_cast<std::size_t>(ranks_.local_count(batch.size()));
+  for (std::size_t j = 0; j < local; ++j) {
+    const std::size_t i = item_of_local(ranks_, j);
+    const SampleRef r = batch.refs[i];
+    batch.windows.push_back(train_->read_window(r.sequence, r.t - batch.self_fed[i], r.t));
+    batch.windows.back().input_noise = std::move(batch.noise[i]);
+  }
+}
+
+// Every local batch slot starts from the current weights (each gets its own gradient buffer).
+void Run::replicate_weights() {
+  for (auto& slot : slots_) {
+    auto dst = slot->values();
     std::copy(params_.values().begin(), params_.values().end(), dst.begin());
   }
-  const auto t1 = Clock::now();
+}
+
+// This rank's samples on the threads, each into its own slot's gradient buffer.
+std::vector<SampleOutcome> Run::train_samples(Batch& batch) {
   const PhysicsStep physics = physics_step_at(config_.physics, adam_->step_count());
-  std::vector<SampleOutcome> local(static_cast<std::size_t>(nl));
-  std::vector<std::string> errors(static_cast<std::size_t>(nl));
-  // One sample per iteration; kernels inside run single-threaded (no nested parallelism),
-  // a lone sample keeps the threads for its kernels.
-#pragma omp parallel for schedule(dynamic, 1) if (nl > 1)
-  for (int j = 0; j < nl; ++j) {
-    try {
-      const auto k = static_cast<std::size_t>(j);
-      const int i = ranks_.rank() + j * ranks_.size();
-      local[k] = train_sample(*train_, windows[k], refs[static_cast<std::size_t>(i)].t,
-                              self_fed[static_cast<std::size_t>(i)], config_,
-                              *tapes_[static_cast<std::size_t>(omp_get_thread_num())], *slots_[k], physics);
-    } catch (const std::exception& e) {
-      errors[static_cast<std::size_t>(j)] = e.what();
-    }
-  }
-  for (const auto& e : errors)
-    if (!e.empty()) throw std::runtime_error(e);
-  const auto t2 = Clock::now();
-  // Mean gradient, summed in sample order (across ranks too: bit-identical to one process),
-  // and every sample's outcome.
+  std::vector<SampleOutcome> local(batch.windows.size());
+  for_each_on_threads(local.size(), tapes_, [&](std::size_t j, ad::Tape<float>& tape) {
+    const std::size_t i = item_of_local(ranks_, j);
+    local[j] = train_sample(*train_, batch.windows[j], batch.refs[i].t, batch.self_fed[i], config_, tape, *slots_[j],
+                            physics);
+  });
+  return local;
+}
+
+// params.grads() = the mean gradient of the n samples, summed in sample order (across ranks too:
+// bit-identical to one process); returns every sample's outcome, in sample order, and the bytes
+// this rank sent.
+std::vector<SampleOutcome> Run::reduce_gradients(const std::vector<SampleOutcome>& local, int n, int64_t& sent_bytes) {
   std::vector<std::span<const float>> grads;
-  for (int j = 0; j < nl; ++j) grads.push_back(slots_[static_cast<std::size_t>(j)]->grads());
-  auto g = params_.grads();
-  const int64_t sent = ranks_.mean_in_sample_order(g, grads, nb);
-  const std::vector<SampleOutcome> outcomes = gather_outcomes(ranks_, local, nb);
-  const auto t3r = Clock::now();
-  window_reduce_s_ += seconds(t2, t3r);
-  summary_.reduce_seconds += seconds(t2, t3r);
-  window_sent_bytes_ += sent;
-  summary_.sent_bytes += sent;
-  if (options_.after_gradients) options_.after_gradients(summary_.batches, params_);
-  LossParts mean;
-  bool finite = true;
+  for (std::size_t j = 0; j < local.size(); ++j) grads.push_back(slots_[j]->grads());
+  sent_bytes = ranks_.mean_in_sample_order(params_.grads(), grads, n);
+  return gather_outcomes(ranks_, local, n);
+}
+
+BatchLoss Run::batch_loss(const std::vector<SampleOutcome>& outcomes) const {
+  BatchLoss loss;
+  const double n = static_cast<double>(outcomes.size());
   for (const auto& o : outcomes) {
-    mean += o.loss.scaled(1.0 / nb);
-    finite = finite && o.loss_finite && o.grad_finite;
+    loss.mean += o.loss.scaled(1.0 / n);
+    loss.finite = loss.finite && o.loss_finite && o.grad_finite;
   }
-  const double norm = ad::grad_norm(params_);
-  finite = finite && std::isfinite(norm);
-  ++summary_.batches;
-  state_.position = begin + nb;
-  if (!finite) {
-    ++summary_.skipped;
-    ++state_.nonfinite_in_row;
-    std::ostringstream samples;
-    nlohmann::ordered_json records = nlohmann::ordered_json::array();
-    for (int i = 0; i < nb; ++i) {
-      const auto k = static_cast<std::size_t>(i);
-      const auto& id = train_->ids()[static_cast<std::size_t>(refs[k].sequence)];
-      samples << (i ? ", " : "") << id << " t=" << refs[k].t << " self-fed " << self_fed[k] << " loss "
-              << outcomes[k].loss.total << (outcomes[k].grad_finite ? "" : " (non-finite gradient)");
-      records.push_back({{"sequence", id},
-                         {"t", refs[k].t},
-                         {"self_fed", self_fed[k]},
-                         {"loss", json_number(outcomes[k].loss.total)},
-                         {"grad_finite", outcomes[k].grad_finite}});
-    }
-    out_ << "epoch " << epoch + 1 << " batch " << summary_.batches << ": non-finite loss or gradient, update skipped ("
-         << state_.nonfinite_in_row << " in a row); samples: " << samples.str() << "\n";
-    metric({{"event", "nonfinite"},
-            {"epoch", epoch + 1},
-            {"in_row", state_.nonfinite_in_row},
-            {"grad_norm", json_number(norm)},
-            {"samples", records}});
-    if (state_.nonfinite_in_row >= tc.max_nonfinite_in_row) {
-      throw TrainingStopped(std::to_string(state_.nonfinite_in_row) +
-                            " updates in a row had a non-finite loss or gradient (train.max_nonfinite_in_row = " +
-                            std::to_string(tc.max_nonfinite_in_row) + "); stopped. " +
-                            divergence_advice(options_.run_dir));
-    }
-  } else {
-    state_.nonfinite_in_row = 0;
-    if (tc.grad_clip > 0 && norm > tc.grad_clip) {
-      const float s = static_cast<float>(tc.grad_clip / norm);
-      for (float& x : g) x *= s;
-    }
-    adam_->step();
-    if (summary_.first_loss < 0) summary_.first_loss = mean.total;
-    summary_.last_loss = mean.total;
-    window_loss_ += mean;
-    window_grad_norm_ += norm;
-    ++window_batches_;
+  loss.grad_norm = ad::grad_norm(params_);
+  loss.finite = loss.finite && std::isfinite(loss.grad_norm);
+  return loss;
+}
+
+// Clips the gradient to train.grad_clip (when set), steps Adam and adds the loss to the window.
+void Run::apply_update(const BatchLoss& loss) {
+  const TrainConfig& tc = config_.train;
+  state_.nonfinite_in_row = 0;
+  if (tc.grad_clip > 0 && loss.grad_norm > tc.grad_clip) {
+    const float s = static_cast<float>(tc.grad_clip / loss.grad_norm);
+    for (float& x : params_.grads()) x *= s;
   }
-  const auto t3 = Clock::now();
-  window_samples_ += nb;
-  window_data_s_ += seconds(t0, t1);
-  window_optim_s_ += seconds(t3r, t3);
-  window_wall_s_ += seconds(t0, t3);
-  for (const auto& o : outcomes) window_build_s_ += o.build_seconds, window_model_s_ += o.model_seconds;
-  total_wall_s_ += seconds(t0, t3);
-  total_samples_ += nb;
-  int64_t steps = 0;
-  for (const int n : self_fed) steps += n;
-  eta_.add_batch(seconds(t0, t3), nb, steps);
-  summary_.wall_seconds += seconds(t0, t3);
-  summary_.read_seconds += seconds(t0, t1);
-  summary_.optimizer_seconds += seconds(t3r, t3);
-  for (const auto& o : outcomes) summary_.build_seconds += o.build_seconds, summary_.model_seconds += o.model_seconds;
-  if (summary_.batches % tc.log_every == 0 || state_.position >= train_->num_samples()) log_progress(epoch);
-  return true;
+  adam_->step();
+  if (summary_.first_loss < 0) summary_.first_loss = loss.mean.total;
+  summary_.last_loss = loss.mean.total;
+  window_.loss += loss.mean;
+  window_.grad_norm += loss.grad_norm;
+  ++window_.updates;
+}
+
+// Logs the skipped update with its samples; stops the run after train.max_nonfinite_in_row in a row.
+void Run::skip_update(int epoch, const Batch& batch, const std::vector<SampleOutcome>& outcomes, double grad_norm) {
+  const TrainConfig& tc = config_.train;
+  ++summary_.skipped;
+  ++state_.nonfinite_in_row;
+  std::ostringstream samples;
+  nlohmann::ordered_json records = nlohmann::ordered_json::array();
+  for (std::size_t i = 0; i < outcomes.size(); ++i) {
+    const SampleRef r = batch.refs[i];
+    const auto& id = element(train_->ids(), r.sequence);
+    samples << (i ? ", " : "") << id << " t=" << r.t << " self-fed " << batch.self_fed[i] << " loss "
+            << outcomes[i].loss.total << (outcomes[i].grad_finite ? "" : " (non-finite gradient)");
+    records.push_back({{"sequence", id},
+                       {"t", r.t},
+                       {"self_fed", batch.self_fed[i]},
+                       {"loss", json_number(outcomes[i].loss.total)},
+                       {"grad_finite", outcomes[i].grad_finite}});
+  }
+  out_ << "epoch " << epoch + 1 << " batch " << summary_.batches << ": non-finite loss or gradient, update skipped ("
+       << state_.nonfinite_in_row << " in a row); samples: " << samples.str() << "\n";
+  metric({{"event", "nonfinite"},
+          {"epoch", epoch + 1},
+          {"in_row", state_.nonfinite_in_row},
+          {"grad_norm", json_number(grad_norm)},
+          {"samples", records}});
+  if (state_.nonfinite_in_row >= tc.max_nonfinite_in_row) {
+    throw TrainingStopped(std::to_string(state_.nonfinite_in_row) +
+                          " updates in a row had a non-finite loss or gradient (train.max_nonfinite_in_row = " +
+                          std::to_string(tc.max_nonfinite_in_row) + "); stopped. " +
+                          divergence_advice(options_.run_dir));
+  }
+}
+
+// One timing record per batch, added to the progress window and to the run's totals.
+void Run::record(Timing cost, const Batch& batch, const std::vector<SampleOutcome>& outcomes) {
+  cost.samples = batch.size();
+  for (const auto& o : outcomes) cost.build += o.build_seconds, cost.model += o.model_seconds;
+  window_.cost += cost;
+  total_ += cost;
+  eta_.add_batch(cost.wall, batch.size(), batch.self_fed_steps());
 }
 
 void Run::log_progress(int epoch) {
   const TrainConfig& tc = config_.train;
-  const double rate = window_wall_s_ > 0 ? static_cast<double>(window_samples_) / window_wall_s_ : 0;
+  const Timing& cost = window_.cost;
+  const double rate = cost.samples_per_second();
   // Later epochs run longer self-fed rollouts: their cost comes from the fitted cost per step.
   std::vector<int> later_steps;
   for (int e = epoch + 1; e < tc.epochs; ++e) later_steps.push_back(rollout_steps_at(tc, e));
   const double eta = eta_.remaining_seconds(train_->num_samples() - state_.position, rollout_steps_at(tc, epoch),
                                             train_->num_samples(), later_steps);
-  const LossParts loss = window_batches_ > 0 ? window_loss_.scaled(1.0 / static_cast<double>(window_batches_)) : LossParts{};
+  const LossParts loss = window_.updates > 0 ? window_.loss.scaled(1.0 / static_cast<double>(window_.updates)) : LossParts{};
   const LossParts weighted = loss.weighted(config_.loss);
   // The penalty's floor is a constant Σ(d − c) (312 at the default sizes) that would hide every
   // other term: show how far above it the maps are.
   const double orth_floor = config_.loss.orthogonality != 0 ? model::orthogonality_floor(config_.model) : 0.0;
-  const double orth_excess = window_batches_ > 0 ? loss.orthogonality - orth_floor : 0.0;
+  const double orth_excess = window_.updates > 0 ? loss.orthogonality - orth_floor : 0.0;
   // Thread-seconds outside the model (reading, sample building, optimizer) over all.
-  const double outside = window_data_s_ + window_build_s_ + window_optim_s_ + window_reduce_s_;
-  const double share = outside + window_model_s_ > 0 ? outside / (outside + window_model_s_) : 0;
+  const double outside = cost.read + cost.build + cost.optimizer + cost.reduce;
+  const double share = outside + cost.model > 0 ? outside / (outside + cost.model) : 0;
   char line[512];
   std::snprintf(line, sizeof line,
                 "epoch %d/%d  step %lld  sample %lld/%lld  %.2f samples/s  ETA %s  lr %.3g  loss above floor %.5g "
@@ -599,49 +727,36 @@ void Run::log_progress(int epoch) {
           {"rollout_max", rollout_steps_at(tc, epoch)},
           {"loss", json_parts(loss, orth_excess)},
           {"loss_weighted", json_parts(weighted, config_.loss.orthogonality * orth_excess)},
-          {"grad_norm", json_number(window_batches_ > 0 ? window_grad_norm_ / static_cast<double>(window_batches_) : 0)},
+          {"grad_norm", json_number(window_.updates > 0 ? window_.grad_norm / static_cast<double>(window_.updates) : 0)},
           {"samples_per_s", json_number(rate)},
           {"eta_s", json_number(eta)},
           {"threads", threads_},
           {"seconds",
-           {{"wall", json_number(window_wall_s_)},
-            {"read", json_number(window_data_s_)},
-            {"build", json_number(window_build_s_)},
-            {"model", json_number(window_model_s_)},
-            {"optimizer", json_number(window_optim_s_)},
-            {"reduce", json_number(window_reduce_s_)}}},
+           {{"wall", json_number(cost.wall)},
+            {"read", json_number(cost.read)},
+            {"build", json_number(cost.build)},
+            {"model", json_number(cost.model)},
+            {"optimizer", json_number(cost.optimizer)},
+            {"reduce", json_number(cost.reduce)}}},
           {"share_outside_model", json_number(share)},
           {"ranks", ranks_.size()},
-          {"sent_bytes", window_sent_bytes_}});
-  window_loss_ = {};
-  window_batches_ = window_samples_ = 0;
-  window_grad_norm_ = window_data_s_ = window_build_s_ = window_model_s_ = window_optim_s_ = window_wall_s_ = 0;
-  window_reduce_s_ = 0;
-  window_sent_bytes_ = 0;
+          {"sent_bytes", cost.sent_bytes}});
+  window_ = {};
 }
 
 // sum + score(0, tape) + ... + score(m − 1, tape). This rank scores its items k (k mod R =
-// rank, each read first by read(k) on this thread) on the OpenMP threads, each on its own tape
-// (tapes[thread]); the scores of all ranks are gathered and added in index order, so the sum
-// does not depend on the thread or rank count. The first error (by index) is rethrown.
+// rank, each read first by read(k) on this thread) on the OpenMP threads, each on its own tape;
+// the scores of all ranks are gathered and added in index order, so the sum does not depend on
+// the thread or rank count. The first error (by index) is rethrown.
 template <class Read, class Score>
 double sum_in_parallel(double sum, int m, const Ranks& ranks, const std::vector<std::unique_ptr<ad::Tape<float>>>& tapes,
                        Read&& read, Score&& score) {
-  const int ml = ranks.local_count(m);
-  for (int j = 0; j < ml; ++j) read(static_cast<std::size_t>(ranks.rank() + j * ranks.size()));
-  std::vector<double> values(static_cast<std::size_t>(ml));
-  std::vector<std::string> errors(static_cast<std::size_t>(ml));
-#pragma omp parallel for schedule(dynamic, 1) if (ml > 1)
-  for (int j = 0; j < ml; ++j) {
-    try {
-      values[static_cast<std::size_t>(j)] = score(static_cast<std::size_t>(ranks.rank() + j * ranks.size()),
-                                                  *tapes[static_cast<std::size_t>(omp_get_thread_num())]);
-    } catch (const std::exception& e) {
-      errors[static_cast<std::size_t>(j)] = e.what();
-    }
-  }
-  for (const auto& e : errors)
-    if (!e.empty()) throw std::runtime_error(e);
+  const std::size_t local = static_cast<std::size_t>(ranks.local_count(m));
+  for (std::size_t j = 0; j < local; ++j) read(item_of_local(ranks, j));
+  std::vector<double> values(local);
+  for_each_on_threads(local, tapes, [&](std::size_t j, ad::Tape<float>& tape) {
+    values[j] = score(item_of_local(ranks, j), tape);
+  });
   for (double v : ranks.gather_items(values, m, 1)) sum += v;
   return sum;
 }
@@ -653,16 +768,16 @@ double Run::validate() {
   // Evenly spaced subset when val_samples limits it (deterministic, no generator).
   const int64_t total = val_->num_samples();
   const int64_t n = config_.train.val_samples > 0 ? std::min<int64_t>(config_.train.val_samples, total) : total;
-  std::vector<int64_t> picks(static_cast<std::size_t>(n));
-  for (int64_t i = 0; i < n; ++i) picks[static_cast<std::size_t>(i)] = i * total / n;
+  std::vector<int64_t> picks;
+  for (int64_t i = 0; i < n; ++i) picks.push_back(i * total / n);
   double sum = 0;
   const int64_t chunk = 4 * threads_;
   for (int64_t b = 0; b < n; b += chunk) {
     const int m = static_cast<int>(std::min(chunk, n - b));
     std::vector<Window> windows(static_cast<std::size_t>(m));
-    std::vector<int> ts(static_cast<std::size_t>(m));
+    std::vector<int> ts(windows.size());
     auto read = [&](std::size_t k) {
-      const SampleRef r = val_->samples()[static_cast<std::size_t>(picks[static_cast<std::size_t>(b) + k])];
+      const SampleRef r = element(val_->samples(), element(picks, b + static_cast<int64_t>(k)));
       windows[k] = val_->read_window(r.sequence, r.t, r.t);
       ts[k] = r.t;
     };
@@ -676,20 +791,22 @@ double Run::validate() {
 
 double Run::validate_rollouts() {
   const auto start = Clock::now();
-  const int count = static_cast<int>(val_->ids().size());
-  std::vector<int> last_t(static_cast<std::size_t>(count), -1);
-  for (const SampleRef& r : val_->samples())
-    last_t[static_cast<std::size_t>(r.sequence)] = std::max(last_t[static_cast<std::size_t>(r.sequence)], r.t);
+  std::vector<int> last_t(val_->ids().size(), -1);  // per sequence
+  for (const SampleRef& r : val_->samples()) {
+    int& last = element(last_t, r.sequence);
+    last = std::max(last, r.t);
+  }
   std::vector<int> sequences, t0, steps;
-  for (int i = 0; i < count; ++i) {
-    if (last_t[static_cast<std::size_t>(i)] < 0) continue;
-    const int first = val_->rollout_start(i);
-    sequences.push_back(i);
+  for (std::size_t i = 0; i < last_t.size(); ++i) {
+    if (last_t[i] < 0) continue;
+    const int sequence = static_cast<int>(i);
+    const int first = val_->rollout_start(sequence);
+    sequences.push_back(sequence);
     t0.push_back(first);
-    steps.push_back(std::min(config_.train.val_rollout_frames, last_t[static_cast<std::size_t>(i)] - first + 1));
+    steps.push_back(std::min(config_.train.val_rollout_frames, last_t[i] - first + 1));
   }
   const int m = static_cast<int>(sequences.size());
-  std::vector<Window> windows(static_cast<std::size_t>(m));
+  std::vector<Window> windows(sequences.size());
   auto read = [&](std::size_t k) { windows[k] = val_->read_window(sequences[k], t0[k], t0[k] + steps[k] - 1); };
   const double sum = sum_in_parallel(0.0, m, ranks_, tapes_, read, [&](std::size_t k, ad::Tape<float>& tape) {
     return rollout_error(*val_, windows[k], t0[k], steps[k], config_, tape, params_);
