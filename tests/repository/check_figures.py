@@ -62,6 +62,26 @@ COLUMNS = {
 }
 
 
+SUBSET_COLUMN = re.compile(r"^subset (\S+) mm$")  # "subset test_windy mm": by_subset_mm["test_windy"]
+
+
+def column(header):
+    """The (getter, index) of a column header, or None when check_figures.py does not know it."""
+    if header in COLUMNS:
+        return COLUMNS[header]
+    m = SUBSET_COLUMN.match(header)
+    if m:
+        name = m.group(1)
+
+        def get(report, method):
+            subsets = method["summary"].get("by_subset_mm", {})
+            if name not in subsets:
+                raise KeyError(f"no subset '{name}' in the summary of '{method['name']}'")
+            return subsets[name]["mean"]
+        return get, 0
+    return None
+
+
 def cells(line):
     return [c.strip() for c in line.strip().strip("|").split("|")]
 
@@ -87,8 +107,9 @@ def check_table(doc, lines, start, report_path, root, problems):
         return
     header = [re.sub(r"\s+", " ", h.lower()) for h in cells(lines[i])]
     for h in header[1:]:
-        if h not in COLUMNS:
-            problems.append(f"{doc}:{i + 1}: column '{h}' is not one check_figures.py knows ({', '.join(COLUMNS)})")
+        if column(h) is None:
+            problems.append(f"{doc}:{i + 1}: column '{h}' is not one check_figures.py knows ({', '.join(COLUMNS)}, "
+                            "or 'subset NAME mm')")
             return
     i += 2  # the header's separator row
     rows = 0
@@ -103,7 +124,7 @@ def check_table(doc, lines, start, report_path, root, problems):
             if cell in ("–", "-", ""):  # not applicable to this row
                 continue
             numbers = NUMBER.findall(cell)
-            getter, k = COLUMNS[h]
+            getter, k = column(h)
             if len(numbers) <= k:
                 problems.append(f"{doc}:{i + 1}: column '{h}' of '{name}' holds no number")
                 continue

@@ -9,7 +9,8 @@ import tempfile
 HERE = pathlib.Path(__file__).resolve().parent
 REPORT = {
     "methods": [
-        {"name": "[constrained] LayersNet", "summary": {"error_mm": {"mean": 60.54, "std": 26.5}, "free_cloth_mm": 112.04}},
+        {"name": "[constrained] LayersNet", "summary": {"error_mm": {"mean": 60.54, "std": 26.5}, "free_cloth_mm": 112.04,
+                                                        "by_subset_mm": {"test_windy": {"mean": 70.26, "sequences": 3}}}},
         {"name": "[constrained] skinned to the body", "summary": {"error_mm": {"mean": 75.0, "std": 20.0}, "free_cloth_mm": 150.0}},
     ],
     "comparisons": [{"model": "[constrained] LayersNet", "baseline": "[constrained] skinned to the body",
@@ -55,9 +56,19 @@ def main():
     code, out = run(TABLE.format(err="60.5").replace("models/eval.json", "models/missing.json"))
     if code == 0:
         failures.append("a missing report passed")
+    subset = TABLE.format(err="60.5").replace("free cloth mm", "subset test_windy mm").replace("| 112.0 |", "| {w} |").replace("| 150 |", "| – |")
+    code, out = run(subset.replace("{w}", "70.3"))
+    if code != 0:
+        failures.append("a matching subset figure was refused:\n" + out)
+    code, out = run(subset.replace("{w}", "71.0"))
+    if code == 0 or "reads 71.0" not in out:
+        failures.append("a wrong subset figure passed:\n" + out)
+    code, out = run(subset.replace("{w}", "70.3").replace("subset test_windy mm", "subset test_calm mm"))
+    if code == 0 or "no subset 'test_calm'" not in out:
+        failures.append("a subset the report lacks passed:\n" + out)
     for f in failures:
         print(f)
-    print(f"test_check_figures: {5 - len(failures)} of 5 cases as expected")
+    print(f"test_check_figures: {8 - len(failures)} of 8 cases as expected")
     return 1 if failures else 0
 
 
