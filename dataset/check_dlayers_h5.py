@@ -173,6 +173,15 @@ def check_sequence(path):
         scale = attr(p, f, "scale", "float")
         if scale is not None and not scale > 0:
             p.add("/", "'scale' must be > 0")
+        # Optional: how the generator drove Blender (read by the physics loss).
+        if "wind_field_factor" in f.attrs:
+            factor = attr(p, f, "wind_field_factor", "float")
+            if factor is not None and not (np.isfinite(factor) and factor >= 0):
+                p.add("/", f"'wind_field_factor' {factor} must be finite and >= 0")
+        if "stiffness_groups" in f.attrs:
+            rule = attr(p, f, "stiffness_groups", "str")
+            if rule is not None and rule not in ("per_layer", "outer_max"):
+                p.add("/", f"'stiffness_groups' is '{rule}', expected 'per_layer' or 'outer_max'")
         T = check_body(p, f)
         check_garments(p, f, T)
         check_wind(p, f, T)

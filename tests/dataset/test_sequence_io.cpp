@@ -106,12 +106,17 @@ TEST(SequenceIo, WindFieldFactorAndStiffnessGroupsRoundTrip) {
   const SequenceInfo set = read_sequence((dir / "set.h5").string()).info;
   EXPECT_EQ(set.wind_field_factor, 2.5f);
   EXPECT_TRUE(set.stiffness_per_layer);
+  std::string out;
+  EXPECT_EQ(testing::run_validator((dir / "set.h5").string(), &out), 0) << out;
   // An unknown rule is refused by file and attribute.
   {
     h5::Handle f(H5Fopen((dir / "set.h5").c_str(), H5F_ACC_RDWR, H5P_DEFAULT), H5Fclose);
     H5Adelete(f.get(), "stiffness_groups");
     h5::write_string_attr(f.get(), "stiffness_groups", "outer");
   }
+  out.clear();
+  EXPECT_NE(testing::run_validator((dir / "set.h5").string(), &out), 0) << out;
+  EXPECT_NE(out.find("'stiffness_groups' is 'outer'"), std::string::npos) << out;
   try {
     (void)read_sequence((dir / "set.h5").string());
     FAIL() << "an unknown stiffness_groups value was accepted";
