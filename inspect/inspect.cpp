@@ -228,14 +228,13 @@ struct MotionTally {
       const BodyStep step = body_step(body_before, body, info.up_axis, info.fps, info.scale);
       body_speed.push_back(static_cast<float>(step.speed));
       turn_rate.push_back(static_cast<float>(step.turn_rate));
-      const Eigen::RowVector3f body_shift = body.colwise().mean() - body_before.colwise().mean();
       double sum = 0;
       int64_t count = 0;
       for (int k = 0; k < info.num_garments(); ++k) {
         const GarmentMesh& g = info.garments[k];
         const Points a = w.garment_at(k, t - 1, g.num_vertices), b = w.garment_at(k, t, g.num_vertices);
         for (int v = 0; v < g.num_vertices; ++v)
-          if (!g.pinned(v)) sum += (b.row(v) - a.row(v) - body_shift).norm(), ++count;
+          if (!g.pinned(v)) sum += (b.row(v) - a.row(v) - step.shift).norm(), ++count;
       }
       const float strength = info.has_wind ? info.wind_strength[t] : 0.f;
       ++frames, windy += strength > kWindy, strong += strength > kStrong;
@@ -279,7 +278,8 @@ BodyStep body_step(const Points& before, const Points& after, char up_axis, floa
   LAYERSNET_CHECK(before.rows() == after.rows() && before.rows() > 0, "body_step: frames of different vertex counts");
   const Eigen::RowVector3f c0 = before.colwise().mean(), c1 = after.colwise().mean();
   BodyStep s;
-  s.speed = static_cast<double>((c1 - c0).norm()) * fps / scale;
+  s.shift = c1 - c0;
+  s.speed = static_cast<double>(s.shift.norm()) * fps / scale;
   // Horizontal axes: the two that are not up (z up: x, y; y up: z, x, keeping a right-handed yaw).
   const int a = up_axis == 'z' ? 0 : 2, b = up_axis == 'z' ? 1 : 0;
   double cross = 0, dot = 0;

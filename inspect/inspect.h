@@ -29,6 +29,7 @@ struct InspectOptions {
 
 // How a body moves between two frames (rows: the same vertices, scene units).
 struct BodyStep {
+  Eigen::RowVector3f shift = Eigen::RowVector3f::Zero();  // centroid displacement, scene units
   double speed = 0;       // m/s of the vertices' centroid
   double turn_rate = 0;   // turns/s about the up axis (absolute), from a least-squares yaw of the
                           // centroid-relative horizontal positions
