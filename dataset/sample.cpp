@@ -104,6 +104,7 @@ std::shared_ptr<const SequenceStructure> build_structure(const SequenceInfo& inf
   s->attributes.resize(static_cast<Eigen::Index>(rows.size()), 5);
   for (size_t i = 0; i < rows.size(); ++i) s->attributes.row(static_cast<Eigen::Index>(i)) = rows[i];
   build_vertex_neighbours(info, *s);
+  s->body = body_topology(info.body_faces, info.num_body_vertices);
   return s;
 }
 
@@ -177,6 +178,10 @@ TrainingSample build_sample(const SequenceInfo& info, const FrameWindow& w, int 
   s.patch_body_normal.resize(centres.rows(), 3);
   for (Eigen::Index p = 0; p < centres.rows(); ++p)
     s.patch_body_normal.row(p) = s.body_normals_next.row(s.patch_nearest_body.index[p]);
+  if (o.body_carry) {
+    const SkinBinding bound = bind_to_body(g2, b2, body_frames(b2, info.body_faces, S.body.tangent_neighbour), S.body);
+    s.body_carry = carry_with_body(bound, b3, body_frames(b3, info.body_faces, S.body.tangent_neighbour)) - g2;
+  }
   return s;
 }
 

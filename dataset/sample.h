@@ -36,6 +36,7 @@
 //                    built once and shared by every sample of the sequence
 // Layer structure (has_layers) exists only with >= 2 garments: the last garment is the
 // outer layer.
+#include "dataset/body_skin.h"
 #include "dataset/neighbours.h"
 #include "dataset/patches.h"
 #include "dataset/sequence.h"
@@ -71,6 +72,7 @@ struct SequenceStructure {
   // scene units: from the /rest template, else the UV length x scale (UVs are metres of rest cloth).
   Csr vertex_neighbours;                  // N rows, ascending
   std::vector<float> neighbour_rest;      // aligned with vertex_neighbours.items
+  BodyTopology body;                      // the body mesh's vertex neighbours (body_skin.h)
   int num_vertices() const { return all.num_vertices; }
   int num_patches() const { return all.num_patches; }
 };
@@ -78,6 +80,7 @@ struct SequenceStructure {
 struct SampleOptions {
   float patch_size = kDefaultPatchSize;
   NeighbourOptions neighbours;
+  bool body_carry = false;  // fill TrainingSample::body_carry
 };
 
 // Normalised attribute row of a garment in a sequence (official ATTR_RANGE).
@@ -107,6 +110,9 @@ struct TrainingSample {
   NearestBody vertex_nearest_body, patch_nearest_body;
   Points vertex_body_normal, patch_body_normal;   // (N, 3), (P, 3)
   Points body_normals_next;                       // (B, 3) at t+1
+  // The displacement the body surface gives each x_t from t to t+1 (body_skin.h: bound at t,
+  // carried to t+1), root-relative like v: units/frame.  (N, 3); empty unless options.body_carry.
+  Points body_carry;
   int num_vertices() const { return static_cast<int>(state.rows()); }
   int num_patches() const { return static_cast<int>(patch_state.rows()); }
 };

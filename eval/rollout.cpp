@@ -35,96 +35,22 @@ Points FollowBody::step(const dataset::Sequence& seq, int t, const Points&, cons
   return x;
 }
 
-Eigen::Matrix<float, Eigen::Dynamic, 9, Eigen::RowMajor> body_frames(const Eigen::Ref<const Points>& body,
-                                                                     const dataset::Faces& faces,
-                                                                     const std::vector<int32_t>& tangent_neighbour) {
-  const Points normals = dataset::vertex_normals(body, faces);
-  Eigen::Matrix<float, Eigen::Dynamic, 9, Eigen::RowMajor> frames(body.rows(), 9);
-  for (Eigen::Index i = 0; i < body.rows(); ++i) {
-    const Eigen::Vector3f n = normals.row(i).transpose();
-    Eigen::Vector3f u = (body.row(tangent_neighbour[static_cast<size_t>(i)]) - body.row(i)).transpose();
-    u -= u.dot(n) * n;
-    if (!(u.norm() > 1e-12f)) u = n.unitOrthogonal();  // an isolated vertex: any tangent, kept consistent
-    u.normalize();
-    const Eigen::Vector3f b = n.cross(u);
-    frames.row(i) << u.transpose(), b.transpose(), n.transpose();
-  }
-  return frames;
-}
-
 void SkinnedToBody::begin(const dataset::Sequence& seq) {
-  const dataset::Faces& f = seq.info.body_faces;
-  body_neighbours_.assign(static_cast<size_t>(seq.info.num_body_vertices), {});
-  for (Eigen::Index i = 0; i < f.rows(); ++i)
-    for (int k = 0; k < 3; ++k) {
-      body_neighbours_[static_cast<size_t>(f(i, k))].push_back(f(i, (k + 1) % 3));
-      body_neighbours_[static_cast<size_t>(f(i, k))].push_back(f(i, (k + 2) % 3));
-    }
-  for (auto& n : body_neighbours_) {
-    std::sort(n.begin(), n.end());
-    n.erase(std::unique(n.begin(), n.end()), n.end());
-  }
-  // The tangent of body vertex i points to its lowest-numbered neighbour (itself when it has none).
-  tangent_neighbour_.resize(body_neighbours_.size());
-  for (size_t i = 0; i < body_neighbours_.size(); ++i)
-    tangent_neighbour_[i] = body_neighbours_[i].empty() ? static_cast<int32_t>(i) : body_neighbours_[i].front();
-  bindings_.clear();
-}
-
-void SkinnedToBody::bind(const dataset::Sequence& seq, int t, const Points& x) {
-  const Points body = seq.body_at(t);
-  const auto frames = body_frames(body, seq.info.body_faces, tangent_neighbour_);
-  const dataset::NearestBody nearest = dataset::nearest_body(x, body);
-  bindings_.assign(static_cast<size_t>(x.rows()), {});
-  for (Eigen::Index v = 0; v < x.rows(); ++v) {
-    const int32_t h = nearest.index[static_cast<size_t>(v)];
-    std::vector<int32_t> carriers{h};
-    carriers.insert(carriers.end(), body_neighbours_[static_cast<size_t>(h)].begin(),
-                    body_neighbours_[static_cast<size_t>(h)].end());
-    double total = 0;
-    auto& list = bindings_[static_cast<size_t>(v)];
-    for (const int32_t c : carriers) {
-      const Eigen::Vector3f d = (x.row(v) - body.row(c)).transpose();
-      Binding b;
-      b.body_vertex = c;
-      // Squared distance floored at a micro-unit, so a vertex on the body keeps finite weights.
-      const double w = 1.0 / std::max(1e-12, static_cast<double>(d.squaredNorm()));
-      b.weight = static_cast<float>(w);
-      total += w;
-      if (rotate_) {
-        const Eigen::Map<const Eigen::Matrix3f> F(frames.row(c).data());  // columns u, b, n
-        b.offset = F.transpose() * d;
-      } else {
-        b.offset = d;
-      }
-      list.push_back(b);
-    }
-    for (Binding& b : list) b.weight = static_cast<float>(b.weight / total);
-  }
+  topology_ = dataset::body_topology(seq.info.body_faces, seq.info.num_body_vertices);
+  binding_ = {};
 }
 
 Points SkinnedToBody::step(const dataset::Sequence& seq, int t, const Points&, const Points&, const Points& x_now) {
-  if (body_neighbours_.size() != static_cast<size_t>(seq.info.num_body_vertices)) begin(seq);
-  if (bindings_.size() != static_cast<size_t>(x_now.rows())) bind(seq, t, x_now);
-  const Points body = seq.body_at(t + 1);
-  Eigen::Matrix<float, Eigen::Dynamic, 9, Eigen::RowMajor> frames;
-  if (rotate_) frames = body_frames(body, seq.info.body_faces, tangent_neighbour_);
-  Points x(x_now.rows(), 3);
-  for (Eigen::Index v = 0; v < x.rows(); ++v) {
-    Eigen::Vector3f p = Eigen::Vector3f::Zero();
-    for (const Binding& b : bindings_[static_cast<size_t>(v)]) {
-      Eigen::Vector3f q = body.row(b.body_vertex).transpose();
-      if (rotate_) {
-        const Eigen::Map<const Eigen::Matrix3f> F(frames.row(b.body_vertex).data());
-        q += F * b.offset;
-      } else {
-        q += b.offset;
-      }
-      p += b.weight * q;
-    }
-    x.row(v) = p.transpose();
+  if (topology_.neighbours.size() != static_cast<size_t>(seq.info.num_body_vertices)) begin(seq);
+  auto frames_of = [&](const Points& body) {
+    return rotate_ ? dataset::body_frames(body, seq.info.body_faces, topology_.tangent_neighbour) : dataset::BodyFrames{};
+  };
+  if (binding_.carriers.size() != static_cast<size_t>(x_now.rows())) {
+    const Points body = seq.body_at(t);
+    binding_ = dataset::bind_to_body(x_now, body, frames_of(body), topology_, rotate_);
   }
-  return x;
+  const Points body = seq.body_at(t + 1);
+  return dataset::carry_with_body(binding_, body, frames_of(body));
 }
 
 std::unique_ptr<const ClothConstraints> make_cloth_constraints(const dataset::Sequence& seq,

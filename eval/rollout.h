@@ -11,6 +11,7 @@
 #include "autodiff/params.h"
 #include "autodiff/tape.h"
 #include "run/cloth_constraints.h"
+#include "dataset/body_skin.h"
 #include "dataset/sample.h"
 #include "dataset/sequence.h"
 #include "dataset/stats.h"
@@ -65,8 +66,8 @@ class FollowBody : public Predictor {
 // t0 and carried with it. The vertex is bound to its nearest body vertex and that vertex's mesh
 // neighbours (weights ∝ 1 / squared distance); for each, its offset is kept in the body vertex's
 // local frame (vertex normal, and a tangent towards a fixed neighbour), so the garment moves
-// with the surface's translation and rotation: x_{t+1} = Σ w_i (h_i + F_i d_i) at frame t+1.
-// A body moved rigidly carries a bound garment exactly. With rotate = false the offsets stay in
+// with the surface's translation and rotation: x_{t+1} = Σ w_i (h_i + F_i d_i) at frame t+1
+// (dataset/body_skin.h). A body moved rigidly carries a bound garment exactly. With rotate = false the offsets stay in
 // world axes (each vertex follows its body vertices' translation only). The rollout's own
 // state is not fed back: the binding is made once, from the ground truth at t0.
 class SkinnedToBody : public Predictor {
@@ -78,24 +79,10 @@ class SkinnedToBody : public Predictor {
               const Points& x_now) override;
 
  private:
-  struct Binding {
-    int32_t body_vertex = 0;
-    float weight = 0;
-    Eigen::Vector3f offset;  // local frame (tangent, bitangent, normal) or world axes
-  };
-  void bind(const dataset::Sequence& seq, int t, const Points& x);
   bool rotate_;
-  std::vector<std::vector<int32_t>> body_neighbours_;  // (B,) mesh neighbours, ascending
-  std::vector<int32_t> tangent_neighbour_;             // (B,) the neighbour each local frame's tangent points to
-  std::vector<std::vector<Binding>> bindings_;         // (N,) empty until the first step
+  dataset::BodyTopology topology_;
+  dataset::SkinBinding binding_;  // empty until the first step
 };
-
-// The body-local frames SkinnedToBody uses: per body vertex the columns (tangent, bitangent,
-// normal) as rows 3i..3i+2 of the result's transpose. body (B, 3); tangent_neighbour (B,): the
-// neighbour the tangent points to. Exposed for tests.
-Eigen::Matrix<float, Eigen::Dynamic, 9, Eigen::RowMajor> body_frames(const Eigen::Ref<const Points>& body,
-                                                                     const dataset::Faces& faces,
-                                                                     const std::vector<int32_t>& tangent_neighbour);
 
 // The cloth constraints of `settings` (run/cloth_constraints.h) built for one sequence, the
 // same for the network and for every baseline run with the post-processing.

@@ -310,15 +310,17 @@ std::vector<T> frames_of(const ModelInput<T>& in, const std::vector<int32_t>& id
 }
 
 // Acceleration in the local frame (rows of a_local) -> world (Rᵀ a), de-normalised with the
-// velocity statistics (official), then v = v_base + a, x = x_base + v. base: (n, 6) [x, v].
+// velocity statistics (official; add_mean = false scales by the std only), then v = v_base + a,
+// x = x_base + v. base: (n, 6) [x, v].
 // base_delta (n, 6), when given: the zero-valued gradient path of the base (StateDelta).
 template <class T>
 Var<T> integrate(ad::Tape<T>& tape, const ModelInput<T>& in, const Var<T>& a_local, const Var<T>& R, bool rotate,
-                 const std::vector<T>& base, const Var<T>& base_delta = {}) {
+                 const std::vector<T>& base, const Var<T>& base_delta, bool add_mean) {
   const int64_t n = a_local.rows;
   Var<T> a = rotate ? ad::rotate3(tape, R, a_local, /*transpose=*/true) : a_local;
   const std::vector<T> sd(in.std12.begin() + 3, in.std12.begin() + 6), mu(in.mean12.begin() + 3, in.mean12.begin() + 6);
-  a = ad::add(tape, ad::mul(tape, a, constant(tape, sd, 1, 3)), constant(tape, mu, 1, 3));
+  a = ad::mul(tape, a, constant(tape, sd, 1, 3));
+  if (add_mean) a = ad::add(tape, a, constant(tape, mu, 1, 3));
   std::vector<T> bx(n * 3), bv(n * 3);
   for (int64_t i = 0; i < n; ++i)
     for (int c = 0; c < 3; ++c) bx[3 * i + c] = base[6 * i + c], bv[3 * i + c] = base[6 * i + 3 + c];
@@ -495,10 +497,31 @@ Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
     }
     a_e = decode(with_local_input(rel_v, He_v, Hh_v), with_local_weight(W1));
   }
+  // Velocity bases: the cloth's own velocity (inertia), or the body-carried displacement c.
+  // With "body" the vertex base is c_v − c̄_p (c̄_p the patch mean), so x_v = x_t + c_v + a_p + a_v;
+  // c is held constant under StateDelta (its dependence on x_t is the body's rotation), and the
+  // outputs are not offset by the mean velocity: a zero output is the skinning step.
+  const bool carried = cfg.velocity_base == "body";
+  LAYERSNET_CHECK(!carried || in.body_carry.size() == static_cast<std::size_t>(N * 3),
+                  "model.velocity_base = \"body\" but the input has no body_carry (N = " << N << ")");
+  std::vector<T> carry_p;
+  if (carried) {
+    carry_p.assign(P * 3, T(0));
+    for (int64_t p = 0; p < P; ++p) {
+      const int32_t b = in.p2v_offsets[p], e = in.p2v_offsets[p + 1];
+      for (int32_t k = b; k < e; ++k)
+        for (int c = 0; c < 3; ++c) carry_p[3 * p + c] += in.body_carry[3 * in.p2v_vertices[k] + c];
+      for (int c = 0; c < 3; ++c) carry_p[3 * p + c] /= static_cast<T>(std::max(1, e - b));
+    }
+  }
   std::vector<T> base_p(P * 6);
-  for (int64_t i = 0; i < P; ++i) std::copy_n(&in.patch_state[12 * i], 6, &base_p[6 * i]);
-  const Var<T> d_base_p = delta.active() ? ad::slice_cols(tape, delta.patch, 0, 6) : Var<T>{};
-  const Var<T> pred_patch = integrate(tape, in, a_p, Rp, ret, base_p, d_base_p);
+  for (int64_t i = 0; i < P; ++i) {
+    std::copy_n(&in.patch_state[12 * i], 6, &base_p[6 * i]);
+    if (carried) std::copy_n(&carry_p[3 * i], 3, &base_p[6 * i + 3]);
+  }
+  Var<T> d_base_p = delta.active() ? ad::slice_cols(tape, delta.patch, 0, 6) : Var<T>{};
+  if (carried && delta.active()) d_base_p = ad::concat_cols(tape, {ad::slice_cols(tape, delta.patch, 0, 3), tape.zeros(P, 3)});
+  const Var<T> pred_patch = integrate(tape, in, a_p, Rp, ret, base_p, d_base_p, !carried);
 
   std::vector<T> inv_count(N);
   for (int64_t v = 0; v < N; ++v)
@@ -507,10 +530,14 @@ Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
   std::vector<T> base_v(N * 6);  // s_v − s_own: the vertex relative to its own patch
   for (int64_t v = 0; v < N; ++v)
     for (int c = 0; c < 6; ++c) base_v[6 * v + c] = in.state[12 * v + c] - in.patch_state[12 * in.own_patch[v] + c];
-  const Var<T> d_base_v =
+  if (carried)
+    for (int64_t v = 0; v < N; ++v)
+      for (int c = 0; c < 3; ++c) base_v[6 * v + 3 + c] = in.body_carry[3 * v + c] - carry_p[3 * in.own_patch[v] + c];
+  Var<T> d_base_v =
       delta.active() ? ad::sub(tape, ad::slice_cols(tape, delta.vertex, 0, 6), ad::gather_rows(tape, d_base_p, in.own_patch))
                      : Var<T>{};
-  const Var<T> pred_rel = integrate(tape, in, a_v, Rv, ret, base_v, d_base_v);
+  if (carried && delta.active()) d_base_v = ad::concat_cols(tape, {ad::slice_cols(tape, d_base_v, 0, 3), tape.zeros(N, 3)});
+  const Var<T> pred_rel = integrate(tape, in, a_v, Rv, ret, base_v, d_base_v, !carried);
   Predictions<T> out;
   out.vertex = ad::add(tape, pred_rel, ad::gather_rows(tape, pred_patch, in.own_patch));
   out.patch = pred_patch;

@@ -29,6 +29,12 @@ struct ModelConfig {
   // (ModelInput::vertex_local: nearest body vertex motion, spring force, Laplacians), through
   // its own first-layer weight decoder.local.weight (decoder_width, 21).
   bool vertex_local_features = false;
+  // What a zero network output predicts for the next frame (docs/decisions.md, "A velocity base
+  // that follows the body"). "inertia" (official): v_{t+1} = v_t + a, the cloth keeps its
+  // velocity. "body": v_{t+1} = c + a with c the displacement the body surface gives x_t from t to
+  // t+1 (dataset/body_skin.h), so a zero output is the skinning baseline's step and the network
+  // predicts how the cloth moves against the body.
+  std::string velocity_base = "inertia";
 };
 
 struct LossConfig {

@@ -89,6 +89,9 @@ struct ModelInput {
   // σ_v the mean velocity std (std12 columns 3..5). The decoder rotates each 3-vector into the
   // vertex's body frame, so the features keep the model rotation-equivariant.
   std::vector<T> vertex_local;
+  // The body-carried displacement of each vertex from t to t+1 (TrainingSample::body_carry), the
+  // velocity base of ModelConfig::velocity_base = "body"; root-relative, units/frame.  (N, 3) or empty
+  std::vector<T> body_carry;
 
   // ---- statistics -----------------------------------------------------------------------------------------
   // Per-column mean and std of the 12-d state ([pos, vel] stats repeated for both frames).
@@ -115,6 +118,7 @@ ModelInput<U> cast_input(const ModelInput<T>& in) {
   o.patch_body = in.patch_body, o.vertex_body = in.vertex_body;
   o.cand_offsets = in.cand_offsets, o.cand_patches = in.cand_patches;
   o.vertex_local = cv(in.vertex_local);
+  o.body_carry = cv(in.body_carry);
   o.mean12 = cv(in.mean12), o.std12 = cv(in.std12);
   return o;
 }

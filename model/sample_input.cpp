@@ -91,6 +91,7 @@ dataset::SampleOptions sample_options_for(const ModelConfig& m) {
       m.body_query == "first" ? dataset::BodyQuery::kFirstInIndexOrder : dataset::BodyQuery::kNearest;
   // The model keeps valid slots only (model/README.md quirk 3), so no duplicate padding.
   o.neighbours.official_padding = false;
+  o.body_carry = m.velocity_base == "body";
   return o;
 }
 
@@ -237,6 +238,11 @@ ModelInput<float> model_input_from_sample(const dataset::TrainingSample& s, cons
   if (cfg.vertex_local_features) {
     const float sigma_v = (in.std12[3] + in.std12[4] + in.std12[5]) / 3.f;
     in.vertex_local = vertex_local_features(s, rb, sigma_v);
+  }
+  if (cfg.velocity_base == "body") {
+    LAYERSNET_CHECK(s.body_carry.rows() == N, "model.velocity_base = \"body\" needs the sample's body_carry: build "
+                                              "the sample with sample_options_for(the model's config)");
+    in.body_carry.assign(s.body_carry.data(), s.body_carry.data() + 3 * N);
   }
   validate(in);
   return in;

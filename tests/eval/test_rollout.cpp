@@ -260,10 +260,10 @@ TEST(Rollout, BodyFramesAreOrthonormalAndTurnWithTheBody) {
   for (Eigen::Index f = 0; f < seq.info.body_faces.rows(); ++f)
     for (int k = 0; k < 3; ++k) neighbour[static_cast<size_t>(seq.info.body_faces(f, k))] = seq.info.body_faces(f, (k + 1) % 3);
   const dataset::Points body = seq.body_at(0);
-  const auto F = body_frames(body, seq.info.body_faces, neighbour);
+  const auto F = dataset::body_frames(body, seq.info.body_faces, neighbour);
   const Eigen::Matrix3f R = Eigen::AngleAxisf(0.7f, Eigen::Vector3f(1, 2, 3).normalized()).toRotationMatrix();
   const dataset::Points turned = body * R.transpose();
-  const auto G = body_frames(turned, seq.info.body_faces, neighbour);
+  const auto G = dataset::body_frames(turned, seq.info.body_faces, neighbour);
   for (Eigen::Index i = 0; i < body.rows(); ++i) {
     const Eigen::Map<const Eigen::Matrix3f> f(F.row(i).data()), g(G.row(i).data());
     EXPECT_LT((f.transpose() * f - Eigen::Matrix3f::Identity()).norm(), 1e-5f) << i;

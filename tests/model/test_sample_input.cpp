@@ -76,6 +76,55 @@ TEST(SampleInput, DatasetSampleTrainsTheModel) {
   }
 }
 
+// velocity_base = "body": the body turned rigidly about the root between t and t+1 carries each
+// x_t by that turn, and a freshly initialised network (its output layer starts at zero) predicts
+// exactly that step, whatever the velocity statistics.
+TEST(SampleInput, BodyVelocityBaseCarriesTheClothWithATurningBody) {
+  dataset::SyntheticOptions o;
+  o.garments = 2;
+  o.frames = 10;
+  auto seq = dataset::make_synthetic_sequence(o);
+  const int t = 6;
+  const Eigen::Matrix3f R = Eigen::AngleAxisf(0.3f, Eigen::Vector3f(0.2f, 0.1f, 1.f).normalized()).toRotationMatrix();
+  const Eigen::RowVector3f r_t = seq.info.translation.row(t), r_next = seq.info.translation.row(t + 1);
+  dataset::Points body_t = seq.body_at(t);
+  body_t.rowwise() -= r_t;
+  dataset::Points turned = body_t * R.transpose();
+  turned.rowwise() += r_next;
+  seq.frames.body.middleRows(static_cast<Eigen::Index>(t + 1) * seq.info.num_body_vertices, seq.info.num_body_vertices) =
+      turned;
+  const auto st = stats();
+  ModelConfig c = testing::tiny_config();
+  c.velocity_base = "body";
+  const auto sample = dataset::build_sample(seq.info, seq.frames, t, st, nullptr, sample_options_for(c));
+  const int N = sample.num_vertices();
+  ASSERT_EQ(sample.body_carry.rows(), N);
+  const dataset::Points x_t = sample.state.leftCols<3>();
+  const dataset::Points expected = x_t * R.transpose() - x_t;
+  EXPECT_LT((sample.body_carry - expected).cwiseAbs().maxCoeff(), 1e-4f);
+  EXPECT_GT(expected.cwiseAbs().maxCoeff(), 0.1f);  // the turn moves the cloth by more than the tolerance
+
+  const auto in = model_input_from_sample(sample, st, c);
+  ad::ParamStore<float> ps;
+  register_params(ps, c);
+  init_params(ps, c, 1);
+  ad::Tape<float> tape;
+  const auto pred = forward(tape, ps, c, in);
+  for (int v = 0; v < N; ++v)
+    for (int k = 0; k < 3; ++k)
+      EXPECT_NEAR(pred.vertex.value[3 * 3 * v + k], x_t(v, k) + expected(v, k), 1e-4f) << v;
+  // The official base keeps the cloth's velocity instead, and adds the mean velocity twice (patch
+  // and vertex).
+  c.velocity_base = "inertia";
+  const auto inertial = forward(tape, ps, c, model_input_from_sample(sample, st, c));
+  for (int k = 0; k < 3; ++k)
+    EXPECT_NEAR(inertial.vertex.value[k], x_t(0, k) + sample.state(0, 3 + k) + 2 * st.velocity.mean[k], 1e-4f);
+  // A body-based model refuses a sample built without the carry.
+  c.velocity_base = "body";
+  const auto bare = dataset::build_sample(seq.info, seq.frames, t, st, nullptr);
+  EXPECT_THROW(model_input_from_sample(bare, st, c), std::exception);
+}
+
 // Each block of ModelInput::vertex_local recomputed here from the sequence itself.
 TEST(SampleInput, VertexLocalFeaturesAreWhatTheirNamesSay) {
   dataset::SyntheticOptions o;
