@@ -80,7 +80,8 @@ struct SequenceStructure {
 struct SampleOptions {
   float patch_size = kDefaultPatchSize;
   NeighbourOptions neighbours;
-  bool body_carry = false;  // fill TrainingSample::body_carry
+  bool body_carry = false;       // fill TrainingSample::body_carry
+  bool body_carry_prev = false;  // and TrainingSample::body_carry_prev
 };
 
 // Normalised attribute row of a garment in a sequence (official ATTR_RANGE).
@@ -113,6 +114,8 @@ struct TrainingSample {
   // The displacement the body surface gives each x_t from t to t+1 (body_skin.h: bound at t,
   // carried to t+1), root-relative like v: units/frame.  (N, 3); empty unless options.body_carry.
   Points body_carry;
+  // The same from t-1 to t (x_{t-1} bound at t-1, carried to t).  (N, 3); empty unless options.body_carry_prev.
+  Points body_carry_prev;
   int num_vertices() const { return static_cast<int>(state.rows()); }
   int num_patches() const { return static_cast<int>(patch_state.rows()); }
 };

@@ -497,13 +497,13 @@ Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
     }
     a_e = decode(with_local_input(rel_v, He_v, Hh_v), with_local_weight(W1));
   }
-  // Velocity bases: the cloth's own velocity (inertia), or the body-carried displacement c.
-  // With "body" the vertex base is c_v − c̄_p (c̄_p the patch mean), so x_v = x_t + c_v + a_p + a_v;
-  // c is held constant under StateDelta (its dependence on x_t is the body's rotation), and the
-  // outputs are not offset by the mean velocity: a zero output is the skinning step.
-  const bool carried = cfg.velocity_base == "body";
+  // Velocity bases: the cloth's own velocity (inertia), or in.body_carry (c, or c + v_t − c_t).
+  // The vertex base is then c_v − c̄_p (c̄_p the patch mean), so x_v = x_t + c_v + a_p + a_v. c and
+  // c_t are held constant under StateDelta (their dependence on the state is the body's rotation),
+  // and the outputs are not offset by the mean velocity: a zero output is the carried step.
+  const bool carried = cfg.velocity_base != "inertia";
   LAYERSNET_CHECK(!carried || in.body_carry.size() == static_cast<std::size_t>(N * 3),
-                  "model.velocity_base = \"body\" but the input has no body_carry (N = " << N << ")");
+                  "model.velocity_base = \"" << cfg.velocity_base << "\" but the input has no body_carry (N = " << N << ")");
   std::vector<T> carry_p;
   if (carried) {
     carry_p.assign(P * 3, T(0));
@@ -520,7 +520,8 @@ Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
     if (carried) std::copy_n(&carry_p[3 * i], 3, &base_p[6 * i + 3]);
   }
   Var<T> d_base_p = delta.active() ? ad::slice_cols(tape, delta.patch, 0, 6) : Var<T>{};
-  if (carried && delta.active()) d_base_p = ad::concat_cols(tape, {ad::slice_cols(tape, delta.patch, 0, 3), tape.zeros(P, 3)});
+  const bool body_only = cfg.velocity_base == "body";  // no v_t in the base
+  if (body_only && delta.active()) d_base_p = ad::concat_cols(tape, {ad::slice_cols(tape, delta.patch, 0, 3), tape.zeros(P, 3)});
   const Var<T> pred_patch = integrate(tape, in, a_p, Rp, ret, base_p, d_base_p, !carried);
 
   std::vector<T> inv_count(N);
@@ -536,7 +537,7 @@ Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
   Var<T> d_base_v =
       delta.active() ? ad::sub(tape, ad::slice_cols(tape, delta.vertex, 0, 6), ad::gather_rows(tape, d_base_p, in.own_patch))
                      : Var<T>{};
-  if (carried && delta.active()) d_base_v = ad::concat_cols(tape, {ad::slice_cols(tape, d_base_v, 0, 3), tape.zeros(N, 3)});
+  if (body_only && delta.active()) d_base_v = ad::concat_cols(tape, {ad::slice_cols(tape, d_base_v, 0, 3), tape.zeros(N, 3)});
   const Var<T> pred_rel = integrate(tape, in, a_v, Rv, ret, base_v, d_base_v, !carried);
   Predictions<T> out;
   out.vertex = ad::add(tape, pred_rel, ad::gather_rows(tape, pred_patch, in.own_patch));

@@ -33,7 +33,8 @@ struct ModelConfig {
   // that follows the body"). "inertia" (official): v_{t+1} = v_t + a, the cloth keeps its
   // velocity. "body": v_{t+1} = c + a with c the displacement the body surface gives x_t from t to
   // t+1 (dataset/body_skin.h), so a zero output is the skinning baseline's step and the network
-  // predicts how the cloth moves against the body.
+  // predicts how the cloth moves against the body. "body_inertia": v_{t+1} = c + (v_t − c_t) + a,
+  // c_t the same displacement from t−1 to t: the cloth keeps its velocity relative to the body.
   std::string velocity_base = "inertia";
 };
 

@@ -89,8 +89,9 @@ struct ModelInput {
   // σ_v the mean velocity std (std12 columns 3..5). The decoder rotates each 3-vector into the
   // vertex's body frame, so the features keep the model rotation-equivariant.
   std::vector<T> vertex_local;
-  // The body-carried displacement of each vertex from t to t+1 (TrainingSample::body_carry), the
-  // velocity base of ModelConfig::velocity_base = "body"; root-relative, units/frame.  (N, 3) or empty
+  // The velocity base of ModelConfig::velocity_base "body" (the body-carried displacement of each
+  // vertex from t to t+1, TrainingSample::body_carry) or "body_inertia" (that plus the vertex's
+  // velocity relative to the body at t); root-relative, units/frame.  (N, 3) or empty
   std::vector<T> body_carry;
 
   // ---- statistics -----------------------------------------------------------------------------------------

@@ -155,7 +155,7 @@ void init_params(ad::ParamStore<T>& ps, const ModelConfig& c, uint64_t seed) {
   }
   // With the body-carried velocity base a zero output is the skinning step: start there, the
   // other weights drawn as before (the same draws as the inertial model of the same seed).
-  if (c.velocity_base == "body")
+  if (c.velocity_base != "inertia")
     for (std::size_t i = 0; i < entries.size(); ++i)
       if (entries[i].name.rfind("decoder.proj.2.", 0) == 0) {
         auto v = ps.value(static_cast<int>(i));

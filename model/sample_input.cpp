@@ -91,7 +91,8 @@ dataset::SampleOptions sample_options_for(const ModelConfig& m) {
       m.body_query == "first" ? dataset::BodyQuery::kFirstInIndexOrder : dataset::BodyQuery::kNearest;
   // The model keeps valid slots only (model/README.md quirk 3), so no duplicate padding.
   o.neighbours.official_padding = false;
-  o.body_carry = m.velocity_base == "body";
+  o.body_carry = m.velocity_base != "inertia";
+  o.body_carry_prev = m.velocity_base == "body_inertia";
   return o;
 }
 
@@ -239,10 +240,16 @@ ModelInput<float> model_input_from_sample(const dataset::TrainingSample& s, cons
     const float sigma_v = (in.std12[3] + in.std12[4] + in.std12[5]) / 3.f;
     in.vertex_local = vertex_local_features(s, rb, sigma_v);
   }
-  if (cfg.velocity_base == "body") {
-    LAYERSNET_CHECK(s.body_carry.rows() == N, "model.velocity_base = \"body\" needs the sample's body_carry: build "
-                                              "the sample with sample_options_for(the model's config)");
+  if (cfg.velocity_base != "inertia") {
+    const bool relative = cfg.velocity_base == "body_inertia";
+    LAYERSNET_CHECK(s.body_carry.rows() == N && (!relative || s.body_carry_prev.rows() == N),
+                    "model.velocity_base = \"" << cfg.velocity_base << "\" needs the sample's body_carry"
+                                            << (relative ? " and body_carry_prev" : "")
+                                            << ": build the sample with sample_options_for(the model's config)");
     in.body_carry.assign(s.body_carry.data(), s.body_carry.data() + 3 * N);
+    if (relative)  // c + (v_t − c_t)
+      for (int64_t v = 0; v < N; ++v)
+        for (int c = 0; c < 3; ++c) in.body_carry[3 * v + c] += s.state(v, 3 + c) - s.body_carry_prev(v, c);
   }
   validate(in);
   return in;

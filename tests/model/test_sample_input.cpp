@@ -86,13 +86,18 @@ TEST(SampleInput, BodyVelocityBaseCarriesTheClothWithATurningBody) {
   auto seq = dataset::make_synthetic_sequence(o);
   const int t = 6;
   const Eigen::Matrix3f R = Eigen::AngleAxisf(0.3f, Eigen::Vector3f(0.2f, 0.1f, 1.f).normalized()).toRotationMatrix();
-  const Eigen::RowVector3f r_t = seq.info.translation.row(t), r_next = seq.info.translation.row(t + 1);
-  dataset::Points body_t = seq.body_at(t);
-  body_t.rowwise() -= r_t;
-  dataset::Points turned = body_t * R.transpose();
-  turned.rowwise() += r_next;
-  seq.frames.body.middleRows(static_cast<Eigen::Index>(t + 1) * seq.info.num_body_vertices, seq.info.num_body_vertices) =
-      turned;
+  const Eigen::Matrix3f R_prev = Eigen::AngleAxisf(-0.2f, Eigen::Vector3f(0.f, 0.3f, 1.f).normalized()).toRotationMatrix();
+  // Frame f + 1's body: frame f's turned by `turn` about the root.
+  auto turn_next = [&](int f, const Eigen::Matrix3f& turn) {
+    dataset::Points body = seq.body_at(f);
+    body.rowwise() -= seq.info.translation.row(f);
+    dataset::Points turned = body * turn.transpose();
+    turned.rowwise() += seq.info.translation.row(f + 1);
+    seq.frames.body.middleRows(static_cast<Eigen::Index>(f + 1) * seq.info.num_body_vertices,
+                               seq.info.num_body_vertices) = turned;
+  };
+  turn_next(t - 1, R_prev);
+  turn_next(t, R);
   const auto st = stats();
   ModelConfig c = testing::tiny_config();
   c.velocity_base = "body";
@@ -119,6 +124,18 @@ TEST(SampleInput, BodyVelocityBaseCarriesTheClothWithATurningBody) {
   const auto inertial = forward(tape, ps, c, model_input_from_sample(sample, st, c));
   for (int k = 0; k < 3; ++k)
     EXPECT_NEAR(inertial.vertex.value[k], x_t(0, k) + sample.state(0, 3 + k) + 2 * st.velocity.mean[k], 1e-4f);
+  // "body_inertia" adds the velocity relative to the body at t: v_t − c_t, c_t = R_prev x_{t-1} − x_{t-1}.
+  c.velocity_base = "body_inertia";
+  const auto relative_sample = dataset::build_sample(seq.info, seq.frames, t, st, nullptr, sample_options_for(c));
+  const dataset::Points x_prev = relative_sample.state.middleCols<3>(6);
+  const dataset::Points carry_prev = x_prev * R_prev.transpose() - x_prev;
+  EXPECT_LT((relative_sample.body_carry_prev - carry_prev).cwiseAbs().maxCoeff(), 1e-4f);
+  EXPECT_GT(carry_prev.cwiseAbs().maxCoeff(), 0.1f);
+  const auto relative = forward(tape, ps, c, model_input_from_sample(relative_sample, st, c));
+  for (int v = 0; v < N; ++v)
+    for (int k = 0; k < 3; ++k)
+      EXPECT_NEAR(relative.vertex.value[9 * v + k],
+                  x_t(v, k) + expected(v, k) + relative_sample.state(v, 3 + k) - carry_prev(v, k), 1e-4f) << v;
   // A body-based model refuses a sample built without the carry.
   c.velocity_base = "body";
   const auto bare = dataset::build_sample(seq.info, seq.frames, t, st, nullptr);
