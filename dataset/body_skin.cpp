@@ -25,13 +25,12 @@ BodyTopology body_topology(const Faces& faces, int num_body_vertices) {
   return t;
 }
 
-BodyFrames body_frames(const Eigen::Ref<const Points>& body, const Faces& faces,
-                       const std::vector<int32_t>& tangent_neighbour) {
+BodyFrames body_frames(const Eigen::Ref<const Points>& body, const Faces& faces, const BodyTopology& topology) {
   const Points normals = vertex_normals(body, faces);
   BodyFrames frames(body.rows(), 9);
   for (Eigen::Index i = 0; i < body.rows(); ++i) {
     const Eigen::Vector3f n = normals.row(i).transpose();
-    Eigen::Vector3f u = (body.row(tangent_neighbour[static_cast<size_t>(i)]) - body.row(i)).transpose();
+    Eigen::Vector3f u = (body.row(topology.tangent_neighbour[static_cast<size_t>(i)]) - body.row(i)).transpose();
     u -= u.dot(n) * n;
     if (!(u.norm() > 1e-12f)) u = n.unitOrthogonal();  // an isolated vertex: any tangent, kept consistent
     u.normalize();
@@ -86,6 +85,22 @@ Points carry_with_body(const SkinBinding& binding, const Eigen::Ref<const Points
     x.row(v) = p.transpose();
   }
   return x;
+}
+
+void smooth_over_mesh(Points& u, const Csr& neighbours, int iterations) {
+  Points next(u.rows(), 3);
+  for (int it = 0; it < iterations; ++it) {
+    for (int v = 0; v < neighbours.rows(); ++v) {
+      Eigen::RowVector3f mean = u.row(v);  // an isolated vertex keeps its value
+      if (neighbours.size(v) > 0) {
+        mean.setZero();
+        for (const int32_t* n = neighbours.begin(v); n != neighbours.end(v); ++n) mean += u.row(*n);
+        mean /= static_cast<float>(neighbours.size(v));
+      }
+      next.row(v) = 0.5f * (u.row(v) + mean);
+    }
+    u.swap(next);
+  }
 }
 
 }  // namespace layersnet::dataset

@@ -8,6 +8,7 @@
 // One road for two jobs: the skinning baseline (eval/rollout.h) binds once and carries to every
 // later frame; the model's body-carried velocity base (ModelConfig::velocity_base = "body")
 // binds x_t to the body at t and carries it one frame, to t+1.
+#include "dataset/patches.h"
 #include "dataset/sequence.h"
 
 #include <Eigen/Core>
@@ -28,8 +29,7 @@ BodyTopology body_topology(const Faces& faces, int num_body_vertices);
 // Body-local frames: per body vertex the columns (tangent, bitangent, normal) of a rotation,
 // stored column-major in the row (so Map<Matrix3f>(row) is the frame). body (B, 3) -> (B, 9).
 using BodyFrames = Eigen::Matrix<float, Eigen::Dynamic, 9, Eigen::RowMajor>;
-BodyFrames body_frames(const Eigen::Ref<const Points>& body, const Faces& faces,
-                       const std::vector<int32_t>& tangent_neighbour);
+BodyFrames body_frames(const Eigen::Ref<const Points>& body, const Faces& faces, const BodyTopology& topology);
 
 struct SkinBinding {
   struct Carrier {
@@ -47,5 +47,10 @@ SkinBinding bind_to_body(const Eigen::Ref<const Points>& x, const Eigen::Ref<con
 
 // Where the bound points are on the body `body` (B, 3) with frames `frames`: (Q, 3).
 Points carry_with_body(const SkinBinding& binding, const Eigen::Ref<const Points>& body, const BodyFrames& frames);
+
+// Averages a per-vertex field over the garment mesh: `iterations` Jacobi steps of
+// u_v <- (u_v + mean of u over v's mesh neighbours) / 2. A field that is the same on every vertex
+// of a connected garment stays as it is. u (N, 3); neighbours: N rows (SequenceStructure).
+void smooth_over_mesh(Points& u, const Csr& neighbours, int iterations);
 
 }  // namespace layersnet::dataset

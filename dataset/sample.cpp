@@ -179,10 +179,15 @@ TrainingSample build_sample(const SequenceInfo& info, const FrameWindow& w, int 
   for (Eigen::Index p = 0; p < centres.rows(); ++p)
     s.patch_body_normal.row(p) = s.body_normals_next.row(s.patch_nearest_body.index[p]);
   if (o.body_carry || o.body_carry_prev) {
-    auto frames = [&](const Points& b) { return body_frames(b, info.body_faces, S.body.tangent_neighbour); };
-    const BodyFrames f2 = frames(b2);
-    if (o.body_carry) s.body_carry = carry_with_body(bind_to_body(g2, b2, f2, S.body), b3, frames(b3)) - g2;
-    if (o.body_carry_prev) s.body_carry_prev = carry_with_body(bind_to_body(g1, b1, frames(b1), S.body), b2, f2) - g1;
+    const BodyFrames f2 = body_frames(b2, info.body_faces, S.body);
+    if (o.body_carry) {
+      s.body_carry = carry_with_body(bind_to_body(g2, b2, f2, S.body), b3, body_frames(b3, info.body_faces, S.body)) - g2;
+      smooth_over_mesh(s.body_carry, S.vertex_neighbours, o.carry_smoothing);
+    }
+    if (o.body_carry_prev) {
+      s.body_carry_prev = carry_with_body(bind_to_body(g1, b1, body_frames(b1, info.body_faces, S.body), S.body), b2, f2) - g1;
+      smooth_over_mesh(s.body_carry_prev, S.vertex_neighbours, o.carry_smoothing);
+    }
   }
   return s;
 }

@@ -82,6 +82,7 @@ struct SampleOptions {
   NeighbourOptions neighbours;
   bool body_carry = false;       // fill TrainingSample::body_carry
   bool body_carry_prev = false;  // and TrainingSample::body_carry_prev
+  int carry_smoothing = 0;       // smooth_over_mesh iterations on both carries (body_skin.h)
 };
 
 // Normalised attribute row of a garment in a sequence (official ATTR_RANGE).
@@ -112,7 +113,8 @@ struct TrainingSample {
   Points vertex_body_normal, patch_body_normal;   // (N, 3), (P, 3)
   Points body_normals_next;                       // (B, 3) at t+1
   // The displacement the body surface gives each x_t from t to t+1 (body_skin.h: bound at t,
-  // carried to t+1), root-relative like v: units/frame.  (N, 3); empty unless options.body_carry.
+  // carried to t+1), root-relative like v, then smoothed over the garment mesh
+  // (options.carry_smoothing): units/frame.  (N, 3); empty unless options.body_carry.
   Points body_carry;
   // The same from t-1 to t (x_{t-1} bound at t-1, carried to t).  (N, 3); empty unless options.body_carry_prev.
   Points body_carry_prev;

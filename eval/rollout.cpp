@@ -43,7 +43,7 @@ void SkinnedToBody::begin(const dataset::Sequence& seq) {
 Points SkinnedToBody::step(const dataset::Sequence& seq, int t, const Points&, const Points&, const Points& x_now) {
   if (topology_.neighbours.size() != static_cast<size_t>(seq.info.num_body_vertices)) begin(seq);
   auto frames_of = [&](const Points& body) {
-    return rotate_ ? dataset::body_frames(body, seq.info.body_faces, topology_.tangent_neighbour) : dataset::BodyFrames{};
+    return rotate_ ? dataset::body_frames(body, seq.info.body_faces, topology_) : dataset::BodyFrames{};
   };
   if (binding_.carriers.size() != static_cast<size_t>(x_now.rows())) {
     const Points body = seq.body_at(t);

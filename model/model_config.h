@@ -36,6 +36,11 @@ struct ModelConfig {
   // predicts how the cloth moves against the body. "body_inertia": v_{t+1} = c + (v_t − c_t) + a,
   // c_t the same displacement from t−1 to t: the cloth keeps its velocity relative to the body.
   std::string velocity_base = "inertia";
+  // Jacobi averaging steps over the garment mesh applied to the body carry c (not "inertia"). The
+  // carry binds each vertex to its nearest body vertex, so neighbours bound to different limbs
+  // (a hem between the legs) move apart; averaging keeps them together (docs/decisions.md,
+  // "A smoother carry"). 0 = the skinning step itself.
+  int carry_smoothing = 0;
 };
 
 struct LossConfig {

@@ -93,6 +93,7 @@ dataset::SampleOptions sample_options_for(const ModelConfig& m) {
   o.neighbours.official_padding = false;
   o.body_carry = m.velocity_base != "inertia";
   o.body_carry_prev = m.velocity_base == "body_inertia";
+  o.carry_smoothing = m.carry_smoothing;
   return o;
 }
 

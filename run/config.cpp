@@ -166,6 +166,7 @@ const Schema& schema() {
     k.add("model.decoder_ret_channels", [](Config& c) -> int& { return c.model.decoder_ret_channels; }, "3-vector channels of the decoder's RET (official 1; 3k <= width)", {1, 1024, {}});
     k.add("model.vertex_local_features", [](Config& c) -> bool& { return c.model.vertex_local_features; }, "the decoder also sees each vertex's nearest body motion, spring force and Laplacians (not in the paper)");
     k.add("model.velocity_base", [](Config& c) -> std::string& { return c.model.velocity_base; }, "what a zero network output predicts: the cloth keeps its velocity (inertia, official), moves with the body surface (body), or keeps its velocity relative to the body surface (body_inertia)", {0, 0, {"inertia", "body", "body_inertia"}});
+    k.add("model.carry_smoothing", [](Config& c) -> int& { return c.model.carry_smoothing; }, "averaging steps over the garment mesh on the body carry (velocity_base body or body_inertia); 0 = none", {0, 1000, {}});
     k.add("model.orthogonality", [](Config& c) -> std::string& { return c.model.orthogonality; }, "how W_R stays orthogonal", {0, 0, {"penalty", "exact"}});
     // [loss]
     const Range weight{0, 1e6, {}};

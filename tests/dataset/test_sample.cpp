@@ -176,6 +176,61 @@ TEST(Sample, WindGravityAndRootMotionRows) {
   EXPECT_NE(calm.root_motion_norm.norm(), 0.f);
 }
 
+// Sum over mesh edges (each counted from both ends) of the squared difference of a field.
+double roughness(const Points& u, const Csr& neighbours) {
+  double sum = 0;
+  for (int v = 0; v < neighbours.rows(); ++v)
+    for (const int32_t* n = neighbours.begin(v); n != neighbours.end(v); ++n) sum += (u.row(v) - u.row(*n)).squaredNorm();
+  return sum;
+}
+
+TEST(Sample, SmoothingKeepsAUniformFieldAndEvensOutASpike) {
+  const Sequence seq = scene(2, false);
+  const auto S = build_structure(seq.info, kDefaultPatchSize);
+  const int N = S->num_vertices();
+  Points uniform = Points::Zero(N, 3);
+  uniform.rowwise() += Eigen::RowVector3f(0.3f, -0.2f, 0.1f);
+  Points smoothed = uniform;
+  smooth_over_mesh(smoothed, S->vertex_neighbours, 7);
+  EXPECT_LT((smoothed - uniform).cwiseAbs().maxCoeff(), 1e-6f);
+
+  Points spike = uniform;
+  spike(N / 3, 2) += 1.f;
+  const double before = roughness(spike, S->vertex_neighbours);
+  Points once = spike, many = spike;
+  smooth_over_mesh(once, S->vertex_neighbours, 1);
+  smooth_over_mesh(many, S->vertex_neighbours, 10);
+  EXPECT_LT(roughness(once, S->vertex_neighbours), 0.5 * before);
+  EXPECT_LT(roughness(many, S->vertex_neighbours), roughness(once, S->vertex_neighbours));
+  EXPECT_LT(many(N / 3, 2) - 0.1f, once(N / 3, 2));  // the spike spreads
+  Points none = spike;
+  smooth_over_mesh(none, S->vertex_neighbours, 0);
+  EXPECT_EQ(none, spike);
+}
+
+TEST(Sample, SmoothedCarryIsTheCarryAveragedOverTheMesh) {
+  Sequence seq = scene(2, false);
+  // The body turns from frame 5 to 6, so the carry differs from vertex to vertex.
+  const int B = seq.info.num_body_vertices;
+  const Eigen::Matrix3f turn = Eigen::AngleAxisf(0.4f, Eigen::Vector3f::UnitZ()).toRotationMatrix();
+  Points body = seq.body_at(5);
+  body.rowwise() -= seq.info.translation.row(5);
+  Points turned = body * turn.transpose();
+  turned.rowwise() += seq.info.translation.row(6);
+  seq.frames.body.middleRows(6 * static_cast<Eigen::Index>(B), B) = turned;
+  const auto st = simple_stats();
+  SampleOptions o;
+  o.body_carry = true;
+  const TrainingSample raw = build_sample(seq.info, seq.frames, 5, st, nullptr, o);
+  o.carry_smoothing = 3;
+  const TrainingSample smooth = build_sample(seq.info, seq.frames, 5, st, nullptr, o);
+  Points expected = raw.body_carry;
+  smooth_over_mesh(expected, raw.structure->vertex_neighbours, 3);
+  ASSERT_EQ(smooth.body_carry.rows(), raw.body_carry.rows());
+  EXPECT_LT((smooth.body_carry - expected).cwiseAbs().maxCoeff(), 1e-6f);
+  EXPECT_GT((raw.body_carry - expected).cwiseAbs().maxCoeff(), 1e-4f);  // the body's motion is not uniform
+}
+
 TEST(Sample, StaticStructureIsBuiltOncePerSequence) {
   const Sequence seq = scene(2, false);
   StructureCache cache;

@@ -256,9 +256,11 @@ TEST(Rollout, SkinningBindsAtTheRolloutsFirstInputFrame) {
 
 TEST(Rollout, BodyFramesAreOrthonormalAndTurnWithTheBody) {
   const dataset::Sequence seq = sequence(1, 4);
-  std::vector<int32_t> neighbour(static_cast<size_t>(seq.info.num_body_vertices));
+  dataset::BodyTopology neighbour;
+  neighbour.tangent_neighbour.resize(static_cast<size_t>(seq.info.num_body_vertices));
   for (Eigen::Index f = 0; f < seq.info.body_faces.rows(); ++f)
-    for (int k = 0; k < 3; ++k) neighbour[static_cast<size_t>(seq.info.body_faces(f, k))] = seq.info.body_faces(f, (k + 1) % 3);
+    for (int k = 0; k < 3; ++k)
+      neighbour.tangent_neighbour[static_cast<size_t>(seq.info.body_faces(f, k))] = seq.info.body_faces(f, (k + 1) % 3);
   const dataset::Points body = seq.body_at(0);
   const auto F = dataset::body_frames(body, seq.info.body_faces, neighbour);
   const Eigen::Matrix3f R = Eigen::AngleAxisf(0.7f, Eigen::Vector3f(1, 2, 3).normalized()).toRotationMatrix();
