@@ -88,6 +88,7 @@ Points carry_with_body(const SkinBinding& binding, const Eigen::Ref<const Points
 }
 
 void smooth_over_mesh(Points& u, const Csr& neighbours, int iterations) {
+  if (iterations <= 0) return;  // the default: no buffer on every sample's path
   Points next(u.rows(), 3);
   for (int it = 0; it < iterations; ++it) {
     for (int v = 0; v < neighbours.rows(); ++v) {
