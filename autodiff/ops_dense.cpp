@@ -122,8 +122,9 @@ void unary_backward(const Var<T>& x, const Var<T>& out, F&& f) {
 
 namespace {
 
-// 16 chunks for large N (balances 1, 2, 4, 8 threads); chunks of >= 1024 rows otherwise.
-int64_t linear_chunks(int64_t n) { return std::clamp<int64_t>(n / 1024, 1, 16); }
+// 16 chunks for large N (balances 1, 2, 4, 8 threads); chunks of >= 256 rows otherwise, so that
+// a rollout's token projections (a few thousand rows) use the threads too.
+int64_t linear_chunks(int64_t n) { return std::clamp<int64_t>(n / 256, 1, 16); }
 
 template <class F>
 void for_linear_chunks(int64_t n, int64_t width, F&& f) {

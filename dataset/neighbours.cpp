@@ -152,17 +152,29 @@ NearestVertexIndex::NearestVertexIndex(const Eigen::Ref<const Points>& points) :
 NearestVertexIndex::~NearestVertexIndex() = default;
 
 NearestBody NearestVertexIndex::query(const Eigen::Ref<const Points>& queries) const {
+  return query_within(queries, std::numeric_limits<float>::infinity());
+}
+
+NearestBody NearestVertexIndex::query_within(const Eigen::Ref<const Points>& queries, float max_distance) const {
   NearestBody out;
   const Eigen::Index Q = queries.rows();
   out.index.assign(Q, 0);
   out.distance.assign(Q, std::numeric_limits<float>::infinity());
   if (tree_->points.rows() == 0) return out;
-#pragma omp parallel for schedule(static) if (Q > 4096)
+  // Slightly above max_distance², so that a point at exactly max_distance is found; the walk
+  // only adds points strictly closer than the current bound.
+  const float bound = std::isfinite(max_distance) ? std::nextafter(max_distance * max_distance, std::numeric_limits<float>::max())
+                                                  : std::numeric_limits<float>::max();
+#pragma omp parallel for schedule(static) if (Q > 512)
   for (Eigen::Index q = 0; q < Q; ++q) {
     const float pt[3] = {queries(q, 0), queries(q, 1), queries(q, 2)};
     uint32_t idx = 0;
     float d2 = 0;
-    tree_->kd.knnSearch(pt, 1, &idx, &d2);
+    nanoflann::KNNResultSet<float, uint32_t> result(1);
+    result.init(&idx, &d2);
+    d2 = bound;  // the walk's initial worst distance
+    tree_->kd.findNeighbors(result, pt, nanoflann::SearchParams());
+    if (result.size() == 0) continue;
     out.index[q] = static_cast<int32_t>(idx);
     out.distance[q] = std::sqrt(d2);
   }

@@ -101,6 +101,10 @@ class NearestVertexIndex {
   NearestVertexIndex(const NearestVertexIndex&) = delete;
   NearestVertexIndex& operator=(const NearestVertexIndex&) = delete;
   NearestBody query(const Eigen::Ref<const Points>& queries) const;
+  // The nearest point within max_distance (scene units) of each query, else index 0 and
+  // distance +inf. Where it finds one it equals query(); the bound prunes the tree walk, which
+  // costs far less when most queries only ask whether a point is near.
+  NearestBody query_within(const Eigen::Ref<const Points>& queries, float max_distance) const;
 
  private:
   struct Tree;

@@ -120,7 +120,7 @@ int64_t for_each_anchored(const dataset::Points& x, Eigen::Index begin, Eigen::I
                           const std::vector<uint8_t>& pinned, const dataset::NearestVertexIndex& index, float reach,
                           F&& f) {
   if (end <= begin) return 0;
-  const dataset::NearestBody nearest = index.query(x.middleRows(begin, end - begin));
+  const dataset::NearestBody nearest = index.query_within(x.middleRows(begin, end - begin), reach);
   int64_t moved = 0;
   for (Eigen::Index v = begin; v < end; ++v)
     if (!pinned[static_cast<size_t>(v)] && nearest.distance[v - begin] <= reach)

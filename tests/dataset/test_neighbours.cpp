@@ -3,6 +3,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <random>
 
 namespace layersnet::dataset {
@@ -135,6 +136,36 @@ TEST(NearestBody, MatchesBruteForce) {
     EXPECT_NEAR(nb.distance[i], d, 1e-5f);
     EXPECT_NEAR((body.row(nb.index[i]) - q.row(i)).norm(), d, 1e-5f);
   }
+}
+
+// Within the bound the bounded search answers as the unbounded one (same index, same distance),
+// beyond it nothing; a point at exactly the bound is found.
+TEST(NearestBody, BoundedSearchAgreesWithinTheBoundAndFindsNothingBeyond) {
+  const Points body = random_points(2000, 1.f, 7), q = random_points(3000, 1.5f, 9);
+  const NearestVertexIndex index(body);
+  const NearestBody all = index.query(q);
+  const float bound = 0.08f;
+  const NearestBody near = index.query_within(q, bound);
+  int inside = 0;
+  for (int i = 0; i < q.rows(); ++i) {
+    if (all.distance[i] <= bound) {
+      ++inside;
+      EXPECT_EQ(near.index[i], all.index[i]) << i;
+      EXPECT_EQ(near.distance[i], all.distance[i]) << i;
+    } else {
+      EXPECT_TRUE(std::isinf(near.distance[i])) << i << " at " << all.distance[i];
+    }
+  }
+  EXPECT_GT(inside, 100);               // both branches are exercised
+  EXPECT_GT(q.rows() - inside, 100);
+  // A query at exactly the bound from a lone point: found, at that distance.
+  Points one(1, 3), at(1, 3);
+  one << 0.f, 0.f, 0.f;
+  at << 0.25f, 0.f, 0.f;  // exact in float, as is its square
+  const NearestBody edge = NearestVertexIndex(one).query_within(at, 0.25f);
+  EXPECT_EQ(edge.index[0], 0);
+  EXPECT_EQ(edge.distance[0], 0.25f);
+  EXPECT_TRUE(std::isinf(NearestVertexIndex(one).query_within(at, 0.2499f).distance[0]));
 }
 
 }  // namespace

@@ -1,6 +1,7 @@
 // `layersnet simulate` end to end: a tiny synthetic scene written as a user would give it (body
 // frames and garments as OBJ), a freshly initialised tiny model (configs/tiny.toml), the same
 // answer as the internal rollout, the errors of bad inputs, and Blender reading the outputs.
+#include "autodiff/bf16_gemm.h"
 #include "dataset/mesh_io.h"
 #include "dataset/stats.h"
 #include "dataset/synthetic.h"
@@ -124,9 +125,10 @@ TEST_F(Simulate, SameAnswerAsTheInternalRolloutFromRest) {
   int code = 0;
   const fs::path out = root_ / "out_roads";
   const std::string text = run_cli("simulate --checkpoint " + checkpoint() + " --body-frames " +
-                                       (root_ / "body").string() + garment_args() + " --out " + out.string(),
+                                       (root_ / "body").string() + garment_args() + " --precision float32 --out " + out.string(),
                                    &code);
   ASSERT_EQ(code, 0) << text;
+  EXPECT_NE(text.find("frames per second"), std::string::npos) << text;
 
   const int K = seq_.info.num_frames, B = seq_.info.num_body_vertices;
   dataset::Sequence start = seq_;
@@ -193,6 +195,29 @@ TEST_F(Simulate, SameAnswerAsTheInternalRolloutFromRest) {
                                        &code);
   EXPECT_TRUE(code == 0 || code == 4) << stressed;  // 4: a bound broke, which an untrained model may do
   EXPECT_NE(stressed.find("scene"), std::string::npos) << stressed;
+}
+
+// Without --precision the products run in bfloat16 where the build has the AVX-512 BF16 kernel
+// and in float32 otherwise; the bf16 rollout stays close to the float32 one.
+TEST_F(Simulate, AutoPrecisionIsBf16WhereTheKernelExists) {
+  int code = 0;
+  const fs::path f32 = root_ / "out_f32", automatic = root_ / "out_auto";
+  const std::string args = " --checkpoint " + checkpoint() + " --body-frames " + (root_ / "body").string() + garment_args();
+  const std::string text32 = run_cli("simulate" + args + " --precision float32 --out " + f32.string(), &code);
+  ASSERT_EQ(code, 0) << text32;
+  const std::string text = run_cli("simulate" + args + " --out " + automatic.string(), &code);
+  ASSERT_EQ(code, 0) << text;
+  const bool bf16 = ad::bf16_available();
+  EXPECT_NE(text.find(bf16 ? "bf16 products" : "float32 products"), std::string::npos) << text;
+  const dataset::Sequence a = dataset::read_sequence((f32 / "scene.h5").string());
+  const dataset::Sequence b = dataset::read_sequence((automatic / "scene.h5").string());
+  double worst = 0;
+  for (int g = 0; g < a.info.num_garments(); ++g)
+    for (int t = 0; t < a.info.num_frames; ++t)
+      worst = std::max(worst, static_cast<double>((a.garment_at(g, t) - b.garment_at(g, t)).cwiseAbs().maxCoeff()));
+  if (bf16) EXPECT_GT(worst, 0.0);  // the products did change
+  else EXPECT_EQ(worst, 0.0);
+  EXPECT_LT(worst, 0.05);  // scene units: half a centimetre over the whole tiny rollout
 }
 
 // Blender imports the OBJ sequence and plays the PC2 through its Mesh Cache modifier: the same
