@@ -202,6 +202,7 @@ const Schema& schema() {
     k.add("data.stats", [](Config& c) -> std::string& { return c.data.stats; }, "statistics file to train with (empty: DATASET/stats.h5, from the training split)");
     k.add("data.first_frame", [](Config& c) -> int& { return c.data.first_frame; }, "first input frame of a sample", {2, 1e6, {}});
     k.add("data.max_frames", [](Config& c) -> int& { return c.data.max_frames; }, "frames used per sequence (0 = all)", {0, 1e6, {}});
+    k.add("data.after_ramp", [](Config& c) -> bool& { return c.data.after_ramp; }, "samples start where each file's ramp into the motion ends (rest_frames + ramp_frames - 1 as first input frame), as eval's rollouts do");
     k.add("data.cache_sequences", [](Config& c) -> int& { return c.data.cache_sequences; }, "sequences cached in memory", positive);
     // [train]
     k.add("train.epochs", [](Config& c) -> int& { return c.train.epochs; }, "epochs", positive);

@@ -23,6 +23,10 @@ struct DataConfig {
   std::string stats;
   int first_frame = 2;    // first input frame t of a sample (t−1 must have a velocity: ≥ 2)
   int max_frames = 0;     // frames per sequence used from first_frame on; 0 = to the end
+  // Start each sequence's samples where its ramp into the motion ends (input frame
+  // rest_frames + ramp_frames − 1, the frame eval's rollouts start from), not before; files
+  // without those attributes keep first_frame.
+  bool after_ramp = false;
   int cache_sequences = 8;  // sequences kept in memory by the lazy reader
 };
 

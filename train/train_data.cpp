@@ -58,9 +58,10 @@ TrainData::TrainData(const dataset::DatasetManifest& manifest, const std::string
   const dataset::FrameSelection selection = frame_selection_for(config.data);
   for (int s = 0; s < static_cast<int>(ids_.size()); ++s) {
     const dataset::SequenceFile f(manifest_.sequence_path(ids_[static_cast<std::size_t>(s)]));
-    const std::vector<int> ts = dataset::sample_frames(f.info().num_frames, selection);
-    first_t_.push_back(ts.empty() ? 0 : ts.front());
+    std::vector<int> ts = dataset::sample_frames(f.info().num_frames, selection);
     const int after_ramp = f.info().settled_frame() - 1;
+    if (config.data.after_ramp && after_ramp >= 2) std::erase_if(ts, [&](int t) { return t < after_ramp; });
+    first_t_.push_back(ts.empty() ? 0 : ts.front());
     rollout_start_.push_back(std::find(ts.begin(), ts.end(), after_ramp) != ts.end() ? after_ramp : first_t_.back());
     garment_vertices_.push_back(static_cast<int>(f.info().total_garment_vertices()));
     for (int t : ts) samples_.push_back({s, t});

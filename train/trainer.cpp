@@ -295,7 +295,9 @@ void Run::open_data() {
   if (train_->num_samples() == 0)
     throw std::runtime_error(config_.data.dataset + ": the train split has no samples for data.first_frame = " +
                              std::to_string(config_.data.first_frame) + " and data.max_frames = " +
-                             std::to_string(config_.data.max_frames) + " (sequences too short?)");
+                             std::to_string(config_.data.max_frames) +
+                             (config_.data.after_ramp ? " after each file's ramp (data.after_ramp = true)" : "") +
+                             " (sequences too short?)");
   if (config_.train.validate && !manifest.val.empty()) val_ = std::make_unique<TrainData>(manifest, "val", stats_, config_);
 }
 

@@ -519,6 +519,19 @@ TEST_F(TrainerTest, RolloutValidationStartsAfterTheRamp) {
   EXPECT_EQ(val.rollout_start(0), 4);  // predicts frame 5, the first after the ramp
   EXPECT_EQ(val.rollout_start(1), 2);
   EXPECT_EQ(val.rollout_start(2), 2);
+
+  // data.after_ramp: the samples of a file with a ramp start where the ramp ends, and its
+  // validation rollout where they start; a file without ramp attributes keeps first_frame; a
+  // file whose ramp ends past its frames has no samples.
+  Config after = tiny_config(m.root);
+  after.data.after_ramp = true;
+  const TrainData cut(dataset::read_manifest(m.root), "val", dataset::NormalisationStats{}, after);
+  EXPECT_EQ(cut.first_t(0), 4);
+  EXPECT_EQ(cut.rollout_start(0), 4);
+  EXPECT_EQ(cut.first_t(1), 2);
+  std::vector<int> per_sequence(3, 0);
+  for (const SampleRef& r : cut.samples()) ++per_sequence[static_cast<std::size_t>(r.sequence)];
+  EXPECT_EQ(per_sequence, (std::vector<int>{4, 6, 0}));  // t = 4..7; t = 2..7; none
 }
 
 // metrics.jsonl: the orthogonality penalty also as its excess over the floor (the progress line
