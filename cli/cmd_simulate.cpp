@@ -6,6 +6,7 @@
 #include "cli/model_option.h"
 #include "cli/program_files.h"
 #include "autodiff/bf16_gemm.h"
+#include "eval/machine.h"
 #include "simulate/motion.h"
 #include "simulate/simulate.h"
 
@@ -16,7 +17,6 @@
 #include <chrono>
 #include <cstdio>
 #include <memory>
-#include <vector>
 #include <omp.h>
 
 namespace {
@@ -106,10 +106,8 @@ int run_simulate(SimulateCliOptions& o) {
   const int files = eval::write_simulation(o.out, scene, o.outputs);
   // The first step also builds the patch structure and the caches every later step reuses, so
   // the rate a user sees over a long motion is the later steps' median.
-  std::vector<double> later(r.step_ms.begin() + std::min<std::ptrdiff_t>(1, std::ssize(r.step_ms)), r.step_ms.end());
-  std::sort(later.begin(), later.end());
   const double first_ms = r.step_ms.empty() ? 0.0 : r.step_ms.front();
-  const double median_ms = later.empty() ? first_ms : later[later.size() / 2];
+  const double median_ms = r.step_ms.size() > 1 ? eval::median({r.step_ms.begin() + 1, r.step_ms.end()}) : first_ms;
   std::printf("simulate: %d frames, first step %.0f ms, then %.1f ms/frame (median) = %.1f frames per second "
               "(%d threads, %s products) -> %d files in %s\n",
               scene.body_frames, first_ms, median_ms, 1000.0 / median_ms, omp_get_max_threads(), o.precision.c_str(), files,
