@@ -1,0 +1,63 @@
+#!/usr/bin/env python3
+"""Freeze the part of a data set that exists, so that training can start while `layersnet
+generate` is still adding sequences to it.
+
+Writes OUT/dataset.json: the manifest of DATA as it is now, its training split cut to the
+sequences whose files exist (validation and test are kept whole and must be complete), and links
+every kept sequence file (and scene.json, if present) into OUT. The training split's statistics then come
+from `layersnet prepare OUT`; a run trained on OUT keeps the same data when DATA grows.
+
+Usage: freeze_train_split.py DATA OUT
+"""
+import json
+import os
+import sys
+
+
+def fail(message):
+    print(f"freeze_train_split: {message}", file=sys.stderr)
+    sys.exit(1)
+
+
+def main(argv):
+    if len(argv) != 3:
+        fail("usage: freeze_train_split.py DATA OUT")
+    data, out = (os.path.realpath(a) for a in argv[1:])
+    manifest_path = os.path.join(data, "dataset.json")
+    try:
+        with open(manifest_path) as f:
+            manifest = json.load(f)
+    except (OSError, ValueError) as e:
+        fail(f"{manifest_path}: cannot read the manifest ({e}); DATA must be a data-set folder")
+    splits = manifest.get("splits")
+    if not isinstance(splits, dict) or "train" not in splits:
+        fail(f"{manifest_path}: no splits.train list; is this a data set written by layersnet generate?")
+    present = lambda sid: os.path.isfile(os.path.join(data, sid + ".h5"))
+    for name, ids in splits.items():
+        missing = [sid for sid in ids if not present(sid)]
+        if name != "train" and missing:
+            fail(f"split {name} is incomplete ({len(missing)} of {len(ids)} files missing, e.g. {missing[0]}.h5); "
+                 "generate it first (`layersnet generate ... --splits " + name + "`)")
+    listed = len(splits["train"])
+    kept_train = [sid for sid in splits["train"] if present(sid)]
+    if not kept_train:
+        fail(f"{data}: no training sequence exists yet")
+    if os.path.exists(os.path.join(out, "dataset.json")):
+        fail(f"{out}/dataset.json exists; freeze into a new folder (a run's data must not change under it)")
+    os.makedirs(out, exist_ok=True)
+    manifest["splits"]["train"] = kept_train
+    manifest["frozen_from"] = {"data": data, "train_sequences": len(kept_train),
+                               "train_sequences_listed": listed}
+    for sid in sorted({s for ids in manifest["splits"].values() for s in ids}):
+        os.symlink(os.path.join(data, sid + ".h5"), os.path.join(out, sid + ".h5"))
+    if os.path.isfile(os.path.join(data, "scene.json")):
+        os.symlink(os.path.join(data, "scene.json"), os.path.join(out, "scene.json"))
+    with open(os.path.join(out, "dataset.json"), "w") as f:
+        json.dump(manifest, f, indent=2)
+    print(f"freeze_train_split: {out}: {len(kept_train)} of the {listed} listed training sequences, "
+          + ", ".join(f"{n} {len(ids)}" for n, ids in manifest["splits"].items() if n != "train")
+          + f"; next: layersnet prepare {out}")
+
+
+if __name__ == "__main__":
+    main(sys.argv)

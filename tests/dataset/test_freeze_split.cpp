@@ -1,0 +1,59 @@
+// scripts/freeze_train_split.py: training on the part of a data set that exists while the rest
+// is still being generated.
+#include "dataset/manifest.h"
+#include "dataset/stats.h"
+#include "dataset/synthetic.h"
+#include "test_util.h"
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+
+namespace layersnet::dataset {
+namespace {
+
+namespace fs = std::filesystem;
+const std::string kScript = std::string(LAYERSNET_SOURCE_DIR) + "/scripts/freeze_train_split.py";
+
+int freeze(const fs::path& data, const fs::path& out) {
+  return std::system(("/usr/bin/python3 " + kScript + " " + data.string() + " " + out.string() + " > /dev/null 2>&1").c_str());
+}
+
+// Two of four training files are still missing: the frozen set lists the two that exist, keeps
+// validation and test whole, carries the generator's extra keys, and its statistics are those of
+// a set written with just those two training sequences.
+TEST(FreezeTrainSplit, KeepsTheTrainingSequencesThatExistAndTheWholeOtherSplits) {
+  const auto tmp = testing::temp_dir("freeze");
+  const fs::path dir = tmp;
+  DatasetManifest growing = write_synthetic_dataset((dir / "growing").string(), 4, 1, 1);
+  growing.extra["tags"] = {{"s0000", {{"wind", "calm"}}}};
+  write_manifest(growing);
+  fs::remove(growing.sequence_path("s0001"));
+  fs::remove(growing.sequence_path("s0003"));
+  ASSERT_EQ(freeze(dir / "growing", dir / "frozen"), 0);
+
+  const DatasetManifest frozen = read_manifest((dir / "frozen").string());
+  EXPECT_EQ(frozen.train, (std::vector<std::string>{"s0000", "s0002"}));
+  EXPECT_EQ(frozen.val, growing.val);
+  EXPECT_EQ(frozen.test, growing.test);
+  EXPECT_EQ(frozen.extra.at("tags"), growing.extra.at("tags"));
+  EXPECT_EQ(frozen.extra.at("frozen_from").at("train_sequences_listed"), 4);
+
+  DatasetManifest two = write_synthetic_dataset((dir / "two").string(), 4, 1, 1);
+  two.train = {"s0000", "s0002"};
+  const NormalisationStats a = compute_stats(frozen), b = compute_stats(two);
+  EXPECT_EQ(a.sequences, b.sequences);
+  for (const auto& q : kStatQuantities) {
+    EXPECT_EQ((a.*q.field).mean, (b.*q.field).mean) << q.name;
+    EXPECT_EQ((a.*q.field).std, (b.*q.field).std) << q.name;
+  }
+
+  // A folder that already holds a manifest is not overwritten; an incomplete validation split is refused.
+  EXPECT_NE(freeze(dir / "growing", dir / "frozen"), 0);
+  fs::remove(growing.sequence_path(growing.val.front()));
+  EXPECT_NE(freeze(dir / "growing", dir / "frozen_again"), 0);
+  EXPECT_FALSE(fs::exists(dir / "frozen_again" / "dataset.json"));
+}
+
+}  // namespace
+}  // namespace layersnet::dataset
