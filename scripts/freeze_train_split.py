@@ -5,9 +5,11 @@ generate` is still adding sequences to it.
 Writes OUT/dataset.json: the manifest of DATA as it is now, its training split cut to the
 sequences whose files exist (validation and test are kept whole and must be complete), and links
 every kept sequence file (and scene.json, if present) into OUT. The training split's statistics then come
-from `layersnet prepare OUT`; a run trained on OUT keeps the same data when DATA grows.
+from `layersnet prepare OUT`; a run trained on OUT keeps the same data when DATA grows. With
+--max-train N only the first N of them (in the manifest's order) are kept, so that a frozen set
+can be made again later, when more files exist.
 
-Usage: freeze_train_split.py DATA OUT
+Usage: freeze_train_split.py DATA OUT [--max-train N]
 """
 import json
 import os
@@ -20,9 +22,14 @@ def fail(message):
 
 
 def main(argv):
-    if len(argv) != 3:
-        fail("usage: freeze_train_split.py DATA OUT")
-    data, out = (os.path.realpath(a) for a in argv[1:])
+    max_train = None
+    if len(argv) == 5 and argv[3] == "--max-train":
+        if not argv[4].isdigit() or int(argv[4]) < 1:
+            fail(f"--max-train {argv[4]}: give a positive whole number of training sequences")
+        max_train = int(argv[4])
+    elif len(argv) != 3:
+        fail("usage: freeze_train_split.py DATA OUT [--max-train N]")
+    data, out = (os.path.realpath(a) for a in argv[1:3])
     manifest_path = os.path.join(data, "dataset.json")
     try:
         with open(manifest_path) as f:
@@ -39,7 +46,9 @@ def main(argv):
             fail(f"split {name} is incomplete ({len(missing)} of {len(ids)} files missing, e.g. {missing[0]}.h5); "
                  "generate it first (`layersnet generate ... --splits " + name + "`)")
     listed = len(splits["train"])
-    kept_train = [sid for sid in splits["train"] if present(sid)]
+    kept_train = [sid for sid in splits["train"] if present(sid)][:max_train]
+    if max_train is not None and len(kept_train) < max_train:
+        fail(f"--max-train {max_train}: only {len(kept_train)} training sequences exist yet")
     if not kept_train:
         fail(f"{data}: no training sequence exists yet")
     if os.path.exists(os.path.join(out, "dataset.json")):

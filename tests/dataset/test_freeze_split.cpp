@@ -15,8 +15,9 @@ namespace {
 namespace fs = std::filesystem;
 const std::string kScript = std::string(LAYERSNET_SOURCE_DIR) + "/scripts/freeze_train_split.py";
 
-int freeze(const fs::path& data, const fs::path& out) {
-  return std::system(("/usr/bin/python3 " + kScript + " " + data.string() + " " + out.string() + " > /dev/null 2>&1").c_str());
+int freeze(const fs::path& data, const fs::path& out, const std::string& options = "") {
+  return std::system(
+      ("/usr/bin/python3 " + kScript + " " + data.string() + " " + out.string() + " " + options + " > /dev/null 2>&1").c_str());
 }
 
 // Two of four training files are still missing: the frozen set lists the two that exist, keeps
@@ -47,6 +48,11 @@ TEST(FreezeTrainSplit, KeepsTheTrainingSequencesThatExistAndTheWholeOtherSplits)
     EXPECT_EQ((a.*q.field).mean, (b.*q.field).mean) << q.name;
     EXPECT_EQ((a.*q.field).std, (b.*q.field).std) << q.name;
   }
+
+  // --max-train keeps the first N that exist, and refuses more than exist.
+  ASSERT_EQ(freeze(dir / "growing", dir / "first", "--max-train 1"), 0);
+  EXPECT_EQ(read_manifest((dir / "first").string()).train, (std::vector<std::string>{"s0000"}));
+  EXPECT_NE(freeze(dir / "growing", dir / "three", "--max-train 3"), 0);
 
   // A folder that already holds a manifest is not overwritten; an incomplete validation split is refused.
   EXPECT_NE(freeze(dir / "growing", dir / "frozen"), 0);
