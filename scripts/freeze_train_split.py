@@ -39,7 +39,9 @@ def main(argv):
     splits = manifest.get("splits")
     if not isinstance(splits, dict) or "train" not in splits:
         fail(f"{manifest_path}: no splits.train list; is this a data set written by layersnet generate?")
-    present = lambda sid: os.path.isfile(os.path.join(data, sid + ".h5"))
+    def present(sid):
+        return os.path.isfile(os.path.join(data, sid + ".h5"))
+
     for name, ids in splits.items():
         missing = [sid for sid in ids if not present(sid)]
         if name != "train" and missing:
