@@ -11,6 +11,13 @@
 
 namespace layersnet::ad {
 
+// Freed heap memory stays with the process: no allocation gets its own mmap, the heap is never
+// trimmed, all threads share one malloc arena. A model step frees and allocates the same sizes
+// every time (sample building, GEMM packing, the losses' index lists); without this glibc hands
+// them back and the next step page-faults them in again. Call once, before the first step;
+// does nothing outside glibc.
+void keep_freed_memory_in_process();
+
 class Arena {
  public:
   static constexpr std::size_t kAlignment = 64;

@@ -20,7 +20,6 @@
 #include "model/sample_input.h"
 
 #include <Eigen/Core>
-#include <malloc.h>
 #include <nlohmann/json.hpp>
 #include <omp.h>
 #include <sys/resource.h>
@@ -200,10 +199,9 @@ void print_profile(const StepProfile& p, int threads, const std::string& size) {
 namespace layersnet::eval {
 
 int run_bench_model(const BenchModelOptions& o) {
-  // Same malloc tuning as the reference's default (--malloc heap): freed tape buffers stay in
-  // the heap instead of being munmap'd and page-faulted in again every step (perf: ~17 % of
-  // a small-scene training step was page faults, clear_page and munmap without it).
-  if (o.malloc_heap) mallopt(M_MMAP_MAX, 0), mallopt(M_TRIM_THRESHOLD, -1), mallopt(M_ARENA_MAX, 1);
+  // The product's malloc tuning, which is also the reference's default (--malloc heap); perf:
+  // ~17 % of a small-scene training step was page faults, clear_page and munmap without it.
+  if (o.malloc_heap) ad::keep_freed_memory_in_process();
   // Checked before any work: a wrong path should not cost a benchmark run.
   const bool with_ref = !o.no_reference && !o.reference.empty();
   if (with_ref && !fs::is_regular_file(o.reference))

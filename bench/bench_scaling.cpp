@@ -30,7 +30,6 @@
 #include "model/sample_input.h"
 
 #include <Eigen/Core>
-#include <malloc.h>
 #include <nlohmann/json.hpp>
 #include <omp.h>
 
@@ -322,7 +321,7 @@ void write_png(const std::string& path, const std::map<std::pair<std::string, in
 namespace layersnet::eval {
 
 int run_bench_scaling(const ScalingOptions& o) {
-  mallopt(M_MMAP_MAX, 0), mallopt(M_TRIM_THRESHOLD, -1), mallopt(M_ARENA_MAX, 1);  // as bench model
+  ad::keep_freed_memory_in_process();
   const auto sizes = parse_list<int64_t>(o.sizes, "--sizes");
   const auto threads = parse_list<int>(o.threads, "--threads");
   const auto modes = parse_list<std::string>(o.modes, "--modes");

@@ -30,7 +30,6 @@
 #include "model/sample_input.h"
 
 #include <Eigen/Core>
-#include <malloc.h>
 #include <nlohmann/json.hpp>
 #include <omp.h>
 
@@ -98,7 +97,7 @@ Expected expected_saving(const model::StageTimes& f, const model::StageTimes& v,
 namespace layersnet::eval {
 
 int run_bench_scene(const SceneBenchOptions& o) {
-  mallopt(M_MMAP_MAX, 0), mallopt(M_TRIM_THRESHOLD, -1), mallopt(M_ARENA_MAX, 1);  // as bench model
+  ad::keep_freed_memory_in_process();
   omp_set_num_threads(o.threads);
   Eigen::setNbThreads(1);
   const ModelConfig mc;  // official sizes

@@ -3,6 +3,7 @@
 // at each requested thread count, and the share of a step spent outside the model
 // (reading, sample building incl. neighbour search, gradient sum + optimizer).
 #include "cli/command_registry.h"
+#include "autodiff/arena.h"
 #include "dataset/stats.h"
 #include "dataset/synthetic.h"
 #include "train/trainer.h"
@@ -27,6 +28,7 @@ struct BenchTrainOptions {
 };
 
 int run_bench_train(const BenchTrainOptions& o) {
+  layersnet::ad::keep_freed_memory_in_process();  // as train
   namespace fs = std::filesystem;
   const fs::path dir = fs::temp_directory_path() / ("layersnet_bench_train_" + std::to_string(::getpid()));
   fs::remove_all(dir);

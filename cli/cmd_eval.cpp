@@ -6,6 +6,7 @@
 // The run: eval/eval_run.h; see eval/README.md.
 #include "cli/command_registry.h"
 #include "cli/exit_codes.h"
+#include "autodiff/arena.h"
 #include "eval/eval_run.h"
 
 #include <Eigen/Core>
@@ -26,6 +27,7 @@ struct EvalCli {
 };
 
 int run_eval(EvalCli c) {
+  ad::keep_freed_memory_in_process();
   // Every model once per listed precision (a list shows the bf16 speed/accuracy trade in one table).
   c.options.precisions.clear();
   for (std::size_t a = 0, b; a <= c.precision.size(); a = b + 1) {

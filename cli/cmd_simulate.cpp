@@ -5,6 +5,7 @@
 #include "cli/command_registry.h"
 #include "cli/model_option.h"
 #include "cli/program_files.h"
+#include "autodiff/arena.h"
 #include "autodiff/bf16_gemm.h"
 #include "eval/machine.h"
 #include "simulate/motion.h"
@@ -53,6 +54,7 @@ eval::ProgressFn progress_reporter() {
 }
 
 int run_simulate(SimulateCliOptions& o) {
+  ad::keep_freed_memory_in_process();
   for (const std::string& spec : o.garments) o.scene.garments.push_back(eval::parse_garment_spec(spec));
   o.scene.up_axis = o.up.front();
   std::string checkpoint = o.model.path();

@@ -5,6 +5,7 @@
 #include "cli/command_registry.h"
 #include "cli/exit_codes.h"
 #include "cli/model_option.h"
+#include "autodiff/arena.h"
 #include "eval/stress_report.h"
 
 #include <Eigen/Core>
@@ -22,6 +23,7 @@ struct StressCli {
 };
 
 int run_stress(StressCli& c) {
+  layersnet::ad::keep_freed_memory_in_process();
   c.options.checkpoint = c.model.required_path();
   if (c.threads > 0) omp_set_num_threads(c.threads);
   Eigen::setNbThreads(1);  // the ops own the threads (as bench model); nested GEMM threads only contend

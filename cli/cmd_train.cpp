@@ -2,6 +2,7 @@
 #include "cli/command_registry.h"
 #include "cli/exit_codes.h"
 #include "cli/program_files.h"
+#include "autodiff/arena.h"
 #include "train/distributed.h"
 #include "train/trainer.h"
 
@@ -57,6 +58,7 @@ int run_train_here(const TrainCliOptions& o, std::ostream& err) {
 }
 
 int run_train(const TrainCliOptions& o) {
+  layersnet::ad::keep_freed_memory_in_process();
   const layersnet::Ranks& ranks = layersnet::Ranks::world();
   if (!ranks.distributed()) return run_train_here(o, std::cerr);
   // Under mpirun every rank parses the same arguments: a refusal is reported once (by rank 0

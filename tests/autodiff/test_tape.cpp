@@ -3,8 +3,11 @@
 #include "autodiff/params.h"
 #include "gradcheck_registry.h"
 
+#include <sys/resource.h>
+
 #include <algorithm>
 #include <cstdint>
+#include <cstdlib>
 #include <memory>
 #include <vector>
 
@@ -42,6 +45,35 @@ TEST(Arena, SteadyStateStepsMakeNoHeapAllocation) {
       EXPECT_GE(tape.arena().capacity(), bytes_first);
     }
   }
+}
+
+long minor_page_faults() {
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  return usage.ru_minflt;
+}
+
+// Writes one byte per 4 KiB page of a fresh buffer, then frees it.
+void touch_and_free(std::size_t bytes) {
+  auto* p = static_cast<char*>(std::malloc(bytes));
+  ASSERT_NE(p, nullptr);
+  volatile char* pages = p;
+  for (std::size_t i = 0; i < bytes; i += 4096) pages[i] = 1;
+  std::free(p);
+}
+
+TEST(Heap, AFreedBufferIsReusedWithoutPageFaults) {
+#if !defined(__GLIBC__)
+  GTEST_SKIP() << "the malloc tuning is glibc's";
+#endif
+  keep_freed_memory_in_process();
+  // Above glibc's largest mmap threshold (32 MiB): untuned, every such buffer is a fresh mmap,
+  // 16,384 faults of 4 KiB.
+  constexpr std::size_t kBytes = std::size_t{64} << 20;
+  touch_and_free(kBytes);
+  const long before = minor_page_faults();
+  touch_and_free(kBytes);
+  EXPECT_LT(minor_page_faults() - before, 64);
 }
 
 TEST(Arena, AllocationsAreAlignedAndDistinct) {
