@@ -73,6 +73,20 @@ Var<T> vertex_normals(ad::Tape<T>& tape, const Var<T>& x, const std::vector<int3
   return ad::row_normalize(tape, ad::scatter_add_rows(tape, fn3, idx, x.rows));
 }
 
+// Mean squared error of the zero-output prediction x − a (columns 0–2 minus 6–8 of a (n, 9)
+// prediction) against target (n, 3), floored at (1 mm)² = 1e-4 units² per coordinate; 1 when not relative.
+template <class T>
+double base_error(const Var<T>& pred, const std::vector<T>& target, bool relative) {
+  if (!relative) return 1.0;
+  double sum = 0;
+  for (int64_t i = 0; i < pred.rows; ++i)
+    for (int c = 0; c < 3; ++c) {
+      const double d = static_cast<double>(pred.value[9 * i + c]) - pred.value[9 * i + 6 + c] - target[3 * i + c];
+      sum += d * d;
+    }
+  return std::max(sum / static_cast<double>(3 * std::max<int64_t>(1, pred.rows)), 1e-4);
+}
+
 template <class T>
 LossTerms<T> compute_losses(ad::Tape<T>& tape, ad::ParamStore<T>& params, const ModelConfig& mc, const LossConfig& lc,
                             const LossInput<T>& tg, const model::Predictions<T>& pred) {
@@ -88,11 +102,12 @@ LossTerms<T> compute_losses(ad::Tape<T>& tape, ad::ParamStore<T>& params, const 
   };
   const Var<T> x = ad::slice_cols(tape, pred.vertex, 0, 3);
   if (lc.vertex != 0)
-    add_term(ad::mean_all(tape, ad::squared_error(tape, x, model::constant(tape, tg.target, N, 3))), lc.vertex, out.vertex);
+    add_term(ad::mean_all(tape, ad::squared_error(tape, x, model::constant(tape, tg.target, N, 3))),
+             lc.vertex / base_error(pred.vertex, tg.target, lc.relative_to_base), out.vertex);
   if (lc.patch != 0)
     add_term(ad::mean_all(tape, ad::squared_error(tape, ad::slice_cols(tape, pred.patch, 0, 3),
                                                   model::constant(tape, tg.target_patch, P, 3))),
-             lc.patch, out.patch);
+             lc.patch / base_error(pred.patch, tg.target_patch, lc.relative_to_base), out.patch);
   const int64_t G = static_cast<int64_t>(tg.garment_offsets.size()) - 1;
   const bool layer_term = lc.collision_layer != 0 && G >= 2;
   Var<T> normals;

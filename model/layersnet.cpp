@@ -360,6 +360,26 @@ StateDelta<T> state_delta(ad::Tape<T>& tape, const ModelInput<T>& in, const Var<
   return d;
 }
 
+// K Jacobi steps u ← (u + mean of u over the vertex's mesh neighbours) / 2, as
+// dataset::smooth_over_mesh does on the carry.  u (N, c) → (N, c).
+template <class T>
+Var<T> smooth_over_vertex_mesh(ad::Tape<T>& tape, const ModelInput<T>& in, Var<T> u, int iterations) {
+  LAYERSNET_CHECK(in.vertex_mesh_offsets.size() == static_cast<std::size_t>(in.N + 1),
+                  "model.output_smoothing = " << iterations
+                                              << " but the input has no vertex mesh neighbours: build it with "
+                                                 "model_input_from_sample and the model's config");
+  std::vector<T> half_inv_degree(in.N);
+  for (int64_t v = 0; v < in.N; ++v)
+    half_inv_degree[v] = T(0.5) / static_cast<T>(in.vertex_mesh_offsets[v + 1] - in.vertex_mesh_offsets[v]);
+  const Var<T> weight = constant(tape, half_inv_degree, in.N, 1);
+  for (int it = 0; it < iterations; ++it) {
+    const Var<T> neighbour_sum =
+        ad::segment_sum(tape, ad::gather_rows(tape, u, in.vertex_mesh_neighbours), in.vertex_mesh_offsets);
+    u = ad::add(tape, ad::scale(tape, u, 0.5), ad::mul(tape, neighbour_sum, weight));
+  }
+  return u;
+}
+
 template <class T>
 Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfig& cfg, const ModelDims& m,
                       const ModelInput<T>& in, const Var<T>& emb, const Var<T>& body_x, const ForwardOptions& opt,
@@ -542,6 +562,12 @@ Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
   Predictions<T> out;
   out.vertex = ad::add(tape, pred_rel, ad::gather_rows(tape, pred_patch, in.own_patch));
   out.patch = pred_patch;
+  if (cfg.output_smoothing > 0) {
+    // The correction is the acceleration column (world axes), which x and v contain once each.
+    const Var<T> a = ad::slice_cols(tape, out.vertex, 6, 9);
+    const Var<T> change = ad::sub(tape, smooth_over_vertex_mesh(tape, in, a, cfg.output_smoothing), a);
+    out.vertex = ad::add(tape, out.vertex, ad::concat_cols(tape, {change, change, change}));
+  }
   return out;
 }
 

@@ -41,6 +41,11 @@ struct ModelConfig {
   // (a hem between the legs) move apart; averaging keeps them together (docs/decisions.md,
   // "A smoother carry"). 0 = the skinning step itself.
   int carry_smoothing = 0;
+  // Jacobi averaging steps over the garment mesh applied to the network's per-vertex correction
+  // (the prediction minus its velocity base), the same operator as carry_smoothing. Per-vertex
+  // corrections that differ between neighbours stretch and crumple the cloth in long rollouts;
+  // averaged, neighbours are corrected together. 0 = the official decoder output.
+  int output_smoothing = 0;
 };
 
 struct LossConfig {
@@ -54,6 +59,11 @@ struct LossConfig {
   // Not in the paper (0 = off): mean over garment edges of ((|x̂_i − x̂_j| − l_ij) / l_ij)², l the
   // ground-truth length at t+1. Penalises the per-vertex jitter that crumples self-fed rollouts.
   double edge_strain = 0.0;
+  // Not in the paper (false = off): the vertex and patch terms of each sample are divided by the
+  // same error of its zero-output prediction (the velocity base from the sample's input state).
+  // A self-fed chain's drifted step then counts as much as a one-step sample, instead of the
+  // square of its larger error; the loss measures the gain over the base.
+  bool relative_to_base = false;
 };
 
 }  // namespace layersnet

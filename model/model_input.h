@@ -93,6 +93,9 @@ struct ModelInput {
   // vertex from t to t+1, TrainingSample::body_carry) or "body_inertia" (that plus the vertex's
   // velocity relative to the body at t); root-relative, units/frame.  (N, 3) or empty
   std::vector<T> body_carry;
+  // Garment mesh neighbours of each vertex, for ModelConfig::output_smoothing (empty when it is
+  // 0). A vertex without mesh neighbours lists itself, so averaging keeps its value.  CSR over N.
+  std::vector<int32_t> vertex_mesh_offsets, vertex_mesh_neighbours;
 
   // ---- statistics -----------------------------------------------------------------------------------------
   // Per-column mean and std of the 12-d state ([pos, vel] stats repeated for both frames).
@@ -120,6 +123,7 @@ ModelInput<U> cast_input(const ModelInput<T>& in) {
   o.cand_offsets = in.cand_offsets, o.cand_patches = in.cand_patches;
   o.vertex_local = cv(in.vertex_local);
   o.body_carry = cv(in.body_carry);
+  o.vertex_mesh_offsets = in.vertex_mesh_offsets, o.vertex_mesh_neighbours = in.vertex_mesh_neighbours;
   o.mean12 = cv(in.mean12), o.std12 = cv(in.std12);
   return o;
 }

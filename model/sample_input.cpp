@@ -252,6 +252,18 @@ ModelInput<float> model_input_from_sample(const dataset::TrainingSample& s, cons
       for (int64_t v = 0; v < N; ++v)
         for (int c = 0; c < 3; ++c) in.body_carry[3 * v + c] += s.state(v, 3 + c) - s.body_carry_prev(v, c);
   }
+  if (cfg.output_smoothing > 0) {
+    const auto& nb = s.structure->vertex_neighbours;
+    in.vertex_mesh_offsets.assign(1, 0);
+    in.vertex_mesh_neighbours.reserve(nb.items.size() + N);
+    for (int v = 0; v < static_cast<int>(N); ++v) {
+      if (nb.size(v) > 0)
+        in.vertex_mesh_neighbours.insert(in.vertex_mesh_neighbours.end(), nb.begin(v), nb.end(v));
+      else
+        in.vertex_mesh_neighbours.push_back(v);
+      in.vertex_mesh_offsets.push_back(static_cast<int32_t>(in.vertex_mesh_neighbours.size()));
+    }
+  }
   validate(in);
   return in;
 }

@@ -167,6 +167,7 @@ const Schema& schema() {
     k.add("model.vertex_local_features", [](Config& c) -> bool& { return c.model.vertex_local_features; }, "the decoder also sees each vertex's nearest body motion, spring force and Laplacians (not in the paper)");
     k.add("model.velocity_base", [](Config& c) -> std::string& { return c.model.velocity_base; }, "what a zero network output predicts: the cloth keeps its velocity (inertia, official), moves with the body surface (body), or keeps its velocity relative to the body surface (body_inertia)", {0, 0, {"inertia", "body", "body_inertia"}});
     k.add("model.carry_smoothing", [](Config& c) -> int& { return c.model.carry_smoothing; }, "averaging steps over the garment mesh on the body carry (velocity_base body or body_inertia); 0 = none", {0, 1000, {}});
+    k.add("model.output_smoothing", [](Config& c) -> int& { return c.model.output_smoothing; }, "averaging steps over the garment mesh on the network's per-vertex correction (not in the paper); 0 = none", {0, 1000, {}});
     k.add("model.orthogonality", [](Config& c) -> std::string& { return c.model.orthogonality; }, "how W_R stays orthogonal", {0, 0, {"penalty", "exact"}});
     // [loss]
     const Range weight{0, 1e6, {}};
@@ -177,6 +178,7 @@ const Schema& schema() {
     k.add("loss.collision_layer", [](Config& c) -> double& { return c.loss.collision_layer; }, "outer-inner layer collision weight", weight);
     k.add("loss.collision_eps", [](Config& c) -> double& { return c.loss.collision_eps; }, "collision margin d_eps (scene units)", {0, 10, {}});
     k.add("loss.orthogonality", [](Config& c) -> double& { return c.loss.orthogonality; }, "W_R orthogonality penalty weight", weight);
+    k.add("loss.relative_to_base", [](Config& c) -> bool& { return c.loss.relative_to_base; }, "divide each sample's vertex and patch terms by its zero-output prediction's error (not in the paper)");
     k.add("loss.edge_strain", [](Config& c) -> double& { return c.loss.edge_strain; }, "edge-length strain weight (not in the paper; 0 = off)", weight);
     // [physics]
     k.add("physics.weight", [](Config& c) -> double& { return c.physics.weight; }, "weight of the physics energy (losses/physics.h, per garment vertex) beside the supervised loss; 0 = off", weight);

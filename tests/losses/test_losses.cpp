@@ -65,6 +65,32 @@ TEST(Losses, HandCountedValues) {
   EXPECT_NEAR(t.total.scalar(), t.vertex + t.patch + t.normal + 1.3 * t.collision_body + 0.1 * t.collision_layer, 1e-12);
 }
 
+// loss.relative_to_base: the vertex and patch terms are divided by the error of x − a, the
+// prediction with a zero network output; the reported terms stay the raw errors.
+TEST(Losses, RelativeToBaseDividesByTheZeroOutputError) {
+  Toy toy;
+  for (int v = 0; v < 6; ++v) toy.pred[9 * v + 8] = -0.1;  // base z = x_z + 0.1
+  toy.patch[8] = 0.1;                                      // patch base z = 0.1
+  ad::ParamStore<double> ps;
+  ad::Tape<double> tape;
+  model::Predictions<double> pred{tape.leaf(toy.pred.data(), 6, 9), tape.leaf(toy.patch.data(), 1, 9)};
+  LossConfig lc;
+  lc.normal = lc.collision_body = lc.collision_layer = 0;
+  lc.relative_to_base = true;
+  const auto t = compute_losses(tape, ps, no_ret(), lc, toy.target, pred);
+  EXPECT_NEAR(t.vertex, (0.0995 * 0.0995 + 0.15 * 0.15 + 0.1 * 0.1) / 6, 1e-12);
+  // base z errors: inner 0.1 each, outer 0.0005, -0.05, 0.2; over 6 vertices x 3 coordinates
+  const double base_vertex = (3 * 0.01 + 0.0005 * 0.0005 + 0.05 * 0.05 + 0.2 * 0.2) / 18;
+  const double base_patch = 0.15 * 0.15 / 3;
+  EXPECT_NEAR(t.total.scalar(), t.vertex / base_vertex + t.patch / base_patch, 1e-9);
+  // A base on the target is floored at (1 mm)² = 1e-4 units² per coordinate, not divided by 0.
+  for (int v = 0; v < 6; ++v)
+    for (int c = 0; c < 3; ++c) toy.pred[9 * v + 6 + c] = toy.pred[9 * v + c] - toy.target.target[3 * v + c];
+  model::Predictions<double> on_target{tape.leaf(toy.pred.data(), 6, 9), tape.leaf(toy.patch.data(), 1, 9)};
+  const auto floored = compute_losses(tape, ps, no_ret(), lc, toy.target, on_target);
+  EXPECT_NEAR(floored.total.scalar(), floored.vertex / 1e-4 + floored.patch / base_patch, 1e-6);
+}
+
 TEST(Losses, GradientsOfEveryTermMatchFiniteDifferences) {
   Toy toy;
   ad::ParamStore<double> ps;

@@ -89,6 +89,13 @@ TEST(ModelGradcheck, WholeModelExactOrthogonality) {
   directional_check(c);
 }
 
+TEST(ModelGradcheck, WholeModelBodyBaseSmoothedOutput) {
+  auto c = testing::tiny_config();
+  c.velocity_base = "body";
+  c.output_smoothing = 2;
+  directional_check(c);
+}
+
 // "exact": the effective W has orthonormal columns for any raw parameter, equals the raw
 // parameter at initialisation, and the loss has no orthogonality term.
 TEST(ModelOrthogonality, ExactParametrisationHoldsForAnyParameter) {

@@ -1,5 +1,6 @@
 // The dataset's training sample drives the model: conversion, forward, losses, backward; the
 // model input's neighbour lists and frames against their definitions.
+#include "dataset/body_skin.h"
 #include "dataset/garments.h"
 #include "dataset/sample.h"
 #include "dataset/synthetic.h"
@@ -216,6 +217,51 @@ TEST(NormalFrame, RotationsWithTheNormalLast) {
 TEST(NormalFrame, NearAxisNormalsWithinFloatPrecision) {
   const std::vector<Eigen::Vector3d> normals = {{1, 2e-7, -2e-7}, {3e-7, 1, 0}, {-2e-7, 0, -1}, {1, 1e-4, 0}};
   for (const auto& n : normals) expect_rotation_to_z(n.normalized(), 1e-6);
+}
+
+// model.output_smoothing averages the network's per-vertex correction over the garment mesh with
+// the carry's operator (dataset::smooth_over_mesh), and moves x and v by the same change.
+TEST(SampleInput, OutputSmoothingAveragesTheCorrectionOverTheMesh) {
+  dataset::SyntheticOptions o;
+  o.garments = 2;
+  o.frames = 10;
+  const auto seq = dataset::make_synthetic_sequence(o);
+  const auto st = stats();
+  ModelConfig c = testing::tiny_config();
+  c.velocity_base = "body";
+  const auto sample = dataset::build_sample(seq.info, seq.frames, 6, st, nullptr, sample_options_for(c));
+  const int N = sample.num_vertices();
+  ad::ParamStore<float> ps;
+  register_params(ps, c);
+  init_params(ps, c, 1);
+  std::mt19937 rng(5);  // a nonzero output layer: the zero one predicts no correction to smooth
+  std::normal_distribution<float> normal(0.f, 0.3f);
+  for (float& w : ps.value(ps.index_of("decoder.proj.2.weight"))) w = normal(rng);
+  ad::Tape<float> tape;
+  const auto raw = forward(tape, ps, c, model_input_from_sample(sample, st, c));
+  c.output_smoothing = 3;
+  const auto in = model_input_from_sample(sample, st, c);
+  const auto smooth = forward(tape, ps, c, in);
+  dataset::Points correction(N, 3), expected;
+  for (int v = 0; v < N; ++v)
+    for (int k = 0; k < 3; ++k) correction(v, k) = raw.vertex.value[9 * v + 6 + k];
+  expected = correction;
+  dataset::smooth_over_mesh(expected, sample.structure->vertex_neighbours, 3);
+  float moved = 0;
+  for (int v = 0; v < N; ++v)
+    for (int k = 0; k < 3; ++k) {
+      const float change = expected(v, k) - correction(v, k);
+      moved = std::max(moved, std::abs(change));
+      EXPECT_NEAR(smooth.vertex.value[9 * v + 6 + k], expected(v, k), 1e-5f) << v;
+      EXPECT_NEAR(smooth.vertex.value[9 * v + k], raw.vertex.value[9 * v + k] + change, 1e-5f) << v;
+      EXPECT_NEAR(smooth.vertex.value[9 * v + 3 + k], raw.vertex.value[9 * v + 3 + k] + change, 1e-5f) << v;
+    }
+  EXPECT_GT(moved, 1e-3f);  // the raw correction differs between neighbours
+  // A model that smooths refuses an input built without the neighbours.
+  c.output_smoothing = 0;
+  const auto bare = model_input_from_sample(sample, st, c);
+  c.output_smoothing = 3;
+  EXPECT_THROW(forward(tape, ps, c, bare), std::exception);
 }
 
 TEST(NormalFrame, OfficialFirstAxisRuleAndNonUnitInput) {
