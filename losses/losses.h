@@ -15,7 +15,8 @@
 //                    length at t+1 (not in the paper; off by default)
 //
 //   total = Σ weight_k · term_k, weights from LossConfig (collision_layer is NOT multiplied by
-//   collision_body, as in the official code).
+//   collision_body, as in the official code). With relative_to_base, vertex and patch are
+//   divided by the same error of the zero-output prediction x − a (not in the paper).
 //
 // Nearest anchors are found outside the tape on the current values (indices only); the
 // distances are on the tape. A term whose weight is 0, or that the scene does not have
