@@ -5,22 +5,38 @@ returned is in scene units (x10). The outer layer is always built at least `GAP`
 outside the inner layer's radius at the same height and angle, so the two layers
 start without interpenetration.
 """
+import math
+
 import numpy as np
 
-from garments import SCENE_SCALE, pants_garment, tube_garment, tube_rings, _rows
+from garments import SCENE_SCALE, ArmAxis, pants_garment, sleeved_garment, tube_garment, tube_rings, _rows
 
 S = SCENE_SCALE
 INNER_KINDS = ("pants_tight", "skirt", "dress_strapless")
 OUTER_KINDS = ("coat_sleeveless", "jacket_sleeveless")
-# Families of the large recipe (opt-in through a scene's inner_kinds / outer_kinds): skirts and
-# dresses to the calf or ankle, wide trousers, a coat to the calf. No sleeves yet.
-EXTRA_INNER_KINDS = ("skirt_long", "dress_long", "pants_loose")
-EXTRA_OUTER_KINDS = ("coat_long",)
+# Opt-in families (a scene's inner_kinds / outer_kinds): skirts and dresses to the calf or
+# ankle, wide trousers, a coat to the calf (the large recipe); a top and a jacket with sleeves.
+EXTRA_INNER_KINDS = ("skirt_long", "dress_long", "pants_loose", "top_sleeved")
+EXTRA_OUTER_KINDS = ("coat_long", "jacket_sleeved")
 TIGHT_INNER = ("pants_tight",)
 GAP = 0.02          # metres between the inner layer and the outer one at rest
 SPACING = 0.045     # metres between garment rows (about the ring edge length)
 COLS = 40           # vertices per ring; divisible by 2, 4, 8 panels
 Z_WAIST, Z_CROTCH, Z_HIP, Z_CHEST = 1.00, 0.84, 0.93, 1.22
+# Sleeved garments: the neckline ring above the shoulder tops next to the neck (1.38-1.40 m),
+# the armholes' lower edge 3 cm under the armpits (1.23 m on the rest body).
+Z_NECK, Z_ARMPIT = 1.40, 1.20
+# Left arm axis of the rest body (metres): shoulder joint, elbow, wrist. The centres of the
+# arm's cross-sections lie within 1.3 cm of these lines; the right arm mirrors x.
+ARM_JOINTS = ((0.17, -0.02, 1.30), (0.371, -0.039, 1.105), (0.448, -0.185, 1.015))
+ELBOW_BEND = 0.10   # metres of arm either side of the elbow over which the sleeve turns
+ARMHOLE_DEG = 27.0  # half-width of an armhole around the side (90 / 270 degrees)
+ARMHOLE_TOP_DEG = 15.0  # its half-width on the neckline, over the shoulder top
+YOKE_BELOW = 0.06   # metres of body under a ring above the armpits that the ring clears
+SLEEVE_START = 0.06  # metres along the arm from the shoulder joint: the armholes end about here
+# An outer layer's armholes reach lower and its sleeves start farther out: under the arm its
+# sleeve and its side must both pass outside the inner layer's, which meet at the armpit.
+Z_ARMPIT_OUTER, SLEEVE_START_OUTER = 1.10, 0.19
 
 
 def _inner(profile, kind, rng, spacing, cols):
@@ -58,19 +74,69 @@ def _inner(profile, kind, rng, spacing, cols):
         fn = lambda z: (base + flare * max(0.0, Z_HIP - z / S)) * S
         rings = tube_rings(profile, _rows(Z_CHEST * S, hem * S, spacing * S), fn, cols, Z_HIP * S)
         return tube_garment("dress", "dress_strapless", rings, 2), fn, Z_CHEST
+    if kind == "top_sleeved":
+        off, hem = rng.uniform(0.015, 0.025), rng.uniform(0.88, 1.02)
+        sleeve, sleeve_off = rng.uniform(0.14, 0.44), rng.uniform(0.015, 0.03)
+        fn = lambda z: off * S
+        g = _sleeved("top", kind, profile, hem, fn, sleeve, lambda t: sleeve_off * S, spacing, cols, False)
+        return g, fn, Z_NECK
     raise ValueError(f"outfits.py: unknown inner garment kind '{kind}' (use one of {INNER_KINDS + EXTRA_INNER_KINDS})")
 
 
-def _outer(profile, kind, rng, inner_fn, inner_top, spacing, cols):
-    """Outer layer: looser than the inner one by GAP plus a sampled ease, longer for coats."""
+def arm_axes(bend=ELBOW_BEND):
+    """{+1: left arm, -1: right arm} centre lines of the rest body, in scene units."""
+    left = ArmAxis(*(np.array(j) * S for j in ARM_JOINTS), bend * S)
+    return {1: left, -1: left.mirrored()}
+
+
+def sleeve_positions(length, spacing, start):
+    """Arc lengths (metres from the shoulder joint) of a sleeve's rings after its armhole: every
+    `spacing` from SLEEVE_START, the first at or after `start`, and the cuff at `length`. The
+    grid does not depend on the layer, so an outer sleeve's rings lie in the inner's planes."""
+    j0 = int(math.ceil((start - SLEEVE_START) / spacing - 1e-9))
+    n = max(j0 + 1, int(round((length - SLEEVE_START) / spacing)))
+    return np.array([SLEEVE_START + spacing * j for j in range(max(j0, 1), n)] + [length])
+
+
+def _sleeved(name, kind, profile, hem, fn, sleeve_length, sleeve_fn, spacing, cols, outer):
+    """A sleeved garment from the neckline to `hem` (metres). Its armholes reach from row 1
+    (inner layer: a shoulder seam one row under the neckline) or from the neckline (outer
+    layer: its sleeve caps pass above the inner's seams) down to Z_ARMPIT or Z_ARMPIT_OUTER.
+    Every layer's rows lie on one grid from the neckline (the last one moves to the hem), so
+    an outer layer's rings are at the inner's heights. The garment carries sleeve_length
+    (metres) and sleeve_offset (arc length -> offset, scene units) for an outer layer."""
+    bottom, start = (Z_ARMPIT_OUTER, SLEEVE_START_OUTER) if outer else (Z_ARMPIT, SLEEVE_START)
+    step = (Z_NECK - Z_ARMPIT) / max(2, int(round((Z_NECK - Z_ARMPIT) / spacing)))
+    k = int(round((Z_NECK - bottom) / step))
+    n = max(k + 1, int(round((Z_NECK - hem) / step)))
+    z_rows = np.append(Z_NECK - step * np.arange(n), hem) * S
+    t = sleeve_positions(sleeve_length, spacing, start) * S
+    hole = max(1, int(round(ARMHOLE_DEG / 360.0 * cols)))
+    g = sleeved_garment(name, kind, profile, z_rows, (0 if outer else 1, k), fn, Z_HIP * S, cols, arm_axes(), t,
+                        sleeve_fn, hole, ARMHOLE_TOP_DEG, YOKE_BELOW * S, spacing * S)
+    g.sleeve_length = sleeve_length
+    g.sleeve_offset = sleeve_fn
+    return g
+
+
+def _outer(profile, kind, rng, inner_fn, inner_top, spacing, cols, inner_sleeve=None):
+    """Outer layer: looser than the inner one by GAP plus a sampled ease, longer for coats.
+    inner_sleeve: the inner layer's sleeve offset (scene units of arc length -> scene units),
+    or None when it has no sleeves."""
     ease, flare = rng.uniform(0.0, 0.02), rng.uniform(0.05, 0.3)
-    top = Z_CHEST + 0.02
+    # Over sleeves a sleeveless outer layer starts under them (its top ring would cut them).
+    top = Z_CHEST + 0.02 if inner_sleeve is None else Z_ARMPIT_OUTER
 
     def fn(z):
         zm = z / S
         inner = inner_fn(z) if zm <= inner_top + 1e-6 else 0.012 * S
         return inner + (GAP + ease + flare * max(0.0, Z_HIP - zm)) * S
 
+    if kind == "jacket_sleeved":
+        hem, sleeve, sleeve_ease = rng.uniform(0.72, 0.88), rng.uniform(0.30, 0.44), rng.uniform(0.0, 0.02)
+        under = inner_sleeve if inner_sleeve is not None else (lambda t: 0.012 * S)
+        return _sleeved("jacket", kind, profile, hem, fn, sleeve,
+                        lambda t: under(t) + (GAP + sleeve_ease) * S, spacing, cols, True)
     if kind == "coat_sleeveless":
         hem, panels = rng.uniform(0.40, 0.60), 4
     elif kind == "jacket_sleeveless":
@@ -91,7 +157,7 @@ def build_outfit(profile, inner_kind, outer_kind, rng, spacing=SPACING, cols=COL
     if cols % 8 != 0:
         raise ValueError(f"outfits.py: ring vertex count {cols} must be a multiple of 8")
     inner, inner_fn, inner_top = _inner(profile, inner_kind, rng, spacing, cols)
-    outer = _outer(profile, outer_kind, rng, inner_fn, inner_top, spacing, cols)
+    outer = _outer(profile, outer_kind, rng, inner_fn, inner_top, spacing, cols, getattr(inner, "sleeve_offset", None))
     if outer.name == inner.name:
         outer.name += "_outer"
     return [inner, outer]
