@@ -31,6 +31,14 @@ dataset::NormalisationStats stats() {
   return s;
 }
 
+// Two garments over ten frames: the scene of the body-base, local-feature and smoothing tests.
+dataset::Sequence two_garment_sequence() {
+  dataset::SyntheticOptions o;
+  o.garments = 2;
+  o.frames = 10;
+  return dataset::make_synthetic_sequence(o);
+}
+
 TEST(SampleInput, DatasetSampleTrainsTheModel) {
   for (const bool local : {false, true})
   for (const bool wind : {false, true}) {
@@ -81,10 +89,7 @@ TEST(SampleInput, DatasetSampleTrainsTheModel) {
 // x_t by that turn, and a freshly initialised network (its output layer starts at zero) predicts
 // exactly that step, whatever the velocity statistics.
 TEST(SampleInput, BodyVelocityBaseCarriesTheClothWithATurningBody) {
-  dataset::SyntheticOptions o;
-  o.garments = 2;
-  o.frames = 10;
-  auto seq = dataset::make_synthetic_sequence(o);
+  auto seq = two_garment_sequence();
   const int t = 6;
   const Eigen::Matrix3f R = Eigen::AngleAxisf(0.3f, Eigen::Vector3f(0.2f, 0.1f, 1.f).normalized()).toRotationMatrix();
   const Eigen::Matrix3f R_prev = Eigen::AngleAxisf(-0.2f, Eigen::Vector3f(0.f, 0.3f, 1.f).normalized()).toRotationMatrix();
@@ -145,10 +150,7 @@ TEST(SampleInput, BodyVelocityBaseCarriesTheClothWithATurningBody) {
 
 // Each block of ModelInput::vertex_local recomputed here from the sequence itself.
 TEST(SampleInput, VertexLocalFeaturesAreWhatTheirNamesSay) {
-  dataset::SyntheticOptions o;
-  o.garments = 2;
-  o.frames = 10;
-  const auto seq = dataset::make_synthetic_sequence(o);
+  const auto seq = two_garment_sequence();
   const auto st = stats();
   const int t = 6;
   const auto sample = dataset::build_sample(seq.info, seq.frames, t, st, nullptr);
@@ -222,10 +224,7 @@ TEST(NormalFrame, NearAxisNormalsWithinFloatPrecision) {
 // model.output_smoothing averages the network's per-vertex correction over the garment mesh with
 // the carry's operator (dataset::smooth_over_mesh), and moves x and v by the same change.
 TEST(SampleInput, OutputSmoothingAveragesTheCorrectionOverTheMesh) {
-  dataset::SyntheticOptions o;
-  o.garments = 2;
-  o.frames = 10;
-  const auto seq = dataset::make_synthetic_sequence(o);
+  const auto seq = two_garment_sequence();
   const auto st = stats();
   ModelConfig c = testing::tiny_config();
   c.velocity_base = "body";
