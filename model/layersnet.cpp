@@ -522,18 +522,11 @@ Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
   // c_t are held constant under StateDelta (their dependence on the state is the body's rotation),
   // and the outputs are not offset by the mean velocity: a zero output is the carried step.
   const bool carried = cfg.velocity_base != "inertia";
-  LAYERSNET_CHECK(!carried || in.body_carry.size() == static_cast<std::size_t>(N * 3),
-                  "model.velocity_base = \"" << cfg.velocity_base << "\" but the input has no body_carry (N = " << N << ")");
-  std::vector<T> carry_p;
-  if (carried) {
-    carry_p.assign(P * 3, T(0));
-    for (int64_t p = 0; p < P; ++p) {
-      const int32_t b = in.p2v_offsets[p], e = in.p2v_offsets[p + 1];
-      for (int32_t k = b; k < e; ++k)
-        for (int c = 0; c < 3; ++c) carry_p[3 * p + c] += in.body_carry[3 * in.p2v_vertices[k] + c];
-      for (int c = 0; c < 3; ++c) carry_p[3 * p + c] /= static_cast<T>(std::max(1, e - b));
-    }
-  }
+  LAYERSNET_CHECK(!carried || (in.body_carry.size() == static_cast<std::size_t>(N * 3) &&
+                               in.body_carry_patch.size() == static_cast<std::size_t>(P * 3)),
+                  "model.velocity_base = \"" << cfg.velocity_base << "\" but the input lacks body_carry (N = " << N
+                                          << ", 3) or body_carry_patch (P = " << P << ", 3): build it with model_input_from_sample");
+  const std::vector<T>& carry_p = in.body_carry_patch;
   std::vector<T> base_p(P * 6);
   for (int64_t i = 0; i < P; ++i) {
     std::copy_n(&in.patch_state[12 * i], 6, &base_p[6 * i]);

@@ -62,6 +62,8 @@ void validate(const ModelInput<T>& in) {
   check_csr("cand", in.cand_offsets, in.cand_patches, N, 0, P);
   if (!in.vertex_local.empty()) check_size("vertex_local", in.vertex_local.size(), N * kVertexLocalDim);
   if (!in.body_carry.empty()) check_size("body_carry", in.body_carry.size(), N * 3);
+  if (!in.body_carry.empty() || !in.body_carry_patch.empty())
+    check_size("body_carry_patch", in.body_carry_patch.size(), P * 3);
   if (!in.vertex_mesh_offsets.empty()) check_csr("vertex_mesh", in.vertex_mesh_offsets, in.vertex_mesh_neighbours, N, 0, N);
   check_size("mean12", in.mean12.size(), 12);
   check_size("std12", in.std12.size(), 12);

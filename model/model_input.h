@@ -93,6 +93,8 @@ struct ModelInput {
   // vertex from t to t+1, TrainingSample::body_carry) or "body_inertia" (that plus the vertex's
   // velocity relative to the body at t); root-relative, units/frame.  (N, 3) or empty
   std::vector<T> body_carry;
+  // body_carry averaged over each patch's member vertices (dataset::patch_means).  (P, 3) or empty
+  std::vector<T> body_carry_patch;
   // Garment mesh neighbours of each vertex, for ModelConfig::output_smoothing (empty when it is
   // 0). A vertex without mesh neighbours lists itself, so averaging keeps its value.  CSR over N.
   std::vector<int32_t> vertex_mesh_offsets, vertex_mesh_neighbours;
@@ -122,7 +124,7 @@ ModelInput<U> cast_input(const ModelInput<T>& in) {
   o.patch_body = in.patch_body, o.vertex_body = in.vertex_body;
   o.cand_offsets = in.cand_offsets, o.cand_patches = in.cand_patches;
   o.vertex_local = cv(in.vertex_local);
-  o.body_carry = cv(in.body_carry);
+  o.body_carry = cv(in.body_carry), o.body_carry_patch = cv(in.body_carry_patch);
   o.vertex_mesh_offsets = in.vertex_mesh_offsets, o.vertex_mesh_neighbours = in.vertex_mesh_neighbours;
   o.mean12 = cv(in.mean12), o.std12 = cv(in.std12);
   return o;

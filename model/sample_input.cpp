@@ -251,6 +251,9 @@ ModelInput<float> model_input_from_sample(const dataset::TrainingSample& s, cons
     if (relative)  // c + (v_t − c_t)
       for (int64_t v = 0; v < N; ++v)
         for (int c = 0; c < 3; ++c) in.body_carry[3 * v + c] += s.state(v, 3 + c) - s.body_carry_prev(v, c);
+    const Eigen::Map<const Eigen::Matrix<float, Eigen::Dynamic, 3, Eigen::RowMajor>> carry(in.body_carry.data(), N, 3);
+    const auto carry_patch = dataset::patch_means(st.all, carry);
+    in.body_carry_patch.assign(carry_patch.data(), carry_patch.data() + 3 * P);
   }
   if (cfg.output_smoothing > 0) {
     const auto& nb = s.structure->vertex_neighbours;
