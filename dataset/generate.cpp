@@ -250,7 +250,10 @@ GenerateSummary generate_dataset(const GenerateOptions& opt) {
           ? split_names_from_ranges(count, recipe["split_ranges"], recipe_path.string() + ": /split_ranges")
           : split_names(count, recipe.value("val_fraction", 0.125), recipe.value("test_fraction", 0.125));
   std::ostringstream source_text;
-  source_text << "layersnet generate: Blender cloth (generate/make_sequence.py), recipe " << recipe_path.string()
+  const bool solved = scene.value("cloth", std::string("blender")) == "blender";
+  source_text << "layersnet generate: "
+              << (solved ? "Blender cloth" : "garments carried by the body, no cloth solver (not simulated cloth)")
+              << " (generate/make_sequence.py), recipe " << recipe_path.string()
               << ", seed " << seed << ", count " << count << ", scene " << scene.dump();
   const std::string source = source_text.str();
 

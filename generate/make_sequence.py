@@ -10,6 +10,8 @@ a fixed noise seed, so the same seed gives the same file on the same machine.
 Scene: the MakeHuman body driven by a CMU clip, two garment layers merged into one
 cloth object with self-collision, piecewise-constant wind, the world scaled x10 before
 simulation, gravity (0, 0, -9.8) scene units/s^2, z up, 30 fps.
+Scene key "cloth": "surface" skips the solver: the outfit is carried on the body (Surface
+Deform), for physics-only pretraining; such files are not ground truth.
 """
 import argparse
 import json
@@ -93,7 +95,12 @@ DEFAULTS = {
     # of them with probability heldout_probability, train and val never do.
     "heldout_kinds": [],
     "heldout_probability": 0.5,
+    # "blender": the cloth solver (ground truth). "surface": no solver; the outfit is carried by
+    # the body through a Surface Deform bound in the rest pose (cheap starting states for
+    # physics-only pretraining, never supervised targets; file attr cloth_source).
+    "cloth": "blender",
 }
+CLOTH_MODES = ("blender", "surface")
 SPLIT_CODE = motion_blocks.SPLIT_CODE
 
 
@@ -115,6 +122,9 @@ def parse_args():
             raise SystemExit(f"make_sequence.py: {a.config}: unknown keys {sorted(unknown)}; "
                              f"known: {sorted(DEFAULTS)}")
         cfg.update(over)
+    if cfg["cloth"] not in CLOTH_MODES:
+        raise SystemExit(f"make_sequence.py: scene key 'cloth' is {cfg['cloth']!r}; "
+                         f"known: {', '.join(CLOTH_MODES)}")
     return a, cfg
 
 
@@ -256,9 +266,28 @@ def add_wind(pivots, centre, field_seed, field_factor=1.0):
     return wind
 
 
+def carry_on_body(obj, body):
+    """Surface Deform of `obj` onto the body, bound at frame 1 (the rest pose, where the
+    garments were built); the body must already be deformed by its armature."""
+    deforming = [m.type for m in body.modifiers if m.type != "COLLISION"]
+    if deforming != ["ARMATURE"]:
+        raise RuntimeError(f"make_sequence.py: cloth 'surface' needs the body deformed by its Armature modifier "
+                           f"alone, found modifiers {[m.type for m in body.modifiers]}")
+    bpy.context.scene.frame_set(1)
+    mod = obj.modifiers.new("surface", "SURFACE_DEFORM")
+    mod.target = body
+    with bpy.context.temp_override(object=obj, active_object=obj):
+        bpy.ops.object.surfacedeform_bind(modifier=mod.name)
+    if not mod.is_bound:
+        raise RuntimeError("make_sequence.py: cloth 'surface': Surface Deform of the outfit onto the body did not "
+                           "bind at frame 1 (Blender's message is in the log above)")
+    return mod
+
+
 def make_cloth(garments, body_w, bone_names, body_rest, layer_attrs, cfg, torso_bones):
     """One mesh object holding every layer (self-collision keeps the layers apart), with
-    an Armature modifier (for the pinned edges) before the Cloth modifier."""
+    an Armature modifier (for the pinned edges) before the Cloth modifier; with cfg cloth
+    "surface", only a Surface Deform onto the body (no solver)."""
     verts = np.concatenate([g.verts for g in garments])
     if cfg["cloth_jitter"] > 0:
         verts = verts + np.random.default_rng(0).normal(0.0, cfg["cloth_jitter"], verts.shape)
@@ -284,6 +313,9 @@ def make_cloth(garments, body_w, bone_names, body_rest, layer_attrs, cfg, torso_
         vg = obj.vertex_groups.new(name=name)
         for i in np.nonzero(w > 0)[0]:
             vg.add([int(i)], float(w[i]), "REPLACE")
+    if cfg["cloth"] == "surface":
+        carry_on_body(obj, bpy.data.objects["body"])
+        return obj, offs
     # Skin weights (they move the pinned waistband / top edge) from the nearest body vertex,
     # restricted to the pelvis and spine: thigh or arm weights would stretch the band.
     keep = np.array([n in torso_bones for n in bone_names])
@@ -441,6 +473,7 @@ def main():
         "inner_kind": inner_kind, "outer_kind": outer_kind, "garments": [g["name"] for g in gar],
         "garment_types": [g["type"] for g in gar], "attributes": layer_attrs,
         "body_friction": body_friction, "wind_pivots": pivots, "max_wind_strength": max_wind,
+        **({"cloth_source": "surface_deform"} if cfg["cloth"] == "surface" else {}),
         "tags": tags, "frames": T, "rest_frames": cfg["rest_frames"], "ramp_frames": cfg["ramp_frames"],
         "body_vertices": B, "cloth_vertices": int(N), "unweighted_body_vertices": unweighted,
         "finite": finite, "quality": q,
@@ -455,6 +488,10 @@ def main():
              "max_wind_strength": max_wind, "q_blender_s_per_frame": t_sim / T}
     for k, v in q.items():
         extra["q_" + k] = v
+    if cfg["cloth"] == "surface":
+        extra["generator"] = ("layersnet generate (garments carried by the body through Blender's Surface Deform, "
+                              "no cloth solver: not simulated cloth; generate/make_sequence.py)")
+        extra["cloth_source"] = "surface_deform"
     if cfg["wind_field_factor"] != 1.0:
         extra["wind_field_factor"] = float(cfg["wind_field_factor"])
     if cfg["stiffness_groups"] != "outer_max":

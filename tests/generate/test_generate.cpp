@@ -151,6 +151,18 @@ TEST(GenerateMotionWind, ProceduralOverlaysAndHorizontalWind) {
   EXPECT_EQ(run("/usr/bin/python3 " + kSource + "/tests/generate/test_motion_wind.py"), 0);
 }
 
+TEST(GenerateCloth, SceneKeyClothIsValidatedAndSkinnedRecipeIsAllTrain) {
+  if (run("/usr/bin/python3 -c 'import numpy' > /dev/null 2>&1") != 0) GTEST_SKIP() << "no numpy";
+  EXPECT_EQ(run("/usr/bin/python3 " + kSource + "/tests/generate/test_cloth_mode.py"), 0);
+}
+
+// About 15 s: a 12-frame "surface" sequence and its "blender" twin.
+TEST(GenerateCloth, SurfaceCarriesGarmentsOnTheSameBody) {
+  if (!have_blender()) GTEST_SKIP() << "blender not installed";
+  if (run("/usr/bin/python3 -c 'import h5py, numpy' > /dev/null 2>&1") != 0) GTEST_SKIP() << "no h5py/numpy";
+  EXPECT_EQ(run("/usr/bin/python3 " + kSource + "/tests/generate/test_cloth_mode.py --blender"), 0);
+}
+
 TEST(GenerateGarments, OlderFilesGetTheGeneratorsPins) {
   if (run("/usr/bin/python3 -c 'import h5py, numpy' > /dev/null 2>&1") != 0) GTEST_SKIP() << "no h5py/numpy";
   EXPECT_EQ(run("/usr/bin/python3 " + kSource + "/tests/generate/test_add_pins.py"), 0);

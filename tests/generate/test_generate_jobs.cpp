@@ -96,6 +96,8 @@ TEST(GenerateJobs, SeedsPerIndexPeriodicManifestAndResume) {
   EXPECT_EQ(m.extra["subsets"]["test_procedural_motion"].size(), 2u);
   EXPECT_FALSE(m.extra["subsets"].contains("test_seen_outfit"));
   EXPECT_EQ(read(fs::path(o.out) / "generate_report.json")["summary"]["jobs"], 3);
+  const std::string solved_source = read(fs::path(o.out) / "dataset.json")["source"];
+  EXPECT_EQ(solved_source.rfind("layersnet generate: Blender cloth", 0), 0u) << solved_source;
   // Each report names the Blender thread count (a re-simulation must use the same).
   EXPECT_EQ(read(fs::path(o.out) / "reports" / "00004.json")["blender_threads"], o.threads);
 
@@ -111,6 +113,14 @@ TEST(GenerateJobs, SeedsPerIndexPeriodicManifestAndResume) {
   for (const json& e : report["sequences"])
     if (e["status"] != "kept") simulated.insert(e["id"].get<std::string>());
   EXPECT_EQ(simulated, std::set<std::string>{"00003"});
+  // A recipe without the solver says so where every reader of the data set looks.
+  const fs::path carried_recipe = dir / "carried.json";
+  std::ofstream(carried_recipe) << R"({"count": 1, "seed": 9, "split_ranges": {}, "scene": {"frames": 6, "cloth": "surface"}})";
+  GenerateOptions carried = o;
+  carried.recipe = carried_recipe.string(), carried.out = (dir / "carried").string();
+  EXPECT_EQ(generate_dataset(carried).accepted, 1);
+  const std::string carried_source = read(dir / "carried" / "dataset.json")["source"];
+  EXPECT_NE(carried_source.find("no cloth solver (not simulated cloth)"), std::string::npos) << carried_source;
   EXPECT_THROW(
       [&] {
         GenerateOptions bad = o;
