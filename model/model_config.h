@@ -36,6 +36,10 @@ struct ModelConfig {
   // predicts how the cloth moves against the body. "body_inertia": v_{t+1} = c + (v_t − c_t) + a,
   // c_t the same displacement from t−1 to t: the cloth keeps its velocity relative to the body.
   std::string velocity_base = "inertia";
+  // "body_inertia" only: the share of the relative velocity v_t − c_t a zero output keeps,
+  // v_{t+1} = c + swing_kept (v_t − c_t) + a. 1 keeps the whole swing, 0 is "body"; between them
+  // the swing a self-fed rollout hands itself decays geometrically.
+  double swing_kept = 1.0;
   // Jacobi averaging steps over the garment mesh applied to the body carry c (not "inertia"). The
   // carry binds each vertex to its nearest body vertex, so neighbours bound to different limbs
   // (a hem between the legs) move apart; averaging keeps them together (docs/decisions.md,

@@ -248,9 +248,11 @@ ModelInput<float> model_input_from_sample(const dataset::TrainingSample& s, cons
                                             << (relative ? " and body_carry_prev" : "")
                                             << ": build the sample with sample_options_for(the model's config)");
     in.body_carry.assign(s.body_carry.data(), s.body_carry.data() + 3 * N);
-    if (relative)  // c + (v_t − c_t)
+    if (relative) {  // c + swing_kept (v_t − c_t)
+      const float kept = static_cast<float>(cfg.swing_kept);
       for (int64_t v = 0; v < N; ++v)
-        for (int c = 0; c < 3; ++c) in.body_carry[3 * v + c] += s.state(v, 3 + c) - s.body_carry_prev(v, c);
+        for (int c = 0; c < 3; ++c) in.body_carry[3 * v + c] += kept * (s.state(v, 3 + c) - s.body_carry_prev(v, c));
+    }
     const Eigen::Map<const Eigen::Matrix<float, Eigen::Dynamic, 3, Eigen::RowMajor>> carry(in.body_carry.data(), N, 3);
     const auto carry_patch = dataset::patch_means(st.all, carry);
     in.body_carry_patch.assign(carry_patch.data(), carry_patch.data() + 3 * P);

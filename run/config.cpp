@@ -166,6 +166,7 @@ const Schema& schema() {
     k.add("model.decoder_ret_channels", [](Config& c) -> int& { return c.model.decoder_ret_channels; }, "3-vector channels of the decoder's RET (official 1; 3k <= width)", {1, 1024, {}});
     k.add("model.vertex_local_features", [](Config& c) -> bool& { return c.model.vertex_local_features; }, "the decoder also sees each vertex's nearest body motion, spring force and Laplacians (not in the paper)");
     k.add("model.velocity_base", [](Config& c) -> std::string& { return c.model.velocity_base; }, "what a zero network output predicts: the cloth keeps its velocity (inertia, official), moves with the body surface (body), or keeps its velocity relative to the body surface (body_inertia)", {0, 0, {"inertia", "body", "body_inertia"}});
+    k.add("model.swing_kept", [](Config& c) -> double& { return c.model.swing_kept; }, "share of the cloth's velocity relative to the body surface that a zero output keeps (velocity_base body_inertia; 1 = all, 0 = the body base)", {0, 1, {}});
     k.add("model.carry_smoothing", [](Config& c) -> int& { return c.model.carry_smoothing; }, "averaging steps over the garment mesh on the body carry (velocity_base body or body_inertia); 0 = none", {0, 1000, {}});
     k.add("model.output_smoothing", [](Config& c) -> int& { return c.model.output_smoothing; }, "averaging steps over the garment mesh on the network's per-vertex correction (not in the paper); 0 = none", {0, 1000, {}});
     k.add("model.orthogonality", [](Config& c) -> std::string& { return c.model.orthogonality; }, "how W_R stays orthogonal", {0, 0, {"penalty", "exact"}});
@@ -402,6 +403,11 @@ void validate_config(const Config& config) {
                       ": every head takes width / heads channels; set model.width to " +
                       std::to_string(m.width / m.heads * m.heads) + " or " +
                       std::to_string((m.width / m.heads + 1) * m.heads));
+  if (m.swing_kept != 1.0 && m.velocity_base != "body_inertia")
+    throw ConfigError(key("model.swing_kept", m.swing_kept) + " scales the relative velocity that only " +
+                      key("model.velocity_base", "\"body_inertia\"") + " keeps, but " +
+                      key("model.velocity_base", "\"" + m.velocity_base + "\"") +
+                      "; set model.velocity_base = \"body_inertia\" or leave model.swing_kept at 1");
   if (m.rotation_equivalent && 3 * m.decoder_ret_channels > m.width)
     throw ConfigError(key("model.decoder_ret_channels", m.decoder_ret_channels) + " needs 3 x that many channels, more "
                       "than " + key("model.width", m.width) + "; set model.decoder_ret_channels <= " +

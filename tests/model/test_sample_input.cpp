@@ -142,6 +142,14 @@ TEST(SampleInput, BodyVelocityBaseCarriesTheClothWithATurningBody) {
     for (int k = 0; k < 3; ++k)
       EXPECT_NEAR(relative.vertex.value[9 * v + k],
                   x_t(v, k) + expected(v, k) + relative_sample.state(v, 3 + k) - carry_prev(v, k), 1e-4f) << v;
+  // model.swing_kept keeps that share of the relative velocity.
+  c.swing_kept = 0.25;
+  const auto damped = forward(tape, ps, c, model_input_from_sample(relative_sample, st, c));
+  for (int v = 0; v < N; ++v)
+    for (int k = 0; k < 3; ++k)
+      EXPECT_NEAR(damped.vertex.value[9 * v + k],
+                  x_t(v, k) + expected(v, k) + 0.25f * (relative_sample.state(v, 3 + k) - carry_prev(v, k)), 1e-4f) << v;
+  c.swing_kept = 1.0;
   // A body-based model refuses a sample built without the carry.
   c.velocity_base = "body";
   const auto bare = dataset::build_sample(seq.info, seq.frames, t, st, nullptr);

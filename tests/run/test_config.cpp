@@ -232,5 +232,38 @@ TEST_F(ConfigTest, EveryShippedConfigLoads) {
   EXPECT_GE(n, 3);
 }
 
+// Pretraining scores Blender's energy alone, on every step, and trains the very model the default
+// recipe fine-tunes (a checkpoint of one starts the other).
+TEST_F(ConfigTest, PretrainingIsTheEnergyAloneOnTheDefaultModel) {
+  const std::string configs = std::string(LAYERSNET_SOURCE_DIR) + "/configs/";
+  const Config pre = load_config({configs + "pretrain.toml"});
+  const Config fine = load_config({configs + "default.toml"});
+  for (const double w : {pre.loss.vertex, pre.loss.patch, pre.loss.normal, pre.loss.collision_body,
+                         pre.loss.collision_layer, pre.loss.edge_strain})
+    EXPECT_EQ(w, 0.0);
+  EXPECT_GT(pre.physics.weight, 0.0);
+  EXPECT_FALSE(pre.physics.self_fed_only);
+  EXPECT_FALSE(pre.train.validate);
+  EXPECT_GT(pre.train.max_steps, 0);
+  auto section = [](const Config& c, const std::string& name) {
+    const std::string text = to_toml(c);
+    const std::size_t begin = text.find("[" + name + "]");
+    return text.substr(begin, text.find("\n[", begin + 1) - begin);
+  };
+  EXPECT_EQ(section(pre, "model"), section(fine, "model"));
+}
+
+// The kept share of the swing belongs to the body_inertia base; elsewhere it would do nothing.
+TEST_F(ConfigTest, SwingKeptNeedsTheBodyInertiaBase) {
+  EXPECT_EQ(load_config({}, {"model.velocity_base=body_inertia", "model.swing_kept=0.5"}).model.swing_kept, 0.5);
+  try {
+    load_config({}, {"model.velocity_base=body", "model.swing_kept=0.5"});
+    ADD_FAILURE() << "no ConfigError";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("model.swing_kept = 0.5 (set at --set"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(load_config({}, {"model.velocity_base=body_inertia", "model.swing_kept=1.5"}), ConfigError);
+}
+
 }  // namespace
 }  // namespace layersnet
