@@ -75,6 +75,15 @@ struct LoadedModel {
 };
 LoadedModel load_model(const std::string& checkpoint_path);
 
+// The weights of a checkpoint trained with another [model] config, copied by name into `params`
+// (train.init_from): the checkpoint is read whole into its own model's layout (checksum and all),
+// then every tensor goes to the tensor of the same name. A tensor this model has and the
+// checkpoint lacks starts at zero and is named in `added`, so an added input weight (e.g.
+// decoder.local.weight) leaves the model computing what the checkpoint's did; a tensor the
+// checkpoint has and this model lacks, or one whose shape differs, is a CheckpointError naming it.
+// Adam moments are zeroed. Returns the checkpoint (its state and statistics).
+Checkpoint read_weights_by_name(const std::string& path, ad::ParamStore<float>& params, std::vector<std::string>& added);
+
 // The element-wise mean of the weights of `checkpoint_paths` (at least one), for averaging
 // the last epochs of one run: the config, statistics and state are the first file's, without
 // optimizer state. Throws CheckpointError naming the file when its model settings or its

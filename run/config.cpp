@@ -222,7 +222,7 @@ const Schema& schema() {
     k.add("train.bptt_steps", [](Config& c) -> int& { return c.train.bptt_steps; }, "the last this many self-fed steps are recorded and the loss's gradient flows back through them (0 = only the final step's, official)", {0, 1000, {}});
     k.add("train.bptt_score_every_step", [](Config& c) -> bool& { return c.train.bptt_score_every_step; }, "with bptt_steps: score every recorded self-fed step against its ground truth, the loss being the mean with the final step's (false: the final step's only)");
     k.add("train.input_noise", [](Config& c) -> double& { return c.train.input_noise; }, "std of noise on the input garment positions (scene units, 0 = off)", {0, 1e3, {}});
-    k.add("train.init_from", [](Config& c) -> std::string& { return c.train.init_from; }, "checkpoint or packed model whose weights (and statistics) start a new run; empty = random init");
+    k.add("train.init_from", [](Config& c) -> std::string& { return c.train.init_from; }, "checkpoint or packed model whose weights (by name; weights it lacks start at zero) and statistics start a new run; empty = random init");
     k.add("train.seed", [](Config& c) -> int64_t& { return c.train.seed; }, "random seed", {0, 9.0e15, {}});
     k.add("train.threads", [](Config& c) -> int& { return c.train.threads; }, "OpenMP threads (0 = all)", {0, 1024, {}});
     k.add("train.keep_checkpoints", [](Config& c) -> int& { return c.train.keep_checkpoints; }, "last N checkpoints kept", positive);

@@ -332,20 +332,21 @@ void Run::restore(const std::string& path) {
 }
 
 void Run::start_from(const std::string& path) {
-  const Checkpoint cp = read_checkpoint(path, params_);
-  // A fine-tuning run is a new run: the optimizer and its schedule start over.
-  for (auto moments : {params_.moment1(), params_.moment2()}) std::fill(moments.begin(), moments.end(), 0.0f);
+  // A fine-tuning run is a new run: the optimizer and its schedule start over (moments zeroed).
+  std::vector<std::string> added;
+  const Checkpoint cp = read_weights_by_name(path, params_, added);
   Config saved = parse_config_text(cp.config_toml, path + ":/config");
   saved.train = config_.train;
   saved.eval = config_.eval;
   saved.data = config_.data;
   saved.loss = config_.loss;
   if (to_toml(saved) != to_toml(config_))
-    out_ << "warning: " << path << " was trained with another [model] config than this run's; the weights fit its "
-         << "layout, but its radii or options differ\n";
+    out_ << "warning: " << path << " was trained with another [model] config than this run's; its weights are "
+         << "copied by name, but its radii or options differ\n";
   // The weights expect inputs normalised as they were trained.
   stats_ = stats_from_arrays(cp.stats, path);
   out_ << "starting from the weights of " << path << " (" << cp.state.global_step << " updates)\n";
+  for (const auto& name : added) out_ << "  " << name << ": not in that checkpoint, starts at zero\n";
   metric({{"event", "init_from"}, {"checkpoint", path}, {"updates", cp.state.global_step}});
 }
 

@@ -302,5 +302,53 @@ TEST_F(CheckpointTest, AveragedModelHoldsTheMeanWeightsAndRefusesOtherModelsOrDa
   expect_refused(write_model(other_radius, 5, 0.5, "other_model.h5"), "other_model.h5", "[model]");
 }
 
+// train.init_from across [model] configs: shared tensors copied by name, a tensor only this
+// model has starts at zero, and a tensor only the checkpoint has is refused by name.
+TEST_F(CheckpointTest, WeightsByNameFillAnAddedInputWeightWithZeros) {
+  const Config plain = load_config({std::string(LAYERSNET_SOURCE_DIR) + "/configs/tiny.toml"});
+  Config local = plain;
+  local.model.vertex_local_features = true;
+  ad::ParamStore<float> trained;
+  model::register_params(trained, plain.model);
+  model::init_params(trained, plain.model, 7);
+  Checkpoint cp;
+  cp.config_toml = to_toml(plain);
+  cp.state.global_step = 12;
+  const std::string path = (dir_ / "plain.h5").string();
+  write_checkpoint(path, trained, cp);
+
+  ad::ParamStore<float> widened;
+  model::register_params(widened, local.model);
+  model::init_params(widened, local.model, 8);
+  std::vector<std::string> added;
+  EXPECT_EQ(read_weights_by_name(path, widened, added).state.global_step, 12);
+  EXPECT_EQ(added, std::vector<std::string>{"decoder.local.weight"});
+  for (const auto& e : widened.entries()) {
+    const auto first = widened.values().begin() + static_cast<std::ptrdiff_t>(e.offset);
+    if (e.name == "decoder.local.weight") {
+      EXPECT_TRUE(std::all_of(first, first + e.size(), [](float v) { return v == 0.0f; }));
+      continue;
+    }
+    const auto& t = trained.entries()[static_cast<std::size_t>(trained.index_of(e.name))];
+    EXPECT_TRUE(std::equal(first, first + e.size(), trained.values().begin() + static_cast<std::ptrdiff_t>(t.offset)))
+        << e.name;
+  }
+  EXPECT_TRUE(std::all_of(widened.moment1().begin(), widened.moment1().end(), [](float v) { return v == 0.0f; }));
+
+  // The other way round the checkpoint holds a weight this model would drop.
+  const std::string local_path = (dir_ / "local.h5").string();
+  cp.config_toml = to_toml(local);
+  write_checkpoint(local_path, widened, cp);
+  ad::ParamStore<float> narrow;
+  model::register_params(narrow, plain.model);
+  try {
+    read_weights_by_name(local_path, narrow, added);
+    ADD_FAILURE() << "a checkpoint with a weight this model lacks was accepted";
+  } catch (const CheckpointError& e) {
+    EXPECT_NE(std::string(e.what()).find("decoder.local.weight"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("not in this model"), std::string::npos) << e.what();
+  }
+}
+
 }  // namespace
 }  // namespace layersnet
