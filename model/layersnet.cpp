@@ -604,7 +604,15 @@ Predictions<T> forward(ad::Tape<T>& tape, ad::ParamStore<T>& params, const Model
     for (int c = 0; c < 12; ++c) inv_std[c] = T(1) / in.std12[c];
     patch_in = ad::add(tape, patch_in, ad::mul(tape, delta.patch, constant(tape, inv_std, 1, 12)));
   }
-  const Var<T> patch_x = mlp(tape, p, "embed.input", 2, true, patch_in);
+  Var<T> patch_x = mlp(tape, p, "embed.input", 2, true, patch_in);
+  if (cfg.patch_base_input) {
+    LAYERSNET_CHECK(in.body_carry_patch.size() == static_cast<std::size_t>(P * 3),
+                    "model.patch_base_input needs the input's body_carry_patch (P = " << P << ", 3)");
+    std::vector<T> base(P * 3);
+    for (int64_t i = 0; i < P; ++i)
+      for (int c = 0; c < 3; ++c) base[3 * i + c] = in.body_carry_patch[3 * i + c] / in.std12[3 + c];
+    patch_x = ad::add(tape, patch_x, ad::linear(tape, constant(tape, base, P, 3), p("embed.base.weight")));
+  }
   const Var<T> attr_x = mlp(tape, p, "embed.attr", 2, true, constant(tape, in.attr, A, 5));
   StageClock body_clock(U > 0 ? times : nullptr, &StageTimes::encoder_body_ms);  // stays 0 without body tokens
   const Var<T> body_x = U > 0 ? mlp(tape, p, "embed.input", 2, true, constant(tape, in.body_norm, U, 12)) : Var<T>{};

@@ -50,6 +50,11 @@ struct ModelConfig {
   // corrections that differ between neighbours stretch and crumple the cloth in long rollouts;
   // averaged, neighbours are corrected together. 0 = the official decoder output.
   int output_smoothing = 0;
+  // With a body velocity base: each patch token also gets its base, the patch mean of the carry
+  // c̄_p / σ_v (root-relative like v_t), through embed.base.weight (width, 3), added to the patch
+  // embedding. The network corrects c without otherwise seeing it beyond model.body_radius. The
+  // weight starts at zero, so a model with it starts as the same model without it.
+  bool patch_base_input = false;
 };
 
 struct LossConfig {

@@ -100,6 +100,7 @@ void register_params(ad::ParamStore<T>& ps, const ModelConfig& c) {
   add_mlp(ps, "decoder.proj", {m.dec_in, m.dec_width, m.dec_width, 3});
   // Registered last so that switching it on leaves every other initial value unchanged.
   if (c.vertex_local_features) ps.add("decoder.local.weight", m.dec_width, kVertexLocalDim);
+  if (c.patch_base_input) ps.add("embed.base.weight", m.d, 3);
   ps.finalize();
 }
 
@@ -155,6 +156,11 @@ void init_params(ad::ParamStore<T>& ps, const ModelConfig& c, uint64_t seed) {
   }
   // With the body-carried velocity base a zero output is the skinning step: start there, the
   // other weights drawn as before (the same draws as the inertial model of the same seed).
+  // The patch base enters at zero: switched on, the model starts as the one without it.
+  if (c.patch_base_input) {
+    auto v = ps.value(ps.index_of("embed.base.weight"));
+    std::fill(v.begin(), v.end(), T(0));
+  }
   if (c.velocity_base != "inertia")
     for (std::size_t i = 0; i < entries.size(); ++i)
       if (entries[i].name.rfind("decoder.proj.2.", 0) == 0) {

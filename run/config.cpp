@@ -169,6 +169,7 @@ const Schema& schema() {
     k.add("model.swing_kept", [](Config& c) -> double& { return c.model.swing_kept; }, "share of the cloth's velocity relative to the body surface that a zero output keeps (velocity_base body_inertia; 1 = all, 0 = the body base)", {0, 1, {}});
     k.add("model.carry_smoothing", [](Config& c) -> int& { return c.model.carry_smoothing; }, "averaging steps over the garment mesh on the body carry (velocity_base body or body_inertia); 0 = none", {0, 1000, {}});
     k.add("model.output_smoothing", [](Config& c) -> int& { return c.model.output_smoothing; }, "averaging steps over the garment mesh on the network's per-vertex correction (not in the paper); 0 = none", {0, 1000, {}});
+    k.add("model.patch_base_input", [](Config& c) -> bool& { return c.model.patch_base_input; }, "each patch token also sees its velocity base (the body carry's patch mean; velocity_base body or body_inertia; not in the paper)");
     k.add("model.orthogonality", [](Config& c) -> std::string& { return c.model.orthogonality; }, "how W_R stays orthogonal", {0, 0, {"penalty", "exact"}});
     // [loss]
     const Range weight{0, 1e6, {}};
@@ -408,6 +409,10 @@ void validate_config(const Config& config) {
                       key("model.velocity_base", "\"body_inertia\"") + " keeps, but " +
                       key("model.velocity_base", "\"" + m.velocity_base + "\"") +
                       "; set model.velocity_base = \"body_inertia\" or leave model.swing_kept at 1");
+  if (m.patch_base_input && m.velocity_base == "inertia")
+    throw ConfigError(key("model.patch_base_input", "true") + " gives each patch its body-carried base, but " +
+                      key("model.velocity_base", "\"inertia\"") + " has none; set model.velocity_base = \"body\" or "
+                      "\"body_inertia\", or model.patch_base_input = false");
   if (m.rotation_equivalent && 3 * m.decoder_ret_channels > m.width)
     throw ConfigError(key("model.decoder_ret_channels", m.decoder_ret_channels) + " needs 3 x that many channels, more "
                       "than " + key("model.width", m.width) + "; set model.decoder_ret_channels <= " +

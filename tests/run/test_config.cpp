@@ -265,5 +265,16 @@ TEST_F(ConfigTest, SwingKeptNeedsTheBodyInertiaBase) {
   EXPECT_THROW(load_config({}, {"model.velocity_base=body_inertia", "model.swing_kept=1.5"}), ConfigError);
 }
 
+// The patch base input is the body carry's patch mean; the official base has none.
+TEST_F(ConfigTest, PatchBaseInputNeedsABodyBase) {
+  EXPECT_TRUE(load_config({}, {"model.velocity_base=body", "model.patch_base_input=true"}).model.patch_base_input);
+  try {
+    load_config({}, {"model.patch_base_input=true"});
+    ADD_FAILURE() << "no ConfigError";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("model.velocity_base = \"inertia\" (default)"), std::string::npos) << e.what();
+  }
+}
+
 }  // namespace
 }  // namespace layersnet
