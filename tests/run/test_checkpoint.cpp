@@ -49,6 +49,16 @@ bool same_tensors(const ad::ParamStore<float>& a, const ad::ParamStore<float>& b
   return true;
 }
 
+// A freshly initialised model of `config` (register_params, init_params with `seed`) written to
+// `path` with the config embedded; `params` receives its weights.
+void write_initial_model(const std::string& path, const Config& config, uint64_t seed, ad::ParamStore<float>& params,
+                         Checkpoint cp = {}) {
+  model::register_params(params, config.model);
+  model::init_params(params, config.model, seed);
+  cp.config_toml = to_toml(config);
+  write_checkpoint(path, params, cp);
+}
+
 class CheckpointTest : public ::testing::Test {
  protected:
   fs::path dir_ = fs::temp_directory_path() / ("layersnet_ckpt_" + std::to_string(::getpid()));
@@ -240,14 +250,10 @@ TEST_F(CheckpointTest, AChangedWeightByteDamagedStatisticsAndANegativeSecondMome
 TEST_F(CheckpointTest, LoadModelRebuildsTheModelFromTheEmbeddedConfig) {
   Config config = load_config({std::string(LAYERSNET_SOURCE_DIR) + "/configs/tiny.toml"});
   ad::ParamStore<float> params;
-  model::register_params(params, config.model);
-  model::init_params(params, config.model, 7);
-  Checkpoint cp;
-  cp.config_toml = to_toml(config);
   const std::string path = (dir_ / "model.h5").string();
-  write_checkpoint(path, params, cp);
+  write_initial_model(path, config, 7, params);
   const LoadedModel loaded = load_model(path);
-  EXPECT_EQ(to_toml(loaded.config), cp.config_toml);
+  EXPECT_EQ(to_toml(loaded.config), to_toml(config));
   EXPECT_EQ(loaded.params.entries().size(), params.entries().size());
   EXPECT_TRUE(same_tensors(params, loaded.params));
 }
@@ -256,13 +262,10 @@ TEST_F(CheckpointTest, AveragedModelHoldsTheMeanWeightsAndRefusesOtherModelsOrDa
   Config config = load_config({std::string(LAYERSNET_SOURCE_DIR) + "/configs/tiny.toml"});
   const auto write_model = [&](const Config& c, unsigned seed, double stat, const std::string& name) {
     ad::ParamStore<float> params;
-    model::register_params(params, c.model);
-    model::init_params(params, c.model, seed);
     Checkpoint cp;
-    cp.config_toml = to_toml(c);
     cp.stats["velocity.mean"] = {stat, 0.0, 0.0};
     const std::string path = (dir_ / name).string();
-    write_checkpoint(path, params, cp);
+    write_initial_model(path, c, seed, params, cp);
     return path;
   };
   const std::string a = write_model(config, 1, 0.5, "a.h5");
@@ -309,13 +312,10 @@ TEST_F(CheckpointTest, WeightsByNameFillAnAddedInputWeightWithZeros) {
   Config local = plain;
   local.model.vertex_local_features = true;
   ad::ParamStore<float> trained;
-  model::register_params(trained, plain.model);
-  model::init_params(trained, plain.model, 7);
   Checkpoint cp;
-  cp.config_toml = to_toml(plain);
   cp.state.global_step = 12;
   const std::string path = (dir_ / "plain.h5").string();
-  write_checkpoint(path, trained, cp);
+  write_initial_model(path, plain, 7, trained, cp);
 
   ad::ParamStore<float> widened;
   model::register_params(widened, local.model);
