@@ -31,9 +31,14 @@ void ParamStore<T>::finalize() {
 }
 
 template <class T>
+int ParamStore<T>::find(const std::string& name) const {
+  const auto it = by_name_.find(name);
+  return it == by_name_.end() ? -1 : it->second;
+}
+
+template <class T>
 int ParamStore<T>::index_of(const std::string& name) const {
-  auto it = by_name_.find(name);
-  if (it != by_name_.end()) return it->second;
+  if (const int i = find(name); i >= 0) return i;
   // Name the closest parameter: the longest common prefix is a good enough guess.
   std::string best;
   std::size_t best_len = 0;

@@ -33,6 +33,7 @@ class ParamStore {
   bool finalized() const { return finalized_; }
 
   int index_of(const std::string& name) const;  // throws with the closest names if unknown
+  int find(const std::string& name) const;      // -1 if unknown
   const std::vector<ParamEntry>& entries() const { return entries_; }
   std::size_t total_size() const { return total_; }
 

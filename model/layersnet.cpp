@@ -521,11 +521,7 @@ Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
   // The vertex base is then c_v − c̄_p (c̄_p the patch mean), so x_v = x_t + c_v + a_p + a_v. c and
   // c_t are held constant under StateDelta (their dependence on the state is the body's rotation),
   // and the outputs are not offset by the mean velocity: a zero output is the carried step.
-  const bool carried = cfg.velocity_base != "inertia";
-  LAYERSNET_CHECK(!carried || (in.body_carry.size() == static_cast<std::size_t>(N * 3) &&
-                               in.body_carry_patch.size() == static_cast<std::size_t>(P * 3)),
-                  "model.velocity_base = \"" << cfg.velocity_base << "\" but the input lacks body_carry (N = " << N
-                                          << ", 3) or body_carry_patch (P = " << P << ", 3): build it with model_input_from_sample");
+  const bool carried = cfg.velocity_base != "inertia";  // its inputs are checked in forward()
   const std::vector<T>& carry_p = in.body_carry_patch;
   std::vector<T> base_p(P * 6);
   for (int64_t i = 0; i < P; ++i) {
@@ -594,6 +590,11 @@ Predictions<T> forward(ad::Tape<T>& tape, ad::ParamStore<T>& params, const Model
   graph_clock.stop();
   const int64_t P = in.P, A = in.A, U = in.U;
   if (times) count_work(in, gr, *times);
+  LAYERSNET_CHECK(cfg.velocity_base == "inertia" || (in.body_carry.size() == static_cast<std::size_t>(in.N * 3) &&
+                                                     in.body_carry_patch.size() == static_cast<std::size_t>(P * 3)),
+                  "model.velocity_base = \"" << cfg.velocity_base << "\" but the input lacks body_carry (N = " << in.N
+                                              << ", 3) or body_carry_patch (P = " << P
+                                              << ", 3): build it with model_input_from_sample");
 
   // ---- token encoders ---------------------------------------------------------------------------------
   StageClock encoder_clock(times, &StageTimes::encoder_ms);
@@ -605,9 +606,7 @@ Predictions<T> forward(ad::Tape<T>& tape, ad::ParamStore<T>& params, const Model
     patch_in = ad::add(tape, patch_in, ad::mul(tape, delta.patch, constant(tape, inv_std, 1, 12)));
   }
   Var<T> patch_x = mlp(tape, p, "embed.input", 2, true, patch_in);
-  if (cfg.patch_base_input) {
-    LAYERSNET_CHECK(in.body_carry_patch.size() == static_cast<std::size_t>(P * 3),
-                    "model.patch_base_input needs the input's body_carry_patch (P = " << P << ", 3)");
+  if (cfg.patch_base_input) {  // implies a carried base (run/config.cpp), whose inputs are checked above
     std::vector<T> base(P * 3);
     for (int64_t i = 0; i < P; ++i)
       for (int c = 0; c < 3; ++c) base[3 * i + c] = in.body_carry_patch[3 * i + c] / in.std12[3 + c];

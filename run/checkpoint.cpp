@@ -310,37 +310,40 @@ Checkpoint read_checkpoint(const std::string& path, ad::ParamStore<float>& param
   }
 }
 
-Checkpoint read_weights_by_name(const std::string& path, ad::ParamStore<float>& params, std::vector<std::string>& added) {
-  const LoadedModel theirs = load_model(path);
+WeightsByName read_weights_by_name(const std::string& path, ad::ParamStore<float>& params) {
+  LoadedModel theirs = load_model(path);
   std::ostringstream unfit;
   for (const auto& e : theirs.params.entries()) {
-    const auto mine = std::find_if(params.entries().begin(), params.entries().end(),
-                                   [&](const ad::ParamEntry& m) { return m.name == e.name; });
-    if (mine == params.entries().end())
+    const int mine = params.find(e.name);
+    if (mine < 0) {
       unfit << "\n  " << e.name << " (" << e.rows << ", " << e.cols << "): not in this model";
-    else if (mine->rows != e.rows || mine->cols != e.cols)
-      unfit << "\n  " << e.name << ": checkpoint (" << e.rows << ", " << e.cols << "), model (" << mine->rows << ", "
-            << mine->cols << ")";
+      continue;
+    }
+    const ad::ParamEntry& m = params.entries()[static_cast<std::size_t>(mine)];
+    if (m.rows != e.rows || m.cols != e.cols)
+      unfit << "\n  " << e.name << ": checkpoint (" << e.rows << ", " << e.cols << "), model (" << m.rows << ", " << m.cols
+            << ")";
   }
   if (!unfit.str().empty())
     fail(path, "its weights do not fit this model's [model] config:" + unfit.str() +
                    "\n  start from a checkpoint of a model that has every one of them, or change [model] to match");
-  added.clear();
-  for (const auto& e : params.entries()) {
-    const auto theirs_entry = std::find_if(theirs.params.entries().begin(), theirs.params.entries().end(),
-                                           [&](const ad::ParamEntry& t) { return t.name == e.name; });
-    const auto to = params.values().begin() + static_cast<std::ptrdiff_t>(e.offset);
-    if (theirs_entry == theirs.params.entries().end()) {
-      std::fill(to, to + e.size(), 0.0f);
-      added.push_back(e.name);
+  WeightsByName out;
+  for (std::size_t i = 0; i < params.entries().size(); ++i) {
+    const ad::ParamEntry& e = params.entries()[i];
+    const auto to = params.value(static_cast<int>(i));
+    if (const int t = theirs.params.find(e.name); t >= 0) {
+      const auto from = theirs.params.value(t);
+      std::copy(from.begin(), from.end(), to.begin());
     } else {
-      const auto from = theirs.params.values().begin() + static_cast<std::ptrdiff_t>(theirs_entry->offset);
-      std::copy(from, from + e.size(), to);
+      std::fill(to.begin(), to.end(), 0.0f);
+      out.added.push_back(e.name);
     }
   }
   std::fill(params.moment1().begin(), params.moment1().end(), 0.0f);
   std::fill(params.moment2().begin(), params.moment2().end(), 0.0f);
-  return theirs.checkpoint;
+  out.checkpoint = std::move(theirs.checkpoint);
+  out.config = std::move(theirs.config);
+  return out;
 }
 
 LoadedModel load_model(const std::string& checkpoint_path) {

@@ -81,8 +81,13 @@ LoadedModel load_model(const std::string& checkpoint_path);
 // checkpoint lacks starts at zero and is named in `added`, so an added input weight (e.g.
 // decoder.local.weight) leaves the model computing what the checkpoint's did; a tensor the
 // checkpoint has and this model lacks, or one whose shape differs, is a CheckpointError naming it.
-// Adam moments are zeroed. Returns the checkpoint (its state and statistics).
-Checkpoint read_weights_by_name(const std::string& path, ad::ParamStore<float>& params, std::vector<std::string>& added);
+// Adam moments are zeroed.
+struct WeightsByName {
+  Checkpoint checkpoint;           // its state and statistics
+  Config config;                   // the config it was trained with
+  std::vector<std::string> added;  // this model's tensors the checkpoint lacks (set to zero)
+};
+WeightsByName read_weights_by_name(const std::string& path, ad::ParamStore<float>& params);
 
 // The element-wise mean of the weights of `checkpoint_paths` (at least one), for averaging
 // the last epochs of one run: the config, statistics and state are the first file's, without

@@ -333,9 +333,9 @@ void Run::restore(const std::string& path) {
 
 void Run::start_from(const std::string& path) {
   // A fine-tuning run is a new run: the optimizer and its schedule start over (moments zeroed).
-  std::vector<std::string> added;
-  const Checkpoint cp = read_weights_by_name(path, params_, added);
-  Config saved = parse_config_text(cp.config_toml, path + ":/config");
+  WeightsByName theirs = read_weights_by_name(path, params_);
+  const Checkpoint& cp = theirs.checkpoint;
+  Config& saved = theirs.config;
   saved.train = config_.train;
   saved.eval = config_.eval;
   saved.data = config_.data;
@@ -346,7 +346,7 @@ void Run::start_from(const std::string& path) {
   // The weights expect inputs normalised as they were trained.
   stats_ = stats_from_arrays(cp.stats, path);
   out_ << "starting from the weights of " << path << " (" << cp.state.global_step << " updates)\n";
-  for (const auto& name : added) out_ << "  " << name << ": not in that checkpoint, starts at zero\n";
+  for (const auto& name : theirs.added) out_ << "  " << name << ": not in that checkpoint, starts at zero\n";
   metric({{"event", "init_from"}, {"checkpoint", path}, {"updates", cp.state.global_step}});
 }
 
