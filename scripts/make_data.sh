@@ -1,0 +1,25 @@
+#!/usr/bin/env bash
+# Makes (or resumes) every data set the validation and test figures in docs/decisions.md use, in
+# the order that gives yardsticks first: data/default, the medium_choice validation split, the
+# large recipe's validation and test splits, the sleeves test set, then the large training split.
+# Each step keeps the sequences already made, so the script can be stopped and run again; the
+# data sets are not in the repository (about 5.5 MB per 100-frame sequence).
+#
+#   scripts/make_data.sh [JOBS=2]
+# Environment: LAYERSNET=path of the binary (default build/bin/layersnet); run it from a frozen
+# copy of the tree for long runs (generate/README.md, "Long runs").
+set -euo pipefail
+cd "$(dirname "$0")/.."
+jobs=${1:-2}
+bin=${LAYERSNET:-build/bin/layersnet}
+[ -x "$bin" ] || { echo "make_data: $bin not found; build first (bash scripts/setup.sh)" >&2; exit 2; }
+gen() { "$bin" generate --jobs "$jobs" --threads 1 --manifest-every 4 "$@"; }
+
+gen --recipe generate/recipes/default.json --out data/default
+"$bin" prepare data/default
+gen --recipe generate/recipes/medium_choice.json --out data/medium_choice --splits val
+gen --recipe generate/recipes/large.json --out data/large --splits val
+gen --recipe generate/recipes/large.json --out data/large --splits test
+gen --recipe generate/recipes/sleeves.json --out data/sleeves --splits test
+gen --recipe generate/recipes/large.json --out data/large --splits train
+"$bin" prepare data/large
