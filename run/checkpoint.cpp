@@ -310,6 +310,15 @@ Checkpoint read_checkpoint(const std::string& path, ad::ParamStore<float>& param
   }
 }
 
+bool same_model_section(const Config& a, const Config& b) {
+  Config a_with_b_rest = a;
+  a_with_b_rest.loss = b.loss;
+  a_with_b_rest.data = b.data;
+  a_with_b_rest.train = b.train;
+  a_with_b_rest.eval = b.eval;
+  return to_toml(a_with_b_rest) == to_toml(b);
+}
+
 WeightsByName read_weights_by_name(const std::string& path, ad::ParamStore<float>& params) {
   LoadedModel theirs = load_model(path);
   std::ostringstream unfit;
@@ -363,12 +372,7 @@ LoadedModel average_models(const std::vector<std::string>& checkpoint_paths) {
   for (std::size_t k = 1; k < checkpoint_paths.size(); ++k) {
     const std::string& path = checkpoint_paths[k];
     Config other = parse_config_text(read_checkpoint_config(path), path + ":/config");
-    // Only the model section has to agree: training and rollout settings do not change what a weight means.
-    other.loss = mean.config.loss;
-    other.data = mean.config.data;
-    other.train = mean.config.train;
-    other.eval = mean.config.eval;
-    if (to_toml(other) != to_toml(mean.config))
+    if (!same_model_section(other, mean.config))
       throw CheckpointError(path + ": its [model] settings differ from " + checkpoint_paths.front() +
                             "'s; only checkpoints of one model can be averaged");
     ad::ParamStore<float> params;

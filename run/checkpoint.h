@@ -75,6 +75,10 @@ struct LoadedModel {
 };
 LoadedModel load_model(const std::string& checkpoint_path);
 
+// True when a and b agree in everything but [loss], [data], [train] and [eval]: the settings
+// that do not change what a weight means.
+bool same_model_section(const Config& a, const Config& b);
+
 // The weights of a checkpoint trained with another [model] config, copied by name into `params`
 // (train.init_from): the checkpoint is read whole into its own model's layout (checksum and all),
 // then every tensor goes to the tensor of the same name. A tensor this model has and the

@@ -333,14 +333,9 @@ void Run::restore(const std::string& path) {
 
 void Run::start_from(const std::string& path) {
   // A fine-tuning run is a new run: the optimizer and its schedule start over (moments zeroed).
-  WeightsByName theirs = read_weights_by_name(path, params_);
+  const WeightsByName theirs = read_weights_by_name(path, params_);
   const Checkpoint& cp = theirs.checkpoint;
-  Config& saved = theirs.config;
-  saved.train = config_.train;
-  saved.eval = config_.eval;
-  saved.data = config_.data;
-  saved.loss = config_.loss;
-  if (to_toml(saved) != to_toml(config_))
+  if (!same_model_section(theirs.config, config_))
     out_ << "warning: " << path << " was trained with another [model] config than this run's; its weights are "
          << "copied by name, but its radii or options differ\n";
   // The weights expect inputs normalised as they were trained.
