@@ -73,6 +73,11 @@ struct LossConfig {
   // A self-fed chain's drifted step then counts as much as a one-step sample, instead of the
   // square of its larger error; the loss measures the gain over the base.
   bool relative_to_base = false;
+  // Not in the paper (1 = as the paper): weight of the terms that compare with the ground-truth
+  // cloth (vertex, patch, normal) on samples whose input is the model's own prediction. A drifted
+  // chain's truth asks it to pull back towards the data, which the body carry already does;
+  // below 1 the physics energy and the collision terms say more of how such a state moves on.
+  double self_fed_truth = 1.0;
 };
 
 }  // namespace layersnet

@@ -181,6 +181,7 @@ const Schema& schema() {
     k.add("loss.collision_eps", [](Config& c) -> double& { return c.loss.collision_eps; }, "collision margin d_eps (scene units)", {0, 10, {}});
     k.add("loss.orthogonality", [](Config& c) -> double& { return c.loss.orthogonality; }, "W_R orthogonality penalty weight", weight);
     k.add("loss.relative_to_base", [](Config& c) -> bool& { return c.loss.relative_to_base; }, "divide each sample's vertex and patch terms by its zero-output prediction's error (not in the paper)");
+    k.add("loss.self_fed_truth", [](Config& c) -> double& { return c.loss.self_fed_truth; }, "weight of the vertex, patch and normal terms on samples whose input is the model's own prediction (T_n > 0; 1 = as the paper, 0 = the physics energy and the collision terms alone score them)", {0, 1, {}});
     k.add("loss.edge_strain", [](Config& c) -> double& { return c.loss.edge_strain; }, "edge-length strain weight (not in the paper; 0 = off)", weight);
     // [physics]
     k.add("physics.weight", [](Config& c) -> double& { return c.physics.weight; }, "weight of the physics energy (losses/physics.h, per garment vertex) beside the supervised loss; 0 = off", weight);
@@ -413,6 +414,10 @@ void validate_config(const Config& config) {
     throw ConfigError(key("model.patch_base_input", "true") + " gives each patch its body-carried base, but " +
                       key("model.velocity_base", "\"inertia\"") + " has none; set model.velocity_base = \"body\" or "
                       "\"body_inertia\", or model.patch_base_input = false");
+  if (config.loss.self_fed_truth == 0 && config.physics.weight == 0)
+    throw ConfigError(key("loss.self_fed_truth", 0) + " takes the ground truth away from the self-fed samples, and " +
+                      key("physics.weight", 0) + " gives them no energy in its place; set physics.weight > 0 "
+                      "(e.g. 0.1) or loss.self_fed_truth > 0");
   if (m.rotation_equivalent && 3 * m.decoder_ret_channels > m.width)
     throw ConfigError(key("model.decoder_ret_channels", m.decoder_ret_channels) + " needs 3 x that many channels, more "
                       "than " + key("model.width", m.width) + "; set model.decoder_ret_channels <= " +

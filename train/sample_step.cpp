@@ -114,12 +114,18 @@ SampleOutcome train_sample(const TrainData& data, Window& window, int t, int sel
     ++scored;
   };
   const bool score_physics = physics.weight > 0 && (self_fed > 0 || !config.physics.self_fed_only);
+  // The step predicting from frame f has the model's own input when f > t − self_fed.
+  LossConfig self_fed_loss = config.loss;
+  self_fed_loss.vertex *= config.loss.self_fed_truth;
+  self_fed_loss.patch *= config.loss.self_fed_truth;
+  self_fed_loss.normal *= config.loss.self_fed_truth;
+  auto loss_config_at = [&](int f) -> const LossConfig& { return f > t - self_fed ? self_fed_loss : config.loss; };
   for (int f = t - recorded; f < t; ++f) {
     const auto [s, input] = build_input(f);
     const auto start = clock::now();
     const auto pred = model::forward(tape, params, config.model, input, {}, state);
     if (config.train.bptt_score_every_step)
-      add_loss(losses::compute_losses(tape, params, config.model, config.loss,
+      add_loss(losses::compute_losses(tape, params, config.model, loss_config_at(f),
                                       losses::loss_input_from_sample(s, *window.info), pred));
     if (!state.value) state = tape.constant(input.state.data(), input.N, 12);
     state = next_garment_state(tape, pred, state);
@@ -136,7 +142,7 @@ SampleOutcome train_sample(const TrainData& data, Window& window, int t, int sel
   out.build_seconds += seconds_since(start);
   start = clock::now();
   const auto pred = model::forward(tape, params, config.model, input, {}, state);
-  losses::LossTerms<float> final_terms = losses::compute_losses(tape, params, config.model, config.loss, target, pred);
+  losses::LossTerms<float> final_terms = losses::compute_losses(tape, params, config.model, loss_config_at(t), target, pred);
   if (score_physics) {
     // Beside the supervised loss: the energy of this prediction given its own (self-fed) state.
     const losses::PhysicsSettings settings = physics_settings(config.physics, physics.collision_stiffness);

@@ -276,5 +276,19 @@ TEST_F(ConfigTest, PatchBaseInputNeedsABodyBase) {
   }
 }
 
+TEST_F(ConfigTest, SelfFedTruthOffNeedsThePhysicsEnergy) {
+  const Config c = load_config({}, {"loss.self_fed_truth=0", "physics.weight=0.1"});
+  EXPECT_EQ(c.loss.self_fed_truth, 0.0);
+  EXPECT_EQ(load_config({}, {}).loss.self_fed_truth, 1.0);
+  try {
+    load_config({}, {"loss.self_fed_truth=0"});
+    ADD_FAILURE() << "no ConfigError";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("physics.weight = 0 (default)"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("loss.self_fed_truth = 0 (set at --set"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(load_config({}, {"loss.self_fed_truth=1.5"}), ConfigError);
+}
+
 }  // namespace
 }  // namespace layersnet

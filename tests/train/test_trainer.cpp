@@ -454,6 +454,50 @@ TEST_F(TrainerTest, PhysicsEnergyJoinsTheLossOnSelfFedSamplesOnly) {
   }
 }
 
+// loss.self_fed_truth scales the terms that compare with the ground-truth cloth on self-fed
+// samples only: a sample fed the data keeps every term, a self-fed one with weight 0 is scored by
+// the collision terms and the physics energy alone.
+TEST_F(TrainerTest, SelfFedTruthWeighsTheGroundTruthTermsOfSelfFedSamplesOnly) {
+  const std::string data = make_dataset(1, 1, 10);
+  const Config full = tiny_config(data, {"train.threads=1", "physics.weight=0.5"});
+  const Config none = tiny_config(data, {"train.threads=1", "physics.weight=0.5", "loss.self_fed_truth=0"});
+  const Config half = tiny_config(data, {"train.threads=1", "physics.weight=0.5", "loss.self_fed_truth=0.5"});
+  const dataset::DatasetManifest manifest = dataset::read_manifest(data);
+  const dataset::NormalisationStats stats = dataset::read_stats(manifest.stats_path());
+  TrainData train_data(manifest, "train", stats, full);
+  ad::ParamStore<float> params = initialised_params(full);
+  ad::Tape<float> tape;
+  const int t = train_data.first_t(0) + 4;
+  const PhysicsStep step = physics_step_at(full.physics, 0);
+  auto run = [&](const Config& c, int self_fed) {
+    Window w = train_data.read_window(0, t - self_fed, t);
+    SampleOutcome o = train_sample(train_data, w, t, self_fed, c, tape, params, step);
+    EXPECT_TRUE(o.loss_finite && o.grad_finite);
+    return std::pair{o.loss, std::vector<float>(params.grads().begin(), params.grads().end())};
+  };
+  {
+    const auto [loss_full, grad_full] = run(full, 0);
+    const auto [loss_none, grad_none] = run(none, 0);
+    EXPECT_EQ(loss_none.total, loss_full.total);
+    EXPECT_EQ(grad_none, grad_full) << "a sample fed the data must keep its ground-truth terms";
+  }
+  const auto [loss_full, grad_full] = run(full, 2);
+  const auto [loss_none, grad_none] = run(none, 2);
+  const auto [loss_half, grad_half] = run(half, 2);
+  ASSERT_GT(loss_full.vertex, 0.0);
+  EXPECT_EQ(loss_none.vertex, 0.0);
+  EXPECT_EQ(loss_none.patch, 0.0);
+  EXPECT_EQ(loss_none.normal, 0.0);
+  EXPECT_EQ(loss_none.collision_body, loss_full.collision_body);
+  EXPECT_EQ(loss_none.physics, loss_full.physics);
+  const double truth = loss_full.vertex + loss_full.patch + loss_full.normal;  // unit weights in tiny_config
+  EXPECT_NEAR(loss_none.total, loss_full.total - truth, 1e-5 * std::abs(loss_full.total));
+  EXPECT_NEAR(loss_half.total, loss_full.total - 0.5 * truth, 1e-5 * std::abs(loss_full.total));
+  double diff = 0;
+  for (std::size_t i = 0; i < grad_full.size(); ++i) diff += std::abs(grad_full[i] - grad_none[i]);
+  EXPECT_GT(diff, 0.0) << "the ground-truth terms did not leave the gradient";
+}
+
 // train.init_from starts a new run from another run's weights (a full checkpoint or a packed
 // model): after one Adam update every weight lies within about one learning rate of them, the
 // optimizer starts over (step 1), and the run keeps the source's statistics.
