@@ -93,6 +93,27 @@ class TrainerTest : public ::testing::Test {
     return p;
   }
 
+  // One training sample (the first sequence's input frame first_t + 4) run through train_sample
+  // with parameters initialised once from `config`: its loss parts and parameter gradient.
+  struct SampleProbe {
+    explicit SampleProbe(const Config& config)
+        : manifest(dataset::read_manifest(config.data.dataset)),
+          data(manifest, "train", dataset::read_stats(manifest.stats_path()), config),
+          params(initialised_params(config)),
+          t(data.first_t(0) + 4) {}
+    std::pair<LossParts, std::vector<float>> run(const Config& c, int self_fed, const PhysicsStep& step) {
+      Window w = data.read_window(0, t - self_fed, t);
+      const SampleOutcome o = train_sample(data, w, t, self_fed, c, tape, params, step);
+      EXPECT_TRUE(o.loss_finite && o.grad_finite);
+      return {o.loss, std::vector<float>(params.grads().begin(), params.grads().end())};
+    }
+    dataset::DatasetManifest manifest;
+    TrainData data;
+    ad::ParamStore<float> params;
+    ad::Tape<float> tape;
+    const int t;
+  };
+
   // The parameters of a run's newest checkpoint.
   static std::vector<float> final_weights(const fs::path& run, const Config& config, int64_t* step = nullptr) {
     const auto all = list_checkpoints(run.string());
@@ -419,25 +440,14 @@ TEST_F(TrainerTest, PhysicsEnergyJoinsTheLossOnSelfFedSamplesOnly) {
   const std::string data = make_dataset(1, 1, 10);
   const Config off = tiny_config(data, {"train.threads=1"});
   const Config on = tiny_config(data, {"train.threads=1", "physics.weight=0.5"});
-  const dataset::DatasetManifest manifest = dataset::read_manifest(data);
-  const dataset::NormalisationStats stats = dataset::read_stats(manifest.stats_path());
-  TrainData train_data(manifest, "train", stats, off);
-  ad::ParamStore<float> params = initialised_params(off);
-  ad::Tape<float> tape;
-  const int t = train_data.first_t(0) + 4;
-  auto run = [&](const Config& c, int self_fed, const PhysicsStep& step) {
-    Window w = train_data.read_window(0, t - self_fed, t);
-    SampleOutcome o = train_sample(train_data, w, t, self_fed, c, tape, params, step);
-    EXPECT_TRUE(o.loss_finite && o.grad_finite);
-    return std::pair{o.loss, std::vector<float>(params.grads().begin(), params.grads().end())};
-  };
+  SampleProbe probe(off);
   const PhysicsStep step = physics_step_at(on.physics, 0);
   EXPECT_EQ(step.weight, 0.5);
   EXPECT_EQ(step.collision_stiffness, on.physics.collision_stiffness_start);
   EXPECT_EQ(physics_step_at(off.physics, 0).weight, 0.0);
   for (const int self_fed : {0, 2}) {
-    const auto [loss_off, grad_off] = run(off, self_fed, physics_step_at(off.physics, 0));
-    const auto [loss_on, grad_on] = run(on, self_fed, step);
+    const auto [loss_off, grad_off] = probe.run(off, self_fed, physics_step_at(off.physics, 0));
+    const auto [loss_on, grad_on] = probe.run(on, self_fed, step);
     if (self_fed == 0) {
       EXPECT_EQ(loss_on.total, loss_off.total);
       EXPECT_EQ(grad_on, grad_off) << "a ground-truth-fed sample must not see the physics energy";
@@ -462,19 +472,9 @@ TEST_F(TrainerTest, SelfFedTruthWeighsTheGroundTruthTermsOfSelfFedSamplesOnly) {
   const Config full = tiny_config(data, {"train.threads=1", "physics.weight=0.5"});
   const Config none = tiny_config(data, {"train.threads=1", "physics.weight=0.5", "loss.self_fed_truth=0"});
   const Config half = tiny_config(data, {"train.threads=1", "physics.weight=0.5", "loss.self_fed_truth=0.5"});
-  const dataset::DatasetManifest manifest = dataset::read_manifest(data);
-  const dataset::NormalisationStats stats = dataset::read_stats(manifest.stats_path());
-  TrainData train_data(manifest, "train", stats, full);
-  ad::ParamStore<float> params = initialised_params(full);
-  ad::Tape<float> tape;
-  const int t = train_data.first_t(0) + 4;
+  SampleProbe probe(full);
   const PhysicsStep step = physics_step_at(full.physics, 0);
-  auto run = [&](const Config& c, int self_fed) {
-    Window w = train_data.read_window(0, t - self_fed, t);
-    SampleOutcome o = train_sample(train_data, w, t, self_fed, c, tape, params, step);
-    EXPECT_TRUE(o.loss_finite && o.grad_finite);
-    return std::pair{o.loss, std::vector<float>(params.grads().begin(), params.grads().end())};
-  };
+  auto run = [&](const Config& c, int self_fed) { return probe.run(c, self_fed, step); };
   {
     const auto [loss_full, grad_full] = run(full, 0);
     const auto [loss_none, grad_none] = run(none, 0);
