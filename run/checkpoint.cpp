@@ -313,6 +313,7 @@ Checkpoint read_checkpoint(const std::string& path, ad::ParamStore<float>& param
 bool same_model_section(const Config& a, const Config& b) {
   Config a_with_b_rest = a;
   a_with_b_rest.loss = b.loss;
+  a_with_b_rest.physics = b.physics;
   a_with_b_rest.data = b.data;
   a_with_b_rest.train = b.train;
   a_with_b_rest.eval = b.eval;

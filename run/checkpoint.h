@@ -75,8 +75,8 @@ struct LoadedModel {
 };
 LoadedModel load_model(const std::string& checkpoint_path);
 
-// True when a and b agree in everything but [loss], [data], [train] and [eval]: the settings
-// that do not change what a weight means.
+// True when a and b agree in everything but [loss], [physics], [data], [train] and [eval]: the
+// settings that do not change what a weight means.
 bool same_model_section(const Config& a, const Config& b);
 
 // The weights of a checkpoint trained with another [model] config, copied by name into `params`

@@ -233,6 +233,7 @@ const Schema& schema() {
     k.add("train.validate", [](Config& c) -> bool& { return c.train.validate; }, "one-step validation error after each epoch");
     k.add("train.val_samples", [](Config& c) -> int& { return c.train.val_samples; }, "validation samples, evenly spaced (0 = all)", {0, 1e9, {}});
     k.add("train.val_rollout_frames", [](Config& c) -> int& { return c.train.val_rollout_frames; }, "validate by a self-fed rollout of up to this many frames per val sequence, predicting from the end of the file's ramp if it has one (0 = one-step error)", {0, 1e6, {}});
+    k.add("train.epoch_samples", [](Config& c) -> int64_t& { return c.train.epoch_samples; }, "samples per epoch, the first of each epoch's shuffled order, so every epoch draws another subset (0 = all)", {0, 9.0e15, {}});
     k.add("train.max_steps", [](Config& c) -> int& { return c.train.max_steps; }, "stop once the run has this many updates in total, counting those before a --resume (0 = no limit)", {0, 1e9, {}});
     k.add("train.max_nonfinite_in_row", [](Config& c) -> int& { return c.train.max_nonfinite_in_row; }, "stop after this many non-finite steps in a row", positive);
     k.add("train.log_every", [](Config& c) -> int& { return c.train.log_every; }, "steps between progress lines", positive);

@@ -69,6 +69,10 @@ struct TrainConfig {
                                         // from its first sample frame): the one-step error favours
                                         // checkpoints that drift in rollouts. 0 = one-step error
                                         // (official). 20: the default data's frames after the ramp
+  // Samples per epoch: the first this many of the epoch's shuffled order, so each epoch draws
+  // another subset; 0 = every sample. Keeps an epoch's curriculum and validation at a fixed cost
+  // however large the training split grows.
+  int64_t epoch_samples = 0;
   int max_steps = 0;                    // stop after this many updates in total (benchmarks); 0 = no limit
   int max_nonfinite_in_row = 10;        // stop after this many skipped updates in a row
   int log_every = 10;                   // steps between progress lines

@@ -273,6 +273,7 @@ class Run {
   std::vector<uint8_t> shuffle_at_epoch_start_;
   TrainingState state_;
   int64_t batches_per_epoch_ = 0;
+  int64_t epoch_samples_ = 0;  // samples per epoch: the first ones of the epoch's shuffled order
   int64_t batches_before_ = 0;  // batches of the run before this process started (resume)
   TrainSummary summary_;
   ProgressWindow window_;  // since the last progress line
@@ -437,13 +438,14 @@ TrainSummary Run::execute() {
     ranks_.broadcast(resumed_from);
   }
   open_data();  // after restore: samples are built with the run's own statistics
-  batches_per_epoch_ = (train_->num_samples() + tc.batch_size - 1) / tc.batch_size;
+  epoch_samples_ = tc.epoch_samples > 0 ? std::min<int64_t>(tc.epoch_samples, train_->num_samples()) : train_->num_samples();
+  batches_per_epoch_ = (epoch_samples_ + tc.batch_size - 1) / tc.batch_size;
   if (!resumed_from.empty()) {
-    if (state_.position > train_->num_samples())
+    if (state_.position > epoch_samples_)
       throw CheckpointError(resumed_from + ": position " + std::to_string(state_.position) + " is beyond the " +
-                            std::to_string(train_->num_samples()) + " samples of the train split (data set changed?)");
+                            std::to_string(epoch_samples_) + " samples of an epoch (data set or train.epoch_samples changed?)");
     out_ << "resuming " << resumed_from << ": epoch " << state_.epoch + 1 << ", sample " << state_.position << " of "
-         << train_->num_samples() << ", " << state_.global_step << " updates\n";
+         << epoch_samples_ << ", " << state_.global_step << " updates\n";
     metric({{"event", "resume"}, {"checkpoint", resumed_from}, {"epoch", state_.epoch + 1}, {"position", state_.position}});
   }
   for (int s = 0; s < ranks_.local_count(tc.batch_size); ++s) {
@@ -451,7 +453,9 @@ TrainSummary Run::execute() {
     model::register_params(*slots_.back(), config_.model);
   }
   for (int t = 0; t < threads_; ++t) tapes_.push_back(std::make_unique<ad::Tape<float>>());
-  out_ << "training " << train_->num_samples() << " samples/epoch (" << train_->ids().size() << " sequences), "
+  out_ << "training " << epoch_samples_ << " samples/epoch"
+       << (epoch_samples_ < train_->num_samples() ? " of " + std::to_string(train_->num_samples()) : std::string())
+       << " (" << train_->ids().size() << " sequences), "
        << batches_per_epoch_ << " batches of " << tc.batch_size << ", " << tc.epochs << " epochs, " << threads_
        << " threads" << (ranks_.distributed() ? " per rank, " + std::to_string(ranks_.size()) + " ranks" : std::string())
        << ", " << params_.total_size() << " parameter slots -> " << options_.run_dir << "\n";
@@ -493,11 +497,11 @@ void Run::run_epoch(int epoch) {
   std::vector<int64_t> order(train_->samples().size());
   for (std::size_t i = 0; i < order.size(); ++i) order[i] = static_cast<int64_t>(i);
   shuffle_rng_.shuffle(order);
-  while (state_.position < train_->num_samples()) {
+  while (state_.position < epoch_samples_) {
     if (!run_batch(epoch, ngs, order)) return;
     const int64_t done = state_.epoch * batches_per_epoch_ +
                          (state_.position + tc.batch_size - 1) / tc.batch_size;
-    if (state_.position < train_->num_samples() && tc.checkpoint_every > 0 && done % tc.checkpoint_every == 0)
+    if (state_.position < epoch_samples_ && tc.checkpoint_every > 0 && done % tc.checkpoint_every == 0)
       save_step_checkpoint();
   }
   const double val = validate();
@@ -547,7 +551,7 @@ bool Run::run_batch(int epoch, int ngs, const std::vector<int64_t>& order) {
   cost.optimizer = clock.lap();
   cost.wall = clock.total();
   record(cost, batch, outcomes);
-  if (summary_.batches % config_.train.log_every == 0 || state_.position >= train_->num_samples()) log_progress(epoch);
+  if (summary_.batches % config_.train.log_every == 0 || state_.position >= epoch_samples_) log_progress(epoch);
   return true;
 }
 
@@ -559,7 +563,7 @@ Batch Run::draw_batch(int ngs, const std::vector<int64_t>& order) {
   const TrainConfig& tc = config_.train;
   Batch batch;
   batch.begin = state_.position;
-  const int64_t n = std::min<int64_t>(tc.batch_size, train_->num_samples() - batch.begin);
+  const int64_t n = std::min<int64_t>(tc.batch_size, epoch_samples_ - batch.begin);
   for (int64_t i = batch.begin; i < batch.begin + n; ++i) {
     const SampleRef r = element(train_->samples(), element(order, i));
     const int drawn = rollout_rng_.uniform_int_inclusive(ngs);
@@ -694,8 +698,8 @@ void Run::log_progress(int epoch) {
   // Later epochs run longer self-fed rollouts: their cost comes from the fitted cost per step.
   std::vector<int> later_steps;
   for (int e = epoch + 1; e < tc.epochs; ++e) later_steps.push_back(rollout_steps_at(tc, e));
-  const double eta = eta_.remaining_seconds(train_->num_samples() - state_.position, rollout_steps_at(tc, epoch),
-                                            train_->num_samples(), later_steps);
+  const double eta = eta_.remaining_seconds(epoch_samples_ - state_.position, rollout_steps_at(tc, epoch),
+                                            epoch_samples_, later_steps);
   const LossParts loss = window_.updates > 0 ? window_.loss.scaled(1.0 / static_cast<double>(window_.updates)) : LossParts{};
   const LossParts weighted = loss.weighted(config_.loss);
   // The penalty's floor is a constant Σ(d − c) (312 at the default sizes) that would hide every
@@ -710,7 +714,7 @@ void Run::log_progress(int epoch) {
                 "epoch %d/%d  step %lld  sample %lld/%lld  %.2f samples/s  ETA %s  lr %.3g  loss above floor %.5g "
                 "(vertex %.4g patch %.4g normal %.4g body %.4g layer %.4g orth excess %.4g strain %.4g)  outside model %.0f%%",
                 epoch + 1, tc.epochs, static_cast<long long>(adam_->step_count()), static_cast<long long>(state_.position),
-                static_cast<long long>(train_->num_samples()), rate, duration_text(eta).c_str(),
+                static_cast<long long>(epoch_samples_), rate, duration_text(eta).c_str(),
                 learning_rate_at(tc, epoch), loss.total - config_.loss.orthogonality * orth_floor, loss.vertex, loss.patch, loss.normal, loss.collision_body,
                 loss.collision_layer, orth_excess, loss.edge_strain, 100 * share);
   out_ << line;

@@ -271,7 +271,8 @@ TEST_F(CheckpointTest, AveragedModelHoldsTheMeanWeightsAndRefusesOtherModelsOrDa
   const std::string a = write_model(config, 1, 0.5, "a.h5");
   const std::string b = write_model(config, 2, 0.5, "b.h5");
   Config other_training = config;
-  other_training.train.learning_rate *= 2;  // training settings may differ
+  other_training.train.learning_rate *= 2;  // training settings may differ, the energy's too
+  other_training.physics.weight = 0.5;
   const std::string c = write_model(other_training, 3, 0.5, "c.h5");
 
   const LoadedModel la = load_model(a), lb = load_model(b), lc = load_model(c);

@@ -643,6 +643,56 @@ TEST_F(TrainerTest, MaxStepsStopInsideAnEpochLeavesAResumableCheckpoint) {
   EXPECT_EQ(std::memcmp(a.data(), b.data(), a.size() * sizeof(float)), 0);
 }
 
+// train.epoch_samples: an epoch is the first k samples of its shuffled order, so its first
+// updates are those of the run without the cap; a run stopped inside a capped epoch resumes to
+// the same bits; k at or above the split's size is no cap at all.
+TEST_F(TrainerTest, EpochSamplesTrainsThePrefixOfEachEpochsOrder) {
+  const std::string data = make_dataset(3, 0, 8);
+  const std::vector<std::string> common = {"train.epochs=3", "train.rollout_steps=[0, 1]", "train.threads=2",
+                                           "train.checkpoint_every=0"};
+  auto with = [&](std::vector<std::string> extra) {
+    std::vector<std::string> all = common;
+    all.insert(all.end(), extra.begin(), extra.end());
+    return tiny_config(data, all);
+  };
+  const Config full = with({});
+  const TrainSummary uncapped = train(full, options("full"));
+  ASSERT_GT(uncapped.updates, 3 * 3);  // more than 3 batches of 2 per epoch: the cap below bites
+  const Config capped = with({"train.epoch_samples=5"});
+  EXPECT_EQ(train(capped, options("capped")).updates, 3 * 3);  // ceil(5 / 2) per epoch
+  EXPECT_NE(log_.str().find("5 samples/epoch of "), std::string::npos) << log_.str();
+
+  // The first two updates of a capped epoch are the uncapped run's first two.
+  const Config two_capped = with({"train.epochs=1", "train.epoch_samples=4"});
+  const Config two_uncapped = with({"train.epochs=1", "train.max_steps=2"});
+  train(two_capped, options("two_capped"));
+  train(two_uncapped, options("two_uncapped"));
+  int64_t step_a = 0, step_b = 0;
+  const auto a = final_weights(dir_ / "two_capped", two_capped, &step_a);
+  const auto b = final_weights(dir_ / "two_uncapped", two_uncapped, &step_b);
+  EXPECT_EQ(step_a, 2);
+  EXPECT_EQ(step_b, 2);
+  ASSERT_EQ(a.size(), b.size());
+  EXPECT_EQ(std::memcmp(a.data(), b.data(), a.size() * sizeof(float)), 0);
+
+  // Stopped inside the second capped epoch and resumed: the capped run's bits.
+  train(with({"train.epoch_samples=5", "train.max_steps=4"}), options("stopped"));
+  TrainOptions resume = options("stopped");
+  resume.resume = true;
+  train(capped, resume);
+  const auto whole = final_weights(dir_ / "capped", capped, &step_a), resumed = final_weights(dir_ / "stopped", capped, &step_b);
+  EXPECT_EQ(step_a, step_b);
+  ASSERT_EQ(whole.size(), resumed.size());
+  EXPECT_EQ(std::memcmp(whole.data(), resumed.data(), whole.size() * sizeof(float)), 0);
+
+  // A cap at or above the split's size changes nothing.
+  const Config loose = with({"train.epoch_samples=100000"});
+  train(loose, options("loose"));
+  const auto u = final_weights(dir_ / "full", full), l = final_weights(dir_ / "loose", loose);
+  ASSERT_EQ(u.size(), l.size());
+  EXPECT_EQ(std::memcmp(u.data(), l.data(), u.size() * sizeof(float)), 0);
+}
+
 // A damaged newest checkpoint is set aside and the run resumes from the one before, ending
 // bit-identical to the uninterrupted run.
 TEST_F(TrainerTest, ResumeFallsBackToTheNewestIntactCheckpoint) {
