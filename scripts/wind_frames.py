@@ -10,6 +10,7 @@ the summed twin error over each baseline's on those frames. Needs python3-h5py a
 Usage: wind_frames.py DATA EVAL [EVAL ...] [--skip ID,ID] [--above S,S,...]
   (default --above 0,100,200; 0 keeps every scored frame)
 """
+import argparse
 import json
 import sys
 
@@ -44,24 +45,19 @@ def curves(eval_dir):
 
 
 def main(argv):
-    args, skip, above = [], set(), [0.0, 100.0, 200.0]
-    i = 1
-    while i < len(argv):
-        if argv[i] in ("--skip", "--above") and i + 1 < len(argv):
-            if argv[i] == "--skip":
-                skip = set(argv[i + 1].split(","))
-            else:
-                try:
-                    above = [float(v) for v in argv[i + 1].split(",")]
-                except ValueError:
-                    fail(f"--above {argv[i + 1]}: give strengths separated by commas, e.g. 0,100,200")
-            i += 2
-        else:
-            args.append(argv[i])
-            i += 1
-    if len(args) < 2:
-        fail("usage: wind_frames.py DATA EVAL [EVAL ...] [--skip ID,ID] [--above S,S,...]")
-    data, evals = args[0], args[1:]
+    parser = argparse.ArgumentParser(prog="wind_frames.py", description=__doc__.split("\n\n")[0])
+    parser.add_argument("data", help="the data set folder the twins were made from (DATA/<id>.h5)")
+    parser.add_argument("evals", nargs="+", help="eval folders made with --replay of the calm twins")
+    parser.add_argument("--skip", default="", help="sequence ids to leave out, separated by commas")
+    parser.add_argument("--above", default="0,100,200",
+                        help="wind strengths separated by commas; 0 keeps every scored frame")
+    a = parser.parse_args(argv[1:])
+    try:
+        above = [float(v) for v in a.above.split(",")]
+    except ValueError:
+        fail(f"--above {a.above}: give strengths separated by commas, e.g. 0,100,200")
+    skip = set(filter(None, a.skip.split(",")))
+    data, evals = a.data, a.evals
     rows = {}
     for e in evals:
         rows.update(curves(e))

@@ -78,6 +78,12 @@ class TrainerTest : public ::testing::Test {
     return load_config({std::string(LAYERSNET_SOURCE_DIR) + "/configs/tiny.toml"}, overrides);
   }
 
+  // tiny_config with the overrides `common` of a test followed by this run's `extra`.
+  Config tiny_config(const std::string& data, std::vector<std::string> common, const std::vector<std::string>& extra) {
+    common.insert(common.end(), extra.begin(), extra.end());
+    return tiny_config(data, std::move(common));
+  }
+
   TrainOptions options(const std::string& run) {
     TrainOptions o;
     o.run_dir = (dir_ / run).string();
@@ -247,11 +253,7 @@ TEST_F(TrainerTest, InputNoiseIsSeededAndReachesTheModel) {
   const std::string data = make_dataset(2, 1, 7);
   // T_n = 0 always: the noise's draws cannot change anything but the noise itself.
   const std::vector<std::string> sets = {"train.epochs=1", "train.rollout_steps=[0]", "train.threads=2"};
-  auto with = [&](std::vector<std::string> extra) {
-    std::vector<std::string> all = sets;
-    all.insert(all.end(), extra.begin(), extra.end());
-    return tiny_config(data, all);
-  };
+  auto with = [&](const std::vector<std::string>& extra) { return tiny_config(data, sets, extra); };
   const Config noisy = with({"train.input_noise=0.05"});
   train(noisy, options("a"));
   train(noisy, options("b"));
@@ -313,11 +315,7 @@ TEST_F(TrainerTest, RolloutConstraintsProjectTheFedBackFrames) {
   const std::vector<std::string> sets = {"train.epochs=1", "train.rollout_steps=[2]", "train.threads=1",
                                          "train.val_rollout_frames=3", "eval.strain_limit=0.05",
                                          "eval.collision_shell=0", "eval.constraint_iterations=200"};
-  auto with = [&](std::vector<std::string> extra) {
-    std::vector<std::string> all = sets;
-    all.insert(all.end(), extra.begin(), extra.end());
-    return tiny_config(data, all);
-  };
+  auto with = [&](const std::vector<std::string>& extra) { return tiny_config(data, sets, extra); };
   const Config on = with({"train.rollout_constraints=true"}), off = with({});
   const dataset::DatasetManifest manifest = dataset::read_manifest(data);
   const dataset::NormalisationStats stats = dataset::read_stats(manifest.stats_path());
@@ -618,11 +616,7 @@ TEST_F(TrainerTest, MaxStepsStopInsideAnEpochLeavesAResumableCheckpoint) {
   const std::string data = make_dataset(3, 1, 8);
   const std::vector<std::string> common = {"train.epochs=2", "train.rollout_steps=[0, 1]", "train.threads=2",
                                            "train.checkpoint_every=0"};
-  auto with = [&](std::vector<std::string> extra) {
-    std::vector<std::string> all = common;
-    all.insert(all.end(), extra.begin(), extra.end());
-    return tiny_config(data, all);
-  };
+  auto with = [&](const std::vector<std::string>& extra) { return tiny_config(data, common, extra); };
   const Config whole = with({});
   const TrainSummary full = train(whole, options("whole"));
   ASSERT_GT(full.updates, 3);
@@ -650,11 +644,7 @@ TEST_F(TrainerTest, EpochSamplesTrainsThePrefixOfEachEpochsOrder) {
   const std::string data = make_dataset(3, 0, 8);
   const std::vector<std::string> common = {"train.epochs=3", "train.rollout_steps=[0, 1]", "train.threads=2",
                                            "train.checkpoint_every=0"};
-  auto with = [&](std::vector<std::string> extra) {
-    std::vector<std::string> all = common;
-    all.insert(all.end(), extra.begin(), extra.end());
-    return tiny_config(data, all);
-  };
+  auto with = [&](const std::vector<std::string>& extra) { return tiny_config(data, common, extra); };
   const Config full = with({});
   const TrainSummary uncapped = train(full, options("full"));
   ASSERT_GT(uncapped.updates, 3 * 3);  // more than 3 batches of 2 per epoch: the cap below bites
@@ -699,11 +689,7 @@ TEST_F(TrainerTest, ResumeFallsBackToTheNewestIntactCheckpoint) {
   const std::string data = make_dataset(3, 0, 8);
   const std::vector<std::string> common = {"train.epochs=2", "train.rollout_steps=[0, 1]", "train.checkpoint_every=1",
                                            "train.keep_checkpoints=3"};
-  auto with = [&](std::vector<std::string> extra) {
-    std::vector<std::string> all = common;
-    all.insert(all.end(), extra.begin(), extra.end());
-    return tiny_config(data, all);
-  };
+  auto with = [&](const std::vector<std::string>& extra) { return tiny_config(data, common, extra); };
   const Config whole = with({});
   train(whole, options("whole"));
   train(with({"train.max_steps=4"}), options("part"));
