@@ -93,6 +93,9 @@ std::shared_ptr<const SequenceStructure> build_structure(const SequenceInfo& inf
     s->vertex_garment.insert(s->vertex_garment.end(), s->garments[g].num_vertices, g);
     s->patch_garment.insert(s->patch_garment.end(), s->garments[g].num_patches, g);
     s->garment_types.push_back(info.garments[g].type);
+    const auto& f = info.garments[g].faces;
+    for (Eigen::Index i = 0; i < f.rows(); ++i)
+      for (int c = 0; c < 3; ++c) s->faces.push_back(f(i, c) + s->vertex_offsets[g]);
   }
   std::vector<Eigen::Matrix<float, 1, 5>> rows;
   for (int g = 0; g < G; ++g) {

@@ -73,6 +73,7 @@ struct SequenceStructure {
   Csr vertex_neighbours;                  // N rows, ascending
   std::vector<float> neighbour_rest;      // aligned with vertex_neighbours.items
   BodyTopology body;                      // the body mesh's vertex neighbours (body_skin.h)
+  std::vector<int32_t> faces;             // (F·3) every garment's triangles, ids into the N vertices
   int num_vertices() const { return all.num_vertices; }
   int num_patches() const { return all.num_patches; }
 };

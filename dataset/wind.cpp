@@ -26,4 +26,25 @@ std::vector<WindSegment> wind_segments(const SequenceInfo& info) {
   return out;
 }
 
+Points face_wind_force(const Points& x, const std::vector<int32_t>& faces, const Eigen::Vector3d& w,
+                       Eigen::VectorXd* vertex_area) {
+  const Eigen::Index N = x.rows();
+  Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> force = Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>::Zero(N, 3);
+  if (vertex_area) vertex_area->setZero(N);
+  for (std::size_t f = 0; f + 2 < faces.size(); f += 3) {
+    const Eigen::Vector3d p0 = x.row(faces[f]).transpose().cast<double>();
+    const Eigen::Vector3d cr = (x.row(faces[f + 1]).transpose().cast<double>() - p0)
+                                   .cross(x.row(faces[f + 2]).transpose().cast<double>() - p0);
+    const double area = cr.norm() / 2;
+    if (!(area > 0)) continue;
+    const Eigen::Vector3d n = cr / (2 * area);
+    const Eigen::Vector3d corner = area / 3.0 * w.dot(n) * n;
+    for (int c = 0; c < 3; ++c) {
+      force.row(faces[f + c]) += corner.transpose();
+      if (vertex_area) (*vertex_area)[faces[f + c]] += area / 3.0;
+    }
+  }
+  return force.cast<float>();
+}
+
 }  // namespace layersnet::dataset

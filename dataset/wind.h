@@ -26,4 +26,12 @@ struct WindSegment {
 // Segments of a sequence; empty when the sequence has no /wind group.
 std::vector<WindSegment> wind_segments(const SequenceInfo& info);
 
+// The shape of Blender's face wind (implicit_blender.c) without its 0.02: each triangle gives each
+// of its corners area/3 · (w·n) n, n its unit normal at x (the sign of n cancels), so cloth
+// edge-on to the wind feels none. x (N, 3) positions, faces (F·3) vertex ids into x, w the wind
+// vector. Returns (N, 3), units² of x times w's units. vertex_area, when given, receives each
+// vertex's share Σ area/3 (N).
+Points face_wind_force(const Points& x, const std::vector<int32_t>& faces, const Eigen::Vector3d& w,
+                       Eigen::VectorXd* vertex_area = nullptr);
+
 }  // namespace layersnet::dataset

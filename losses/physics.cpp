@@ -194,37 +194,22 @@ PhysicsInput<float> physics_input_from_sample(const dataset::TrainingSample& s, 
     in.hinge_k_sin0.push_back(static_cast<float>(k * h.sin0));
     in.hinge_k_sum += k;
   }
-  for (int k = 0; k < G; ++k) {
-    const auto& f = info.garments[k].faces;
-    for (Eigen::Index i = 0; i < f.rows(); ++i)
-      for (int c = 0; c < 3; ++c) in.faces.push_back(f(i, c) + offsets[k]);
-  }
-  // Face wind at x_t: Blender's effector wind is field strength (stored strength × the file's
-  // wind_field_factor) × the field's z axis; each face gives its corners 0.02 · area/3 · (w·n) n.
+  in.faces = s.structure->faces;
+  // Face wind at x_t: the effector gives each vertex w = field strength (stored strength × the
+  // file's wind_field_factor) × the field's z axis / fps, and each face 0.02 |e1 × e2| / 3 =
+  // 0.04 area / 3 times (w·n) n to each corner.
   in.wind_force.assign(N * 3, 0.f);
   if (info.has_wind && info.wind_strength[t + 1] != 0.f) {
     const Eigen::Vector3d w =
-        static_cast<double>(info.wind_strength[t + 1]) * static_cast<double>(info.wind_field_factor) *
+        0.04 / static_cast<double>(info.fps) * static_cast<double>(info.wind_strength[t + 1]) *
+        static_cast<double>(info.wind_field_factor) *
         dataset::wind_direction(info.wind_rotation.row(t + 1).transpose()).cast<double>();
-    std::vector<double> force(N * 3, 0.0);
-    for (std::size_t f = 0; f < in.faces.size() / 3; ++f) {
-      Eigen::Vector3d p[3];
-      for (int c = 0; c < 3; ++c)
-        p[c] = Eigen::Vector3d(in.x_t[3 * in.faces[3 * f + c]], in.x_t[3 * in.faces[3 * f + c] + 1],
-                               in.x_t[3 * in.faces[3 * f + c] + 2]);
-      const Eigen::Vector3d cr = (p[1] - p[0]).cross(p[2] - p[0]);
-      const double area = cr.norm() / 2;
-      if (area <= 0) continue;
-      const Eigen::Vector3d n = cr.normalized();
-      const Eigen::Vector3d fv = 0.02 * area / 3.0 * w.dot(n) * n;
-      for (int c = 0; c < 3; ++c)
-        for (int d = 0; d < 3; ++d) force[3 * in.faces[3 * f + c] + d] += fv[d];
-    }
+    const dataset::Points force = dataset::face_wind_force(s.state.leftCols<3>(), in.faces, w);
     for (int k = 0; k < G; ++k)
       for (int v = 0; v < info.garments[k].num_vertices; ++v) {
         if (info.garments[k].pinned(v)) continue;
         const int64_t gv = offsets[k] + v;
-        for (int d = 0; d < 3; ++d) in.wind_force[3 * gv + d] = static_cast<float>(force[3 * gv + d]);
+        for (int d = 0; d < 3; ++d) in.wind_force[3 * gv + d] = force(gv, d);
       }
   }
   in.body_pos.resize(B * 3), in.body_normals.resize(B * 3);

@@ -444,33 +444,57 @@ Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
                                  ad::gather_rows(tape, delta.patch, in.cand_patches));
     rel_v = ad::add(tape, rel_v, ret ? rotate_k_blocks(Re, d_rel, 4) : d_rel);
   }
-  // The vertex's local features per candidate row, each 3-vector in the vertex's frame (RET).
+  // Row i of a per-vertex (or per-patch) feature table f (·, dim) picked by rows[i], each 3-vector
+  // turned into frame R_i (RET): (n, dim).
+  auto rotated_rows = [&](const std::vector<T>& R_host, const std::vector<T>& f, const std::vector<int32_t>& rows,
+                          int dim) {
+    const int64_t n = static_cast<int64_t>(rows.size());
+    std::vector<T> out(n * dim);
+    for (int64_t k = 0; k < n; ++k) {
+      const T* R = &R_host[9 * k];
+      const T* x = &f[dim * static_cast<int64_t>(rows[k])];
+      T* o = &out[dim * k];
+      for (int blk = 0; blk < dim / 3; ++blk)
+        for (int c = 0; c < 3; ++c)
+          o[3 * blk + c] = ret ? R[3 * c] * x[3 * blk] + R[3 * c + 1] * x[3 * blk + 1] + R[3 * c + 2] * x[3 * blk + 2]
+                               : x[3 * blk + c];
+    }
+    return constant(tape, out, n, dim);
+  };
+  // The vertex's local features per candidate row, in the vertex's frame.
   const bool local = cfg.vertex_local_features;
   LAYERSNET_CHECK(!local || in.vertex_local.size() == static_cast<std::size_t>(N * kVertexLocalDim),
                   "model.vertex_local_features is on but the input has no vertex_local features (N = " << N << ")");
-  Var<T> loc_v;
-  if (local) {
-    std::vector<T> loc(Ec * kVertexLocalDim);
-    for (int64_t k = 0; k < Ec; ++k) {
-      const T* R = &Re[9 * k];
-      const T* f = &in.vertex_local[kVertexLocalDim * static_cast<int64_t>(cand_vertex[k])];
-      T* o = &loc[kVertexLocalDim * k];
-      for (int blk = 0; blk < kVertexLocalDim / 3; ++blk)
-        for (int c = 0; c < 3; ++c)
-          o[3 * blk + c] = ret ? R[3 * c] * f[3 * blk] + R[3 * c + 1] * f[3 * blk + 1] + R[3 * c + 2] * f[3 * blk + 2]
-                               : f[3 * blk + c];
-    }
-    loc_v = constant(tape, loc, Ec, kVertexLocalDim);
+  const Var<T> loc_v = local ? rotated_rows(Re, in.vertex_local, cand_vertex, kVertexLocalDim) : Var<T>{};
+  // The wind force per candidate row and per patch, in the row's frame. A scene without wind
+  // skips it: a zero input adds nothing.
+  const bool wind = cfg.wind_force_input && !in.wind_force.empty();
+  LAYERSNET_CHECK(!cfg.wind_force_input || !in.has_wind || wind,
+                  "model.wind_force_input is on but the windy input has no wind_force: build it with model_input_from_sample");
+  Var<T> wind_v, wind_p;
+  if (wind) {
+    std::vector<int32_t> patches(P);
+    for (int64_t i = 0; i < P; ++i) patches[i] = static_cast<int32_t>(i);
+    wind_v = rotated_rows(Re, in.wind_force, cand_vertex, 3);
+    wind_p = rotated_rows(Rp_host, in.wind_force_patch, patches, 3);
   }
-  // The vertex branch's first-layer weight and input: the local columns sit after rel's 12.
-  auto with_local_weight = [&](const Var<T>& W_first) {
-    if (!local) return W_first;
-    const int64_t cols = W_first.cols;
-    return ad::concat_cols(tape, {ad::slice_cols(tape, W_first, 0, 12), p("decoder.local.weight"),
-                                  ad::slice_cols(tape, W_first, 12, cols)});
+  // First-layer weights and inputs: the extra columns sit after rel's 12, local then wind; the
+  // patch branch (rel = 0) has only the wind's.
+  auto with_extra_weight = [&](const Var<T>& W_first, bool vertex_rows) {
+    std::vector<Var<T>> parts{ad::slice_cols(tape, W_first, 0, 12)};
+    if (vertex_rows && local) parts.push_back(p("decoder.local.weight"));
+    if (wind) parts.push_back(p("decoder.wind.weight"));
+    if (parts.size() == 1) return W_first;
+    parts.push_back(ad::slice_cols(tape, W_first, 12, W_first.cols));
+    return ad::concat_cols(tape, std::span<const Var<T>>(parts));
   };
-  auto with_local_input = [&](const Var<T>& rel_part, const Var<T>& e_part, const Var<T>& h_part) {
-    return local ? ad::concat_cols(tape, {rel_part, loc_v, e_part, h_part}) : ad::concat_cols(tape, {rel_part, e_part, h_part});
+  auto with_extra_input = [&](const Var<T>& rel_part, const Var<T>& e_part, const Var<T>& h_part, bool vertex_rows) {
+    std::vector<Var<T>> parts{rel_part};
+    if (vertex_rows && local) parts.push_back(loc_v);
+    if (wind) parts.push_back(vertex_rows ? wind_v : wind_p);
+    parts.push_back(e_part);
+    parts.push_back(h_part);
+    return ad::concat_cols(tape, std::span<const Var<T>>(parts));
   };
 
   // The decoder MLP decoder.proj with its first-layer weight given (factored and/or with local columns).
@@ -488,13 +512,13 @@ Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
                                             ad::linear(tape, ad::slice_cols(tape, W1, 12, 12 + d), Wt),
                                             ad::linear(tape, ad::slice_cols(tape, W1, 12 + d, 12 + 2 * d), Wt)});
     const Var<T> z_p = ad::linear(tape, emb, Wt);  // Wᵀ e_p  (P, 3k)
-    const Var<T> feat_p = ad::concat_cols(tape, {tape.zeros(P, 12), rotate_blocks(Rp_host, z_p),
-                                                 rotate_blocks(Rp_host, ad::linear(tape, phi_p, Wt))});
+    const Var<T> feat_p = with_extra_input(tape.zeros(P, 12), rotate_blocks(Rp_host, z_p),
+                                           rotate_blocks(Rp_host, ad::linear(tape, phi_p, Wt)), false);
     const Var<T> zh_v = rotate_blocks(Rv_host, ad::linear(tape, phi_v, Wt));  // (I⊗R_v) Wᵀ h_v  (N, 3k)
     const Var<T> ze_v = rotate_blocks(Re, ad::gather_rows(tape, z_p, in.cand_patches));
-    const Var<T> feat_v = with_local_input(rel_v, ze_v, ad::gather_rows(tape, zh_v, cand_vertex));
-    a_p = decode(feat_p, M);
-    a_e = decode(feat_v, with_local_weight(M));
+    const Var<T> feat_v = with_extra_input(rel_v, ze_v, ad::gather_rows(tape, zh_v, cand_vertex), true);
+    a_p = decode(feat_p, with_extra_weight(M, false));
+    a_e = decode(feat_v, with_extra_weight(M, true));
   } else {
     // Patch branch: [0 (12), φ(R_p) e_p, φ(R_p) h_p]; vertex branch: [rel, φ(R_v) e_p, φ(R_v) h_v].
     // k = 1: the fused W R Wᵀ op; k > 1: W (I⊗R) Wᵀ composed.
@@ -505,7 +529,7 @@ Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
     const Var<T> He_p = ret ? phi(Rp_host, Rp, emb) : emb;
     const Var<T> Hh_p = ret ? phi(Rp_host, Rp, phi_p) : phi_p;
     const Var<T> W1 = p("decoder.proj.0.weight");
-    a_p = decode(ad::concat_cols(tape, {tape.zeros(P, 12), He_p, Hh_p}), W1);
+    a_p = decode(with_extra_input(tape.zeros(P, 12), He_p, Hh_p, false), with_extra_weight(W1, false));
     Var<T> He_v, Hh_v;
     if (ret) {
       const Var<T> z_e = rotate_blocks(Re, ad::gather_rows(tape, ad::linear(tape, emb, Wt), in.cand_patches));
@@ -515,7 +539,7 @@ Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
       He_v = ad::gather_rows(tape, emb, in.cand_patches);
       Hh_v = ad::gather_rows(tape, phi_v, cand_vertex);
     }
-    a_e = decode(with_local_input(rel_v, He_v, Hh_v), with_local_weight(W1));
+    a_e = decode(with_extra_input(rel_v, He_v, Hh_v, true), with_extra_weight(W1, true));
   }
   // Velocity bases: the cloth's own velocity (inertia), or in.body_carry (c, or c + v_t − c_t).
   // The vertex base is then c_v − c̄_p (c̄_p the patch mean), so x_v = x_t + c_v + a_p + a_v. c and
@@ -612,6 +636,8 @@ Predictions<T> forward(ad::Tape<T>& tape, ad::ParamStore<T>& params, const Model
       for (int c = 0; c < 3; ++c) base[3 * i + c] = in.body_carry_patch[3 * i + c] / in.std12[3 + c];
     patch_x = ad::add(tape, patch_x, ad::linear(tape, constant(tape, base, P, 3), p("embed.base.weight")));
   }
+  if (cfg.wind_force_input && !in.wind_force_patch.empty())
+    patch_x = ad::add(tape, patch_x, ad::linear(tape, constant(tape, in.wind_force_patch, P, 3), p("embed.wind_force.weight")));
   const Var<T> attr_x = mlp(tape, p, "embed.attr", 2, true, constant(tape, in.attr, A, 5));
   StageClock body_clock(U > 0 ? times : nullptr, &StageTimes::encoder_body_ms);  // stays 0 without body tokens
   const Var<T> body_x = U > 0 ? mlp(tape, p, "embed.input", 2, true, constant(tape, in.body_norm, U, 12)) : Var<T>{};

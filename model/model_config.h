@@ -55,6 +55,12 @@ struct ModelConfig {
   // embedding. The network corrects c without otherwise seeing it beyond model.body_radius. The
   // weight starts at zero, so a model with it starts as the same model without it.
   bool patch_base_input = false;
+  // The wind as Blender applies it: each garment vertex gets the face wind at x_t
+  // (ModelInput::wind_force, dataset::face_wind_force), each patch its members' mean. The decoder
+  // sees it in each row's frame through decoder.wind.weight (decoder_width, 3), the patch tokens
+  // in world axes through embed.wind_force.weight (width, 3); both start at zero. Without it the
+  // wind reaches the network only as one token that the attention may ignore. Not in the paper.
+  bool wind_force_input = false;
 };
 
 struct LossConfig {

@@ -60,6 +60,10 @@ void validate(const ModelInput<T>& in) {
   check_index("patch_body", in.patch_body, P, -1, U);
   check_index("vertex_body", in.vertex_body, N, -1, U);
   check_csr("cand", in.cand_offsets, in.cand_patches, N, 0, P);
+  if (!in.wind_force.empty() || !in.wind_force_patch.empty()) {
+    check_size("wind_force", in.wind_force.size(), N * 3);
+    check_size("wind_force_patch", in.wind_force_patch.size(), P * 3);
+  }
   if (!in.vertex_local.empty()) check_size("vertex_local", in.vertex_local.size(), N * kVertexLocalDim);
   if (!in.body_carry.empty()) check_size("body_carry", in.body_carry.size(), N * 3);
   if (!in.body_carry.empty() || !in.body_carry_patch.empty())

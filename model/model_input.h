@@ -67,6 +67,10 @@ struct ModelInput {
   // [q_w, q_x, q_y, q_z, strength/400] at t+1 then t.                                    (1, 10)
   std::vector<T> wind;
   std::vector<T> wind_rot;  // (9) quaternion rotation at t (world -> wind frame)
+  // ModelConfig::wind_force_input: the face wind of t+1 at x_t, (strength / 400) × the wind's unit
+  // direction through dataset::face_wind_force, divided by the garment's mean vertex area share,
+  // world axes; its patch means. Empty when off or without wind.          (N, 3) / (P, 3)
+  std::vector<T> wind_force, wind_force_patch;
   // [g_acc(t+1), g_acc(t), root_vel(t+1), root_acc(t+1), root_vel(t), root_acc(t)], where
   // g_acc = (g/fps - root_acc - mu_acc)/sigma_acc and root_* normalised with the root stats.  (1, 18)
   std::vector<T> gravity;
@@ -120,6 +124,7 @@ ModelInput<U> cast_input(const ModelInput<T>& in) {
   o.body_norm = cv(in.body_norm), o.body_rot = cv(in.body_rot);
   o.body_offsets = in.body_offsets, o.body_tokens = in.body_tokens;
   o.has_wind = in.has_wind, o.wind = cv(in.wind), o.wind_rot = cv(in.wind_rot);
+  o.wind_force = cv(in.wind_force), o.wind_force_patch = cv(in.wind_force_patch);
   o.gravity = cv(in.gravity), o.gravity_rot = cv(in.gravity_rot);
   o.patch_body = in.patch_body, o.vertex_body = in.vertex_body;
   o.cand_offsets = in.cand_offsets, o.cand_patches = in.cand_patches;

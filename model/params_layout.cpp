@@ -101,6 +101,10 @@ void register_params(ad::ParamStore<T>& ps, const ModelConfig& c) {
   // Registered last so that switching it on leaves every other initial value unchanged.
   if (c.vertex_local_features) ps.add("decoder.local.weight", m.dec_width, kVertexLocalDim);
   if (c.patch_base_input) ps.add("embed.base.weight", m.d, 3);
+  if (c.wind_force_input) {
+    ps.add("embed.wind_force.weight", m.d, 3);
+    ps.add("decoder.wind.weight", m.dec_width, 3);
+  }
   ps.finalize();
 }
 
@@ -161,6 +165,11 @@ void init_params(ad::ParamStore<T>& ps, const ModelConfig& c, uint64_t seed) {
     auto v = ps.value(ps.index_of("embed.base.weight"));
     std::fill(v.begin(), v.end(), T(0));
   }
+  if (c.wind_force_input)  // likewise
+    for (const char* name : {"embed.wind_force.weight", "decoder.wind.weight"}) {
+      auto v = ps.value(ps.index_of(name));
+      std::fill(v.begin(), v.end(), T(0));
+    }
   if (c.velocity_base != "inertia")
     for (std::size_t i = 0; i < entries.size(); ++i)
       if (entries[i].name.rfind("decoder.proj.2.", 0) == 0) {

@@ -1,6 +1,7 @@
 #include "model/sample_input.h"
 
 #include "autodiff/check.h"
+#include "dataset/wind.h"
 
 #include <algorithm>
 #include <array>
@@ -75,6 +76,26 @@ std::vector<float> vertex_local_features(const dataset::TrainingSample& s, float
     put(4, lap, inv_r);
     put(5, lap_vel, inv_v);
     put(6, vel - vel_prev, inv_v);
+  }
+  return out;
+}
+
+// ModelInput::wind_force (N, 3): the face wind of the wind at t+1, w = (strength / 400) × its unit
+// direction, at x_t, per unit of the garment's mean vertex area share (Blender's vertices carry
+// equal masses, so this is the wind's acceleration up to one constant per garment).
+std::vector<float> wind_force_feature(const dataset::TrainingSample& s) {
+  const dataset::SequenceStructure& S = *s.structure;
+  const Eigen::Vector4f q = s.wind.row(0).head<4>().transpose();
+  const Eigen::Vector3d w = static_cast<double>(s.wind(0, 4)) * dataset::wind_direction(q).cast<double>();
+  Eigen::VectorXd area;
+  const dataset::Points force = dataset::face_wind_force(s.state.leftCols<3>(), S.faces, w, &area);
+  std::vector<float> out(static_cast<std::size_t>(3 * force.rows()));
+  for (std::size_t g = 0; g + 1 < S.vertex_offsets.size(); ++g) {
+    const int begin = S.vertex_offsets[g], end = S.vertex_offsets[g + 1];
+    const double mean_area = end > begin ? area.segment(begin, end - begin).mean() : 0.0;
+    const double scale = mean_area > 0 ? 1.0 / mean_area : 0.0;
+    for (int v = begin; v < end; ++v)
+      for (int c = 0; c < 3; ++c) out[3 * v + c] = static_cast<float>(force(v, c) * scale);
   }
   return out;
 }
@@ -210,6 +231,12 @@ ModelInput<float> model_input_from_sample(const dataset::TrainingSample& s, cons
     in.wind_rot.resize(9);
     for (int i = 0; i < 3; ++i)
       for (int j = 0; j < 3; ++j) in.wind_rot[3 * i + j] = s.wind_rotation[1](i, j);
+  }
+  if (cfg.wind_force_input && s.has_wind) {
+    in.wind_force = wind_force_feature(s);
+    const Eigen::Map<const Eigen::Matrix<float, Eigen::Dynamic, 3, Eigen::RowMajor>> force(in.wind_force.data(), N, 3);
+    const auto force_patch = dataset::patch_means(st.all, force);
+    in.wind_force_patch.assign(force_patch.data(), force_patch.data() + 3 * P);
   }
   in.gravity = flat(s.gravity_norm);
   const auto root = flat(s.root_motion_norm);

@@ -170,6 +170,7 @@ const Schema& schema() {
     k.add("model.carry_smoothing", [](Config& c) -> int& { return c.model.carry_smoothing; }, "averaging steps over the garment mesh on the body carry (velocity_base body or body_inertia); 0 = none", {0, 1000, {}});
     k.add("model.output_smoothing", [](Config& c) -> int& { return c.model.output_smoothing; }, "averaging steps over the garment mesh on the network's per-vertex correction (not in the paper); 0 = none", {0, 1000, {}});
     k.add("model.patch_base_input", [](Config& c) -> bool& { return c.model.patch_base_input; }, "each patch token also sees its velocity base (the body carry's patch mean; velocity_base body or body_inertia; not in the paper)");
+    k.add("model.wind_force_input", [](Config& c) -> bool& { return c.model.wind_force_input; }, "each garment vertex and patch also sees the wind's force on its faces, as Blender applies it (not in the paper)");
     k.add("model.orthogonality", [](Config& c) -> std::string& { return c.model.orthogonality; }, "how W_R stays orthogonal", {0, 0, {"penalty", "exact"}});
     // [loss]
     const Range weight{0, 1e6, {}};

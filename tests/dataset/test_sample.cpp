@@ -1,6 +1,7 @@
 // Training samples: every tensor checked against its definition in dataset/sample.h.
 #include "dataset/sample.h"
 #include "dataset/synthetic.h"
+#include "dataset/wind.h"
 
 #include <gtest/gtest.h>
 
@@ -258,4 +259,28 @@ TEST(Sample, OfficialFrameSelectionAndRangeErrors) {
 }
 
 }  // namespace
+// A unit square of two triangles in the z = 0 plane (one wound each way): facing the wind, each
+// corner gets its faces' area/3 along z, whatever the winding; edge-on, nothing; at 60° from the
+// normal, half the strength along the normal.
+TEST(FaceWind, SquareFacingEdgeOnAndOblique) {
+  Points x(4, 3);
+  x << 0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0;
+  const std::vector<int32_t> faces{0, 1, 2, 0, 3, 2};  // normals +z and −z
+  Eigen::VectorXd area;
+  const Points facing = face_wind_force(x, faces, Eigen::Vector3d(0, 0, 2), &area);
+  const double share[4] = {1.0 / 3, 1.0 / 6, 1.0 / 3, 1.0 / 6};  // corners 0 and 2 are in both faces
+  for (int v = 0; v < 4; ++v) {
+    EXPECT_NEAR(area[v], share[v], 1e-12) << v;
+    EXPECT_NEAR(facing(v, 2), 2 * share[v], 1e-6) << v;
+    EXPECT_NEAR(facing(v, 0), 0, 1e-7) << v;
+    EXPECT_NEAR(facing(v, 1), 0, 1e-7) << v;
+  }
+  EXPECT_EQ(face_wind_force(x, faces, Eigen::Vector3d(3, -1, 0)).cwiseAbs().maxCoeff(), 0.f);
+  const Points oblique = face_wind_force(x, faces, Eigen::Vector3d(std::sqrt(3.0), 0, 1));  // |w| 2, 60° off
+  for (int v = 0; v < 4; ++v) {
+    EXPECT_NEAR(oblique(v, 2), share[v], 1e-6) << v;
+    EXPECT_NEAR(oblique(v, 0), 0, 1e-6) << v;
+  }
+}
+
 }  // namespace layersnet::dataset

@@ -131,6 +131,53 @@ TEST(ModelGradcheck, WholeModelBodyBasePatchBaseInput) {
   });
 }
 
+// The wind force input: zero weights give the model without it (its initial state); drawn, they
+// move the prediction and the gradient holds; a calm scene runs exactly the model without it.
+TEST(ModelGradcheck, WholeModelWindForceInput) {
+  auto c = testing::tiny_config();
+  c.velocity_base = "body";
+  auto with = c;
+  with.wind_force_input = true;
+  const auto s = make_sample<double>(testing::tiny_scene(), with);
+  ASSERT_FALSE(s.input.wind_force.empty());
+  ad::ParamStore<double> plain, winded;
+  register_params(plain, c);
+  init_params(plain, c, 3);
+  register_params(winded, with);
+  init_params(winded, with, 3);
+  auto draw = [](ad::ParamStore<double>& ps, const std::string& name, uint64_t seed) {
+    std::mt19937_64 rng(seed);
+    std::normal_distribution<double> normal(0, 0.3);
+    for (auto& x : ps.value(ps.index_of(name))) x = normal(rng);
+  };
+  for (auto* ps : {&plain, &winded}) draw(*ps, "decoder.proj.2.weight", 5);
+  auto predict = [&](ad::ParamStore<double>& ps, const ModelConfig& cfg, const ModelInput<double>& in) {
+    ad::Tape<double> tape;
+    const Eigen::MatrixXd out = forward(tape, ps, cfg, in).vertex.val();
+    return std::make_pair(out, tape.nodes().size());
+  };
+  const Eigen::MatrixXd a = predict(plain, c, s.input).first;
+  // Zero columns join the first layer's products, which may then sum in another order: 3e-18.
+  EXPECT_LT((a - predict(winded, with, s.input).first).cwiseAbs().maxCoeff(), 1e-14);
+  draw(winded, "decoder.wind.weight", 6);
+  const Eigen::MatrixXd decoder_moved = predict(winded, with, s.input).first;
+  EXPECT_GT((decoder_moved - a).cwiseAbs().maxCoeff(), 1e-6);
+  draw(winded, "embed.wind_force.weight", 7);
+  EXPECT_GT((predict(winded, with, s.input).first - decoder_moved).cwiseAbs().maxCoeff(), 1e-8);
+  // Calm: the same tape and bits as the model without the input.
+  const auto calm = make_sample<double>(testing::tiny_scene(false), with);
+  EXPECT_TRUE(calm.input.wind_force.empty());
+  const auto [calm_plain, calm_nodes_plain] = predict(plain, c, calm.input);
+  const auto [calm_winded, calm_nodes_winded] = predict(winded, with, calm.input);
+  EXPECT_EQ(calm_nodes_plain, calm_nodes_winded);
+  EXPECT_EQ((calm_plain - calm_winded).cwiseAbs().maxCoeff(), 0.0);
+  directional_check(with, [&](ad::ParamStore<double>& ps) {
+    draw(ps, "decoder.wind.weight", 6);
+    draw(ps, "embed.wind_force.weight", 7);
+    draw(ps, "decoder.proj.2.weight", 5);
+  });
+}
+
 // "exact": the effective W has orthonormal columns for any raw parameter, equals the raw
 // parameter at initialisation, and the loss has no orthogonality term.
 TEST(ModelOrthogonality, ExactParametrisationHoldsForAnyParameter) {

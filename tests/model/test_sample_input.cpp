@@ -4,6 +4,7 @@
 #include "dataset/garments.h"
 #include "dataset/sample.h"
 #include "dataset/synthetic.h"
+#include "dataset/wind.h"
 #include "losses/sample_loss_input.h"
 #include "model/layersnet.h"
 #include "model/params_layout.h"
@@ -195,6 +196,73 @@ TEST(SampleInput, VertexLocalFeaturesAreWhatTheirNamesSay) {
   EXPECT_LT(near_body, in.N);  // the outer layer lies beyond R_b in parts: both branches are tested
 }
 
+
+// ModelInput::wind_force recomputed from the sequence's faces at x_t: the face wind of the wind at
+// t+1 divided by the garment's mean vertex area share; its patch means; empty without wind or
+// with the switch off; linear in the strength.
+TEST(SampleInput, WindForceIsTheFaceWindPerMeanVertexArea) {
+  dataset::SyntheticOptions o;
+  o.garments = 2;
+  o.frames = 10;
+  o.wind = true;
+  const auto seq = dataset::make_synthetic_sequence(o);
+  const auto st = stats();
+  const int t = 6;
+  ASSERT_TRUE(seq.info.has_wind);
+  ASSERT_GT(seq.info.wind_strength[t + 1], 0.f);
+  const auto sample = dataset::build_sample(seq.info, seq.frames, t, st, nullptr);
+  ModelConfig c = testing::tiny_config();
+  EXPECT_TRUE(model_input_from_sample(sample, st, c).wind_force.empty());
+  c.wind_force_input = true;
+  const auto in = model_input_from_sample(sample, st, c);
+  ASSERT_EQ(in.wind_force.size(), static_cast<std::size_t>(3 * in.N));
+  const auto x = dataset::garments_at(seq.info, seq.frames, t);
+  const Eigen::Vector3d w = seq.info.wind_strength[t + 1] / 400.0 *
+                            dataset::wind_direction(seq.info.wind_rotation.row(t + 1).transpose()).cast<double>();
+  std::vector<Eigen::Vector3d> force(in.N, Eigen::Vector3d::Zero());
+  std::vector<double> area(in.N, 0.0);
+  int offset = 0, facing = 0;
+  for (const auto& g : seq.info.garments) {
+    for (Eigen::Index f = 0; f < g.faces.rows(); ++f) {
+      const Eigen::Vector3d a = x.row(offset + g.faces(f, 0)).transpose().cast<double>();
+      const Eigen::Vector3d b = x.row(offset + g.faces(f, 1)).transpose().cast<double>();
+      const Eigen::Vector3d d = x.row(offset + g.faces(f, 2)).transpose().cast<double>();
+      const Eigen::Vector3d n = (b - a).cross(d - a);
+      const double A = n.norm() / 2;
+      for (int k = 0; k < 3; ++k) {
+        force[offset + g.faces(f, k)] += A / 3 * w.dot(n.normalized()) * n.normalized();
+        area[offset + g.faces(f, k)] += A / 3;
+      }
+    }
+    double mean = 0;
+    for (int v = offset; v < offset + g.num_vertices; ++v) mean += area[v] / g.num_vertices;
+    for (int v = offset; v < offset + g.num_vertices; ++v) {
+      const Eigen::Vector3f got(in.wind_force[3 * v], in.wind_force[3 * v + 1], in.wind_force[3 * v + 2]);
+      EXPECT_LT((got.cast<double>() - force[v] / mean).norm(), 1e-5 * (1 + force[v].norm() / mean)) << v;
+      facing += got.norm() > 1e-3f;
+    }
+    offset += g.num_vertices;
+  }
+  EXPECT_GT(facing, in.N / 4);  // the feature is not all zeros
+  const auto& all = sample.structure->all;
+  for (int p = 0; p < in.P; ++p) {
+    Eigen::Vector3f mean = Eigen::Vector3f::Zero();
+    for (const int32_t* v = all.patch_vertices.begin(p); v != all.patch_vertices.end(p); ++v)
+      mean += Eigen::Vector3f(in.wind_force[3 * *v], in.wind_force[3 * *v + 1], in.wind_force[3 * *v + 2]);
+    mean /= static_cast<float>(all.patch_vertices.size(p));
+    for (int k = 0; k < 3; ++k) EXPECT_NEAR(in.wind_force_patch[3 * p + k], mean[k], 1e-5f) << p;
+  }
+  // Half the strength, half the feature (eval --wind-scale scales the strength).
+  auto halved = seq;
+  halved.info.wind_strength *= 0.5f;
+  const auto in_half = model_input_from_sample(dataset::build_sample(halved.info, halved.frames, t, st, nullptr), st, c);
+  for (std::size_t i = 0; i < in.wind_force.size(); ++i)
+    EXPECT_NEAR(in_half.wind_force[i], 0.5f * in.wind_force[i], 1e-6f * (1 + std::abs(in.wind_force[i])));
+  // No wind, no feature.
+  o.wind = false;
+  const auto calm = dataset::make_synthetic_sequence(o);
+  EXPECT_TRUE(model_input_from_sample(dataset::build_sample(calm.info, calm.frames, t, st, nullptr), st, c).wind_force.empty());
+}
 
 using Mat3 = Eigen::Matrix<double, 3, 3, Eigen::RowMajor>;
 
