@@ -9,6 +9,7 @@
 
 #include <cmath>
 #include <iostream>
+#include <random>
 
 namespace layersnet::model {
 namespace {
@@ -56,32 +57,42 @@ TEST(ModelForward, ShapesAndFiniteOutputs) {
 }
 
 // The rank-3 factored decoder is the same function as the explicit φ(R) one, with the same
-// gradients.
+// gradients; also with the extra first-layer columns (local features, the wind force) drawn.
 TEST(ModelForward, FactoredDecoderEqualsExplicit) {
-  const ModelConfig c = testing::tiny_config();
-  const auto in = cast_input<double>(testing::window(dataset::make_synthetic_sequence(testing::tiny_scene()), c).input);
-  ad::ParamStore<double> ps;
-  register_params(ps, c);
-  init_params(ps, c, 4);
-  std::vector<double> out[2], grad[2];
-  for (int k = 0; k < 2; ++k) {
-    ad::Tape<double> tape;
-    ForwardOptions opt;
-    opt.factor_decoder = k == 0;
-    const auto pred = forward(tape, ps, c, in, opt);
-    out[k].assign(pred.vertex.value, pred.vertex.value + pred.vertex.size());
-    out[k].insert(out[k].end(), pred.patch.value, pred.patch.value + pred.patch.size());
-    ps.zero_grads();
-    tape.backward(ad::sum_all(tape, ad::concat_rows(tape, pred.vertex, pred.patch)));
-    grad[k].assign(ps.grads().begin(), ps.grads().end());
+  for (const bool extras : {false, true}) {
+    ModelConfig c = testing::tiny_config();
+    c.vertex_local_features = c.wind_force_input = extras;
+    const auto in = cast_input<double>(testing::window(dataset::make_synthetic_sequence(testing::tiny_scene()), c).input);
+    ASSERT_EQ(in.wind_force.empty(), !extras);
+    ad::ParamStore<double> ps;
+    register_params(ps, c);
+    init_params(ps, c, 4);
+    if (extras) {
+      std::mt19937_64 rng(9);
+      std::normal_distribution<double> normal(0, 0.3);
+      for (const char* name : {"decoder.wind.weight", "embed.wind_force.weight"})
+        for (auto& x : ps.value(ps.index_of(name))) x = normal(rng);
+    }
+    std::vector<double> out[2], grad[2];
+    for (int k = 0; k < 2; ++k) {
+      ad::Tape<double> tape;
+      ForwardOptions opt;
+      opt.factor_decoder = k == 0;
+      const auto pred = forward(tape, ps, c, in, opt);
+      out[k].assign(pred.vertex.value, pred.vertex.value + pred.vertex.size());
+      out[k].insert(out[k].end(), pred.patch.value, pred.patch.value + pred.patch.size());
+      ps.zero_grads();
+      tape.backward(ad::sum_all(tape, ad::concat_rows(tape, pred.vertex, pred.patch)));
+      grad[k].assign(ps.grads().begin(), ps.grads().end());
+    }
+    ASSERT_EQ(out[0].size(), out[1].size());
+    for (std::size_t i = 0; i < out[0].size(); ++i) ASSERT_NEAR(out[0][i], out[1][i], 1e-12) << i << " extras " << extras;
+    double gmax = 0, dmax = 0;
+    for (std::size_t i = 0; i < grad[0].size(); ++i)
+      gmax = std::max(gmax, std::abs(grad[1][i])), dmax = std::max(dmax, std::abs(grad[0][i] - grad[1][i]));
+    EXPECT_GT(gmax, 0.0);
+    EXPECT_LT(dmax, 1e-10 * gmax) << "extras " << extras;
   }
-  ASSERT_EQ(out[0].size(), out[1].size());
-  for (std::size_t i = 0; i < out[0].size(); ++i) ASSERT_NEAR(out[0][i], out[1][i], 1e-12) << i;
-  double gmax = 0, dmax = 0;
-  for (std::size_t i = 0; i < grad[0].size(); ++i)
-    gmax = std::max(gmax, std::abs(grad[1][i])), dmax = std::max(dmax, std::abs(grad[0][i] - grad[1][i]));
-  EXPECT_GT(gmax, 0.0);
-  EXPECT_LT(dmax, 1e-10 * gmax);
 }
 
 // The fused RIA op and the gather/segment composite give the same model (up to how eps
