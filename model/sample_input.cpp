@@ -85,8 +85,8 @@ std::vector<float> vertex_local_features(const dataset::TrainingSample& s, float
 // equal masses, so this is the wind's acceleration up to one constant per garment).
 std::vector<float> wind_force_feature(const dataset::TrainingSample& s) {
   const dataset::SequenceStructure& S = *s.structure;
-  const Eigen::Vector4f q = s.wind.row(0).head<4>().transpose();
-  const Eigen::Vector3d w = static_cast<double>(s.wind(0, 4)) * dataset::wind_direction(q).cast<double>();
+  // The wind blows along R(q)'s z axis (dataset::wind_direction); the sample holds R(q) of t+1.
+  const Eigen::Vector3d w = static_cast<double>(s.wind(0, 4)) * s.wind_rotation[0].col(2).cast<double>();
   Eigen::VectorXd area;
   const dataset::Points force = dataset::face_wind_force(s.state.leftCols<3>(), S.faces, w, &area);
   std::vector<float> out(static_cast<std::size_t>(3 * force.rows()));

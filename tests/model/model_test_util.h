@@ -1,7 +1,8 @@
 #pragma once
 // Shared fixtures for the model tests: a tiny configuration, a small synthetic sequence, and
 // its windows through the production road (dataset::build_sample -> model_input_from_sample,
-// losses::loss_input_from_sample).
+// losses::loss_input_from_sample); drawn values for parameters that start at zero.
+#include "autodiff/params.h"
 #include "dataset/sample.h"
 #include "dataset/stats.h"
 #include "dataset/synthetic.h"
@@ -10,9 +11,19 @@
 #include "model/sample_input.h"
 #include "run/config.h"
 
+#include <cstdint>
+#include <random>
 #include <string>
 
 namespace layersnet::model::testing {
+
+// Overwrites the tensor `name` with N(0, 0.3²) draws from `seed`, so that the paths behind a
+// parameter that starts at zero change the output and carry a gradient.
+inline void draw_normal(ad::ParamStore<double>& ps, const std::string& name, uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> normal(0, 0.3);
+  for (auto& x : ps.value(ps.index_of(name))) x = normal(rng);
+}
 
 // The tests' one tiny model: the [model] section of configs/tiny.toml, which the trainer and
 // command-line tests train too; small enough for a double-precision whole-model gradient check

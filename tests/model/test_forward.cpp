@@ -9,10 +9,22 @@
 
 #include <cmath>
 #include <iostream>
-#include <random>
 
 namespace layersnet::model {
 namespace {
+
+// One forward: `out` gets the vertex predictions (then the patch ones when `with_patch`), `grad`
+// the parameter gradient of their sum.
+void run_forward(ad::ParamStore<double>& ps, const ModelConfig& c, const ModelInput<double>& in, const ForwardOptions& opt,
+                 bool with_patch, std::vector<double>& out, std::vector<double>& grad) {
+  ad::Tape<double> tape;
+  const auto pred = forward(tape, ps, c, in, opt);
+  out.assign(pred.vertex.value, pred.vertex.value + pred.vertex.size());
+  if (with_patch) out.insert(out.end(), pred.patch.value, pred.patch.value + pred.patch.size());
+  ps.zero_grads();
+  tape.backward(ad::sum_all(tape, with_patch ? ad::concat_rows(tape, pred.vertex, pred.patch) : pred.vertex));
+  grad.assign(ps.grads().begin(), ps.grads().end());
+}
 
 TEST(ModelParams, OfficialSizesMatchTheReferenceCount) {
   ModelConfig c;  // official sizes
@@ -68,22 +80,14 @@ TEST(ModelForward, FactoredDecoderEqualsExplicit) {
     register_params(ps, c);
     init_params(ps, c, 4);
     if (extras) {
-      std::mt19937_64 rng(9);
-      std::normal_distribution<double> normal(0, 0.3);
-      for (const char* name : {"decoder.wind.weight", "embed.wind_force.weight"})
-        for (auto& x : ps.value(ps.index_of(name))) x = normal(rng);
+      testing::draw_normal(ps, "decoder.wind.weight", 9);
+      testing::draw_normal(ps, "embed.wind_force.weight", 10);
     }
     std::vector<double> out[2], grad[2];
     for (int k = 0; k < 2; ++k) {
-      ad::Tape<double> tape;
       ForwardOptions opt;
       opt.factor_decoder = k == 0;
-      const auto pred = forward(tape, ps, c, in, opt);
-      out[k].assign(pred.vertex.value, pred.vertex.value + pred.vertex.size());
-      out[k].insert(out[k].end(), pred.patch.value, pred.patch.value + pred.patch.size());
-      ps.zero_grads();
-      tape.backward(ad::sum_all(tape, ad::concat_rows(tape, pred.vertex, pred.patch)));
-      grad[k].assign(ps.grads().begin(), ps.grads().end());
+      run_forward(ps, c, in, opt, true, out[k], grad[k]);
     }
     ASSERT_EQ(out[0].size(), out[1].size());
     for (std::size_t i = 0; i < out[0].size(); ++i) ASSERT_NEAR(out[0][i], out[1][i], 1e-12) << i << " extras " << extras;
@@ -105,14 +109,9 @@ TEST(ModelForward, FusedAttentionEqualsComposite) {
   init_params(ps, c, 6);
   std::vector<double> out[2], grad[2];
   for (int k = 0; k < 2; ++k) {
-    ad::Tape<double> tape;
     ForwardOptions opt;
     opt.fused_attention = k == 0;
-    const auto pred = forward(tape, ps, c, in, opt);
-    out[k].assign(pred.vertex.value, pred.vertex.value + pred.vertex.size());
-    ps.zero_grads();
-    tape.backward(ad::sum_all(tape, pred.vertex));
-    grad[k].assign(ps.grads().begin(), ps.grads().end());
+    run_forward(ps, c, in, opt, false, out[k], grad[k]);
   }
   double omax = 0, odiff = 0, gmax = 0, gdiff = 0;
   for (std::size_t i = 0; i < out[0].size(); ++i)

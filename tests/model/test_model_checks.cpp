@@ -112,11 +112,7 @@ TEST(ModelGradcheck, WholeModelBodyBasePatchBaseInput) {
   init_params(plain, c, 3);
   register_params(based, with);
   init_params(based, with, 3);
-  auto draw = [](ad::ParamStore<double>& ps, const std::string& name, uint64_t seed) {
-    std::mt19937_64 rng(seed);
-    std::normal_distribution<double> normal(0, 0.3);
-    for (auto& x : ps.value(ps.index_of(name))) x = normal(rng);
-  };
+  const auto draw = testing::draw_normal;
   for (auto* ps : {&plain, &based}) draw(*ps, "decoder.proj.2.weight", 5);
   ad::Tape<double> tape;
   const Eigen::MatrixXd a = forward(tape, plain, c, s.input).vertex.val();
@@ -145,11 +141,7 @@ TEST(ModelGradcheck, WholeModelWindForceInput) {
   init_params(plain, c, 3);
   register_params(winded, with);
   init_params(winded, with, 3);
-  auto draw = [](ad::ParamStore<double>& ps, const std::string& name, uint64_t seed) {
-    std::mt19937_64 rng(seed);
-    std::normal_distribution<double> normal(0, 0.3);
-    for (auto& x : ps.value(ps.index_of(name))) x = normal(rng);
-  };
+  const auto draw = testing::draw_normal;
   for (auto* ps : {&plain, &winded}) draw(*ps, "decoder.proj.2.weight", 5);
   auto predict = [&](ad::ParamStore<double>& ps, const ModelConfig& cfg, const ModelInput<double>& in) {
     ad::Tape<double> tape;
