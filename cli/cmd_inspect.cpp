@@ -37,6 +37,10 @@ LAYERSNET_COMMAND(inspect, "Summarise a D-LAYERS-H5 data set (sequences, garment
                     sub.add_option("--patch-size", opts->patch_size, "UV patch size (default: the config's, else 0.04)");
                     sub.add_flag("--margins", opts->options.margins,
                                  "measure the training split's ground-truth collision distances (for loss.collision_eps)");
+                    sub.add_flag("--physics", opts->options.physics,
+                                 "how far the validation split's frames are from stationary for the physics energy: "
+                                 "each term's gradient at Blender's next frame against the inertia's, and the term "
+                                 "weights that fit best");
                     sub.add_flag("--pins", opts->options.pins,
                                  "measure how closely pinned vertices carried with the body (eval.pins) follow the ground truth");
                     sub.add_flag("--motion", opts->options.motion,

@@ -119,6 +119,9 @@ struct TrainingSample {
   Points body_carry;
   // The same from t-1 to t (x_{t-1} bound at t-1, carried to t).  (N, 3); empty unless options.body_carry_prev.
   Points body_carry_prev;
+  // One implicit step of Blender's cloth energy from x_t as a root-relative displacement
+  // (losses/physics_step.h): units/frame.  (N, 3); empty unless the caller adds it.
+  Points physics_step;
   int num_vertices() const { return static_cast<int>(state.rows()); }
   int num_patches() const { return static_cast<int>(patch_state.rows()); }
 };

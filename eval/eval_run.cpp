@@ -113,6 +113,7 @@ void run_evaluation(EvalRunOptions o) {
     plain.push_back(std::make_unique<FollowBody>());
     plain.push_back(std::make_unique<SkinnedToBody>(false));
     plain.push_back(std::make_unique<SkinnedToBody>(true));
+    plain.push_back(std::make_unique<PhysicsStep>());
     for (auto& b : plain) {
       owned.push_back(on ? std::make_unique<PostProcessed>(std::move(b), post.eval) : std::move(b));
       kinds.push_back("baseline");

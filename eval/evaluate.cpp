@@ -163,14 +163,20 @@ std::vector<MethodResult> evaluate(const dataset::DatasetManifest& manifest, std
   std::vector<MethodResult> results(predictors.size());
   for (size_t p = 0; p < predictors.size(); ++p) results[p].name = predictors[p]->name();
   for (const std::string& id : ids) {
-    dataset::Sequence seq = dataset::read_sequence(manifest.sequence_path(id));
-    if (seq.info.has_wind) seq.info.wind_strength *= static_cast<float>(o.wind_scale);
+    const dataset::Sequence seq = dataset::read_sequence(manifest.sequence_path(id));
+    dataset::Sequence scaled_wind;  // what the models see under --wind-scale
+    const bool rescale = seq.info.has_wind && o.wind_scale != 1.0;
+    if (rescale) {
+      scaled_wind = seq;
+      scaled_wind.info.wind_strength *= static_cast<float>(o.wind_scale);
+    }
     const RolloutStart start = rollout_start(manifest.sequence_path(id), o);
     CollisionOptions co;
     co.max_body_distance = o.max_body_distance_m * seq.info.scale;
     co.max_layer_distance = o.max_layer_distance_m * seq.info.scale;
     for (size_t p = 0; p < predictors.size(); ++p) {
-      const Rollout r = rollout(*predictors[p], seq, start.input_frame, o.frames);
+      const bool scaled = rescale && predictors[p]->takes_scaled_wind();
+      const Rollout r = rollout(*predictors[p], scaled ? scaled_wind : seq, start.input_frame, o.frames);
       SequenceResult s = score_rollout(seq, r, co, o.mark_frames);
       s.id = id;
       s.after_ramp = start.after_ramp;

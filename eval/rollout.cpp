@@ -7,6 +7,7 @@
 #include "eval/tether.h"
 
 #include "model/layersnet.h"
+#include "losses/physics_step.h"
 #include "model/sample_input.h"
 #include "run/checkpoint.h"
 #include "run/run_dir.h"
@@ -53,6 +54,25 @@ Points SkinnedToBody::step(const dataset::Sequence& seq, int t, const Points&, c
   return dataset::carry_with_body(binding_, body, frames_of(body));
 }
 
+PhysicsStep::PhysicsStep() {
+  model_.velocity_base = "physics";
+  options_ = model::sample_options_for(model_);
+}
+
+void PhysicsStep::begin(const dataset::Sequence& seq) {
+  structure_ = dataset::build_structure(seq.info, options_.patch_size);
+}
+
+Points PhysicsStep::step(const dataset::Sequence& seq, int t, const Points& x_prev2, const Points& x_prev,
+                         const Points& x_now) {
+  if (!structure_) begin(seq);
+  const dataset::TrainingSample s =
+      rollout_sample(seq, t, x_prev2, x_prev, x_now, dataset::NormalisationStats{}, structure_, options_, model_);
+  Points x = s.state.leftCols<3>() + s.physics_step;  // root-relative at t+1
+  x.rowwise() += s.root_translation_next.transpose();
+  return x;
+}
+
 std::unique_ptr<const ClothConstraints> make_cloth_constraints(const dataset::Sequence& seq,
                                                                const EvalConfig& settings) {
   return std::make_unique<const ClothConstraints>(seq.info, rest_garments(seq), seq.body_at(0), garments_at(seq, 0),
@@ -86,7 +106,7 @@ ModelPredictor::ModelPredictor(std::string name, Config config, ad::ParamStore<f
 dataset::TrainingSample rollout_sample(const dataset::Sequence& seq, int t, const Points& x_prev2, const Points& x_prev,
                                        const Points& x_now, const dataset::NormalisationStats& stats,
                                        const std::shared_ptr<const dataset::SequenceStructure>& structure,
-                                       const dataset::SampleOptions& options) {
+                                       const dataset::SampleOptions& options, const ModelConfig& model) {
   const dataset::SequenceInfo& info = seq.info;
   // The window t-2..t+1: body from the data, garments from the rollout (t+1 is only the
   // sample's unused target, so the ground truth fills it).
@@ -105,7 +125,9 @@ dataset::TrainingSample rollout_sample(const dataset::Sequence& seq, int t, cons
     w.garments.push_back(std::move(x));
     offset += n;
   }
-  return dataset::build_sample(info, w, t, stats, structure, options);
+  dataset::TrainingSample sample = dataset::build_sample(info, w, t, stats, structure, options);
+  losses::add_physics_step(sample, info, model);
+  return sample;
 }
 
 template <class T>
@@ -128,7 +150,7 @@ Points NetworkPredictor<T>::step(const dataset::Sequence& seq, int t, const Poin
                                  const Points& x_now) {
   if (!structure_) begin(seq);
   const dataset::TrainingSample sample =
-      rollout_sample(seq, t, x_prev2, x_prev, x_now, stats_, structure_, sample_options_);
+      rollout_sample(seq, t, x_prev2, x_prev, x_now, stats_, structure_, sample_options_, config_.model);
   Points x = predict_positions(tape_, params_, config_, sample, stats_);
   if (!tether_limit_.empty()) apply_tether(structure_->all, tether_limit_, x);
   if (constraints_) constraints_->apply(seq.body_at(t + 1), x, seq.body_at(t), x_now);

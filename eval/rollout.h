@@ -38,6 +38,9 @@ class Predictor {
   virtual std::string name() const = 0;
   // Called once per sequence before its first step.
   virtual void begin(const dataset::Sequence& /*seq*/) {}
+  // True for the models under test: eval's --wind-scale changes the wind they are given; every
+  // baseline keeps the data's.
+  virtual bool takes_scaled_wind() const { return false; }
   // x_prev2, x_prev, x_now: garment positions at t-2, t-1, t (world, (N, 3)).
   virtual Points step(const dataset::Sequence& seq, int t, const Points& x_prev2, const Points& x_prev,
                       const Points& x_now) = 0;
@@ -84,6 +87,23 @@ class SkinnedToBody : public Predictor {
   dataset::SkinBinding binding_;  // empty until the first step
 };
 
+// Baseline: one implicit step of Blender's cloth energy per frame, no network
+// (losses/physics_step.h with the "physics" velocity base's defaults): what a model with
+// model.velocity_base = "physics" predicts when its output is zero, fed its own frames.
+class PhysicsStep : public Predictor {
+ public:
+  PhysicsStep();
+  std::string name() const override { return "one physics step"; }
+  void begin(const dataset::Sequence& seq) override;
+  Points step(const dataset::Sequence& seq, int t, const Points& x_prev2, const Points& x_prev,
+              const Points& x_now) override;
+
+ private:
+  ModelConfig model_;  // velocity_base "physics", every other key at its default
+  dataset::SampleOptions options_;
+  std::shared_ptr<const dataset::SequenceStructure> structure_;
+};
+
 // The cloth constraints of `settings` (run/cloth_constraints.h) built for one sequence, the
 // same for the network and for every baseline run with the post-processing.
 std::unique_ptr<const ClothConstraints> make_cloth_constraints(const dataset::Sequence& seq,
@@ -98,6 +118,7 @@ class PostProcessed : public Predictor {
   PostProcessed(std::unique_ptr<Predictor> inner, EvalConfig settings)
       : inner_(std::move(inner)), settings_(std::move(settings)) {}
   std::string name() const override { return "[constrained] " + inner_->name(); }
+  bool takes_scaled_wind() const override { return inner_->takes_scaled_wind(); }
   void begin(const dataset::Sequence& seq) override;
   Points step(const dataset::Sequence& seq, int t, const Points& x_prev2, const Points& x_prev,
               const Points& x_now) override;
@@ -109,11 +130,12 @@ class PostProcessed : public Predictor {
 };
 
 // The dataset sample of a rollout step: the window t-2..t+1 with the body from the data and the
-// garments from the rollout (x_prev2, x_prev, x_now at t-2..t; t+1, the unused target, from the data).
+// garments from the rollout (x_prev2, x_prev, x_now at t-2..t; t+1, the unused target, from the data),
+// with what the model's velocity base needs (losses::add_physics_step).
 dataset::TrainingSample rollout_sample(const dataset::Sequence& seq, int t, const Points& x_prev2, const Points& x_prev,
                                        const Points& x_now, const dataset::NormalisationStats& stats,
                                        const std::shared_ptr<const dataset::SequenceStructure>& structure,
-                                       const dataset::SampleOptions& options);
+                                       const dataset::SampleOptions& options, const ModelConfig& model);
 
 // World x_{t+1} (N, 3) from a rollout sample: the model input in precision T, forward without
 // recording on `tape`, predicted root-relative position + r_{t+1}.
@@ -130,6 +152,7 @@ template <class T>
 class NetworkPredictor : public Predictor {
  public:
   void begin(const dataset::Sequence& seq) override;
+  bool takes_scaled_wind() const override { return true; }
   Points step(const dataset::Sequence& seq, int t, const Points& x_prev2, const Points& x_prev,
               const Points& x_now) override;
   const Config& config() const { return config_; }

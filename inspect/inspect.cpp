@@ -9,6 +9,7 @@
 #include "dataset/wind.h"
 #include "eval/metrics.h"
 #include "eval/rollout.h"
+#include "losses/physics.h"
 #include "run/cloth_constraints.h"
 
 #include <algorithm>
@@ -210,6 +211,94 @@ std::vector<float> carried_pin_errors(const Sequence& seq, int first) {
   return errors;
 }
 
+// Normal equations of the stationarity fit: ‖g_inertia + Σ_k w_k g_k‖² over the free vertices of
+// many frames, g the terms' gradients at Blender's x_{t+1}.
+struct PhysicsBalance {
+  static constexpr int kTerms = 7;
+  static constexpr const char* kNames[kTerms] = {"drag", "stretch", "bending", "gravity", "wind", "body collision",
+                                                 "layer collision"};
+  Eigen::Matrix<double, kTerms, kTerms> gram = Eigen::Matrix<double, kTerms, kTerms>::Zero();
+  Eigen::Matrix<double, kTerms, 1> cross = Eigen::Matrix<double, kTerms, 1>::Zero();  // −g_kᵀ g_inertia
+  double inertia_sq = 0;
+  int frames = 0;
+  // Per free vertex-frame, each term's gradient length and the inertia's (index kTerms): the
+  // median says what a typical vertex feels, the rms above is led by the worst vertices.
+  std::array<std::vector<float>, kTerms + 1> vertex_norm;
+
+  void add(const Sequence& seq, const std::shared_ptr<const SequenceStructure>& structure, int t) {
+    const TrainingSample s = build_sample(seq.info, seq.frames, t, NormalisationStats{}, structure);
+    const losses::PhysicsSettings settings;
+    const auto in = losses::cast_physics_input<double>(losses::physics_input_from_sample(s, seq.info, settings));
+    const int64_t N = s.num_vertices();
+    std::vector<double> x(3 * N);  // Blender's x_{t+1} in the energy's frame (t+1's root)
+    for (int64_t v = 0; v < N; ++v)
+      for (int c = 0; c < 3; ++c) x[3 * v + c] = s.target(v, c);
+    auto gradient = [&](auto term) {
+      ad::Tape<double> tape;
+      const ad::Var<double> X = tape.leaf(x.data(), N, 3);
+      tape.backward(term(tape, X));
+      Eigen::VectorXd g(3 * N);
+      for (int64_t k = 0; k < 3 * N; ++k) g[k] = in.inertia_weight[k / 3] > 0 ? X.grad[k] : 0.0;  // pinned rows follow the body
+      return g;
+    };
+    const Eigen::VectorXd inertia = gradient([&](auto& tape, const auto& X) { return losses::inertia_energy(tape, X, in); });
+    std::array<Eigen::VectorXd, kTerms> g;
+    g[0] = gradient([&](auto& tape, const auto& X) { return losses::drag_energy(tape, X, in); });
+    g[1] = gradient([&](auto& tape, const auto& X) { return losses::stretch_energy(tape, X, in); });
+    g[2] = gradient([&](auto& tape, const auto& X) { return losses::bending_energy(tape, X, in); });
+    g[3] = gradient([&](auto& tape, const auto& X) { return losses::work_energy(tape, X, in, in.external_force); });
+    g[4] = gradient([&](auto& tape, const auto& X) { return losses::work_energy(tape, X, in, in.wind_force); });
+    g[5] = gradient([&](auto& tape, const auto& X) {
+      return losses::body_collision_energy(tape, X, in, settings.body_margin, settings.collision_stiffness);
+    });
+    g[6] = in.garment_offsets.size() >= 3 ? gradient([&](auto& tape, const auto& X) {
+      return losses::layer_collision_energy(tape, X, in, settings.layer_margin, settings.collision_stiffness);
+    })
+                                          : Eigen::VectorXd::Zero(3 * N);
+    for (int64_t v = 0; v < N; ++v) {
+      if (in.inertia_weight[v] == 0) continue;
+      for (int i = 0; i <= kTerms; ++i)
+        vertex_norm[i].push_back(static_cast<float>((i < kTerms ? g[i] : inertia).segment<3>(3 * v).norm()));
+    }
+    for (int i = 0; i < kTerms; ++i) {
+      cross[i] -= g[i].dot(inertia);
+      for (int j = 0; j < kTerms; ++j) gram(i, j) += g[i].dot(g[j]);
+    }
+    inertia_sq += inertia.squaredNorm();
+    ++frames;
+  }
+  // ‖g_inertia + Σ w_k g_k‖² relative to ‖g_inertia‖².
+  double residual(const Eigen::Matrix<double, kTerms, 1>& w) const {
+    return (inertia_sq - 2 * w.dot(cross) + w.dot(gram * w)) / inertia_sq;
+  }
+  void print(int sequences) const {
+    std::printf("Blender's next frame in the physics energy (val split, %d sequences, %d frames; a frame the energy "
+                "describes has gradient 0):\n  term              gradient / inertia's: rms   per-vertex median   p90\n",
+                sequences, frames);
+    auto quantile = [](std::vector<float> v, double q) {
+      if (v.empty()) return 0.0;
+      const auto k = static_cast<std::ptrdiff_t>(q * static_cast<double>(v.size() - 1));
+      std::nth_element(v.begin(), v.begin() + k, v.end());
+      return static_cast<double>(v[k]);
+    };
+    const double inertia_median = quantile(vertex_norm[kTerms], 0.5), inertia_p90 = quantile(vertex_norm[kTerms], 0.9);
+    for (int k = 0; k < kTerms; ++k)
+      std::printf("  %-17s %10.3g %14.3g %12.3g\n", kNames[k], std::sqrt(gram(k, k) / inertia_sq),
+                  quantile(vertex_norm[k], 0.5) / inertia_median, quantile(vertex_norm[k], 0.9) / inertia_p90);
+    const Eigen::Matrix<double, kTerms, 1> ones = Eigen::Matrix<double, kTerms, 1>::Ones();
+    std::printf("  |gradient|^2 / |inertia's|^2 with Blender's weights (all 1): %.4g\n", residual(ones));
+    // Terms absent from every frame (no wind, one layer) stay at weight 0.
+    Eigen::Matrix<double, kTerms, kTerms> a = gram;
+    for (int k = 0; k < kTerms; ++k)
+      if (a(k, k) == 0) a(k, k) = 1;
+    const Eigen::Matrix<double, kTerms, 1> fit = a.ldlt().solve(cross);
+    std::printf("  least-squares weights (inertia 1):");
+    for (int k = 0; k < kTerms; ++k) std::printf(" %s %.3g%s", kNames[k], fit[k], k + 1 < kTerms ? "," : "");
+    std::printf("\n  |gradient|^2 / |inertia's|^2 with them: %.4g (1 = the terms explain none of Blender's acceleration)\n",
+                residual(fit));
+  }
+};
+
 // Per-frame motion statistics of one split (every frame after each sequence's ramp).
 struct MotionTally {
   static constexpr float kWindy = 50.f, kStrong = 250.f;  // the generator's calm / windy bounds
@@ -379,6 +468,20 @@ void inspect_dataset(const InspectOptions& o, const SampleOptions& sample_option
       for (const auto& id : m.split(split)) tally.add_sequence(SequenceFile(m.sequence_path(id)));
       tally.print(split);
     }
+  }
+  if (o.physics) {
+    PhysicsBalance balance;
+    int sequences = 0;
+    for (const auto& id : m.split("val")) {
+      const Sequence seq = read_sequence(m.sequence_path(id));
+      const auto structure = build_structure(seq.info, patch_size);
+      for (int t = std::max(2, seq.info.settled_frame()); t <= seq.info.num_frames - 2; t += 10) balance.add(seq, structure, t);
+      ++sequences;
+    }
+    if (balance.frames == 0)
+      std::printf("physics: the val split has no frame after the ramp\n");
+    else
+      balance.print(sequences);
   }
   if (o.pins) {
     std::printf("pinned vertices carried with the body (eval.pins) from the first frame after the ramp to the last, "

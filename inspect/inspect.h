@@ -11,7 +11,10 @@
 // last, and measures how far they end up from the ground truth's. --motion reads every frame
 // after the ramp and prints, per split, what the data can teach about dynamics: the body's
 // speed and turn rate, the share of frames with wind, and how fast the garments move against
-// the body on calm and on windy frames.
+// the body on calm and on windy frames. --physics asks whether the physics energy describes the
+// data: the energy of one step is stationary at the frame its simulator would make, so on every
+// 10th validation frame after the ramp it compares each term's gradient at Blender's x_{t+1}
+// with the inertia's, and fits the term weights that bring the sum closest to zero.
 #include "dataset/sample.h"
 
 #include <string>
@@ -25,6 +28,7 @@ struct InspectOptions {
   bool margins = false;  // the training split's ground-truth collision distances and strain
   bool pins = false;     // how closely pinned vertices carried with the body follow the ground truth
   bool motion = false;   // per split: body speed and turn rate, wind share, garment speed with and without wind
+  bool physics = false;  // how far Blender's frames are from stationary for the physics energy (losses/physics.h)
 };
 
 // How a body moves between two frames (rows: the same vertices, scene units).

@@ -553,7 +553,7 @@ Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
     if (carried) std::copy_n(&carry_p[3 * i], 3, &base_p[6 * i + 3]);
   }
   Var<T> d_base_p = delta.active() ? ad::slice_cols(tape, delta.patch, 0, 6) : Var<T>{};
-  const bool body_only = cfg.velocity_base == "body";  // no v_t in the base
+  const bool body_only = cfg.velocity_base == "body" || cfg.velocity_base == "physics";  // no v_t in the base
   if (body_only && delta.active()) d_base_p = ad::concat_cols(tape, {ad::slice_cols(tape, delta.patch, 0, 3), tape.zeros(P, 3)});
   const Var<T> pred_patch = integrate(tape, in, a_p, Rp, ret, base_p, d_base_p, !carried);
 

@@ -35,7 +35,18 @@ struct ModelConfig {
   // t+1 (dataset/body_skin.h), so a zero output is the skinning baseline's step and the network
   // predicts how the cloth moves against the body. "body_inertia": v_{t+1} = c + (v_t − c_t) + a,
   // c_t the same displacement from t−1 to t: the cloth keeps its velocity relative to the body.
+  // "physics": v_{t+1} = s + a with s one implicit step of Blender's cloth energy from x_t
+  // (losses/physics_step.h, TrainingSample::physics_step), started at the body carry.
   std::string velocity_base = "inertia";
+  // "physics" only: Newton iterations of the step; its inertia target ("body" keeps the cloth's
+  // velocity relative to the body surface, "world" is Blender's 2x_t − x_{t−1}); the body
+  // contact's stiffness k_c (mass / frame²); and whether the layer-contact term is in it.
+  // Chosen one frame from the truth on large val (docs/decisions.md, "A physics step as the
+  // velocity base"): a few iterations, not the minimum, and no layer term.
+  int physics_step_iterations = 3;
+  std::string physics_step_inertia = "body";
+  double physics_step_collision_stiffness = 1e4;
+  bool physics_step_layer_collision = false;
   // "body_inertia" only: the share of the relative velocity v_t − c_t a zero output keeps,
   // v_{t+1} = c + swing_kept (v_t − c_t) + a. 1 keeps the whole swing, 0 is "body"; between them
   // the swing a self-fed rollout hands itself decays geometrically.

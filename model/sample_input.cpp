@@ -113,7 +113,8 @@ dataset::SampleOptions sample_options_for(const ModelConfig& m) {
   // The model keeps valid slots only (model/README.md quirk 3), so no duplicate padding.
   o.neighbours.official_padding = false;
   o.body_carry = m.velocity_base != "inertia";
-  o.body_carry_prev = m.velocity_base == "body_inertia";
+  o.body_carry_prev =
+      m.velocity_base == "body_inertia" || (m.velocity_base == "physics" && m.physics_step_inertia == "body");
   o.carry_smoothing = m.carry_smoothing;
   return o;
 }
@@ -274,7 +275,14 @@ ModelInput<float> model_input_from_sample(const dataset::TrainingSample& s, cons
                     "model.velocity_base = \"" << cfg.velocity_base << "\" needs the sample's body_carry"
                                             << (relative ? " and body_carry_prev" : "")
                                             << ": build the sample with sample_options_for(the model's config)");
-    in.body_carry.assign(s.body_carry.data(), s.body_carry.data() + 3 * N);
+    if (cfg.velocity_base == "physics") {
+      LAYERSNET_CHECK(s.physics_step.rows() == N, "model.velocity_base = \"physics\" needs the sample's physics_step ("
+                                                      << s.physics_step.rows() << " rows for " << N
+                                                      << " vertices): add it with losses::add_physics_step");
+      in.body_carry.assign(s.physics_step.data(), s.physics_step.data() + 3 * N);
+    } else {
+      in.body_carry.assign(s.body_carry.data(), s.body_carry.data() + 3 * N);
+    }
     if (relative) {  // c + swing_kept (v_t − c_t)
       const float kept = static_cast<float>(cfg.swing_kept);
       for (int64_t v = 0; v < N; ++v)

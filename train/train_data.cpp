@@ -1,6 +1,7 @@
 #include "train/train_data.h"
 
 #include "dataset/garments.h"
+#include "losses/physics_step.h"
 #include "model/sample_input.h"
 
 #include <algorithm>
@@ -51,6 +52,7 @@ TrainData::TrainData(const dataset::DatasetManifest& manifest, const std::string
       split_(split),
       stats_(stats),
       sample_options_(model::sample_options_for(config.model)),
+      model_(config.model),
       max_open_files_(std::max(config.data.cache_sequences, 1)),
       constraint_settings_(config.train.rollout_constraints ? std::optional<EvalConfig>(config.eval) : std::nullopt),
       ids_(manifest.split(split)),
@@ -105,6 +107,7 @@ Window TrainData::read_window(int sequence, int t_first, int t_last) {
 dataset::TrainingSample TrainData::build(const Window& w, int t) const {
   dataset::TrainingSample s = dataset::build_sample(*w.info, w.frames, t, stats_, w.structure, sample_options_);
   s.sequence_id = w.sequence_id;
+  losses::add_physics_step(s, *w.info, model_);
   return s;
 }
 

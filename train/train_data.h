@@ -99,6 +99,7 @@ class TrainData {
   std::string split_;
   dataset::NormalisationStats stats_;
   dataset::SampleOptions sample_options_;
+  ModelConfig model_;  // what the velocity base adds to each sample
   int max_open_files_;
   std::optional<EvalConfig> constraint_settings_;  // train.rollout_constraints only
   std::vector<std::string> ids_;

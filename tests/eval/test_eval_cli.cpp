@@ -71,8 +71,9 @@ TEST_F(EvalCli, EvalWritesReportsAndPrintsTheSummaryTable) {
   EXPECT_NE(text.find("ms/f 1t"), std::string::npos) << text;
   const auto j = nlohmann::json::parse(slurp(out / "eval.json"));
   EXPECT_NE(text.find("skinned to the body"), std::string::npos) << text;
-  // 2 models, 4 baselines (bare: the models run without the constraints), ground truth.
-  ASSERT_EQ(j["methods"].size(), 7u);
+  EXPECT_NE(text.find("one physics step"), std::string::npos) << text;
+  // 2 models, 5 baselines (bare: the models run without the constraints), ground truth.
+  ASSERT_EQ(j["methods"].size(), 8u);
   EXPECT_EQ(j["split"], "test");
   for (const auto& m : j["methods"]) {
     ASSERT_EQ(m["sequences"].size(), 2u) << m["name"];
@@ -82,7 +83,7 @@ TEST_F(EvalCli, EvalWritesReportsAndPrintsTheSummaryTable) {
     EXPECT_EQ(m["summary"]["strain_p99_curve_percent"].size(), 3u) << m["name"];
     EXPECT_EQ(m["sequences"][0]["strain_p99_curve"].size(), 3u) << m["name"];
   }
-  const auto& gt = j["methods"][6];
+  const auto& gt = j["methods"][7];
   EXPECT_EQ(gt["kind"], "ground truth");
   EXPECT_EQ(gt["summary"]["error_mm"]["mean"].get<double>(), 0.0);
   EXPECT_GT(gt["summary"]["strain_p99_percent"]["mean"].get<double>(), 0.0);  // the synthetic cloth ripples
@@ -119,7 +120,7 @@ TEST_F(EvalCli, EvalWritesReportsAndPrintsTheSummaryTable) {
     EXPECT_TRUE(m["summary"].contains("free_cloth_mm")) << m["name"];
   }
   // Each model against each bare baseline, one best.
-  ASSERT_EQ(j["comparisons"].size(), 8u);
+  ASSERT_EQ(j["comparisons"].size(), 10u);
   int best = 0;
   for (const auto& c : j["comparisons"]) {
     EXPECT_FALSE(c["post_processed"].get<bool>());
@@ -141,17 +142,17 @@ TEST_F(EvalCli, BaselinesGetTheModelsPostProcessing) {
                                &code);
   ASSERT_EQ(code, 0) << text;
   const auto j = nlohmann::json::parse(slurp(out / "eval.json"));
-  ASSERT_EQ(j["methods"].size(), 11u);  // 2 model rows, 8 baselines, ground truth
+  ASSERT_EQ(j["methods"].size(), 13u);  // 2 model rows, 10 baselines, ground truth
   int post = 0;
   for (const auto& m : j["methods"])
     if (m["kind"] == "baseline" && m["post_processed"].get<bool>()) {
       ++post;
       EXPECT_EQ(m["name"].get<std::string>().rfind("[constrained] ", 0), 0u) << m["name"];
     }
-  EXPECT_EQ(post, 4);
+  EXPECT_EQ(post, 5);
   for (const auto& c : j["comparisons"])
     EXPECT_EQ(c["model"].get<std::string>().rfind("[constrained] ", 0) == 0, c["post_processed"].get<bool>()) << c;
-  EXPECT_EQ(j["comparisons"].size(), 8u);
+  EXPECT_EQ(j["comparisons"].size(), 10u);
   EXPECT_EQ(j["post_processing"]["strain_limit"].get<double>(), 0.05);
 }
 
@@ -174,10 +175,10 @@ TEST_F(EvalCli, WindScaleChangesWhatTheModelSeesNotTheTruth) {
   const auto [calm, scale_0] = errors(" --wind-scale 0", "eval_wind_0");
   EXPECT_EQ(scale_1, 1.0);
   EXPECT_EQ(scale_0, 0.0);
-  ASSERT_EQ(data_wind.size(), 6u);  // model, 4 baselines, ground truth
-  ASSERT_EQ(calm.size(), 6u);
+  ASSERT_EQ(data_wind.size(), 7u);  // model, 5 baselines, ground truth
+  ASSERT_EQ(calm.size(), 7u);
   EXPECT_NE(data_wind[0], calm[0]);  // the model reads the wind
-  for (std::size_t k = 1; k < 6; ++k) EXPECT_EQ(data_wind[k], calm[k]) << k;
+  for (std::size_t k = 1; k < 7; ++k) EXPECT_EQ(data_wind[k], calm[k]) << k;
   EXPECT_NE(slurp(root_ / "eval_wind_0" / "eval.md").find("wind strengths x 0"), std::string::npos);
 }
 

@@ -425,5 +425,31 @@ TEST(Rollout, ModelPredictorFirstStepEqualsADirectForward) {
   EXPECT_GT(median_ms_per_frame(mp, seq, 2, 3, 1), 0.0);
 }
 
+// The physics-step baseline is what a "physics" model with a zero output predicts (the output
+// layer starts at zero), frame by frame of its own rollout; and it is neither skinning nor
+// constant velocity.
+TEST(Rollout, PhysicsStepBaselineIsTheZeroOutputPhysicsModel) {
+  const dataset::Sequence seq = sequence(2);
+  Config c = load_config({std::string(LAYERSNET_SOURCE_DIR) + "/configs/tiny.toml"}, {"model.velocity_base=physics"});
+  dataset::NormalisationStats st;
+  ad::ParamStore<float> ps;
+  model::register_params(ps, c.model);
+  model::init_params(ps, c.model, 3);
+  ModelPredictor zero("zero", c, std::move(ps), st);
+  PhysicsStep physics;
+  ConstantVelocity constant;
+  SkinnedToBody skinned;
+  const Rollout a = rollout(zero, seq, 2, 4), b = rollout(physics, seq, 2, 4), k = rollout(constant, seq, 2, 4),
+                sk = rollout(skinned, seq, 2, 4);
+  ASSERT_EQ(a.frames.size(), 4u);
+  ASSERT_EQ(b.frames.size(), 4u);
+  for (size_t f = 0; f < 4; ++f) {
+    EXPECT_LT((a.frames[f] - b.frames[f]).cwiseAbs().maxCoeff(), 1e-4f) << "frame " << f;
+    EXPECT_GT((b.frames[f] - k.frames[f]).cwiseAbs().maxCoeff(), 1e-3f) << "frame " << f;
+    EXPECT_GT((b.frames[f] - sk.frames[f]).cwiseAbs().maxCoeff(), 1e-3f) << "frame " << f;
+    EXPECT_TRUE(b.frames[f].allFinite());
+  }
+}
+
 }  // namespace
 }  // namespace layersnet::eval

@@ -1,0 +1,279 @@
+#include "losses/physics_step.h"
+
+#include "dataset/neighbours.h"
+#include "autodiff/check.h"
+
+#include <Eigen/Dense>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+
+namespace layersnet::losses {
+namespace {
+
+using Vec = std::vector<double>;
+using Block = Eigen::Matrix3d;
+
+double dot(const Vec& a, const Vec& b) {
+  double s = 0;
+  for (std::size_t k = 0; k < a.size(); ++k) s += a[k] * b[k];
+  return s;
+}
+
+// N · physics_energy (the energy itself, not per vertex) and, when `grad` is given, its gradient.
+double energy(const PhysicsInput<double>& in, const Vec& x, const PhysicsSettings& s, Vec* grad) {
+  const int64_t N = static_cast<int64_t>(x.size() / 3);
+  ad::Tape<double> tape;
+  const ad::Var<double> X = grad ? tape.leaf(x.data(), N, 3) : tape.constant(x.data(), N, 3);
+  const PhysicsTerms<double> terms = physics_energy(tape, X, in, s);
+  const double scale = static_cast<double>(std::max<int64_t>(N, 1));
+  if (grad) {
+    tape.backward(terms.total);
+    grad->assign(X.grad, X.grad + 3 * N);
+    for (double& g : *grad) g *= scale;
+  }
+  return terms.total.scalar() * scale;
+}
+
+// The approximate Hessian of N · E at x (see the header): per-vertex scalars, spring blocks and
+// body-contact blocks.
+struct Hessian {
+  Vec diagonal;                                 // (N) mass and drag
+  std::vector<Block> spring;                    // (E)
+  std::vector<int32_t> contact_row;             // vertices in contact
+  std::vector<Eigen::Vector3d> contact_normal;  // their body normals, scaled by sqrt(k_c)
+  std::vector<Block> preconditioner;            // (N) inverse of each vertex's diagonal block
+  // Bending, Gauss–Newton: k_h u uᵀ with u = ∂θ/∂(x_i, x_j, x_a, x_b), stored as sqrt(k_h) u.
+  std::vector<std::array<int32_t, 4>> hinge_rows;
+  std::vector<std::array<Eigen::Vector3d, 4>> hinge_u;
+
+  void multiply(const PhysicsInput<double>& in, const Vec& p, Vec& y) const {
+    const std::size_t N = diagonal.size();
+    for (std::size_t v = 0; v < N; ++v)
+      for (int c = 0; c < 3; ++c) y[3 * v + c] = diagonal[v] * p[3 * v + c];
+    for (std::size_t e = 0; e < spring.size(); ++e) {
+      const int32_t i = in.edge_i[e], j = in.edge_j[e];
+      const Eigen::Vector3d d(p[3 * i] - p[3 * j], p[3 * i + 1] - p[3 * j + 1], p[3 * i + 2] - p[3 * j + 2]);
+      const Eigen::Vector3d f = spring[e] * d;
+      for (int c = 0; c < 3; ++c) y[3 * i + c] += f[c], y[3 * j + c] -= f[c];
+    }
+    for (std::size_t h = 0; h < hinge_rows.size(); ++h) {
+      double up = 0;
+      for (int k = 0; k < 4; ++k)
+        for (int c = 0; c < 3; ++c) up += hinge_u[h][k][c] * p[3 * hinge_rows[h][k] + c];
+      for (int k = 0; k < 4; ++k)
+        for (int c = 0; c < 3; ++c) y[3 * hinge_rows[h][k] + c] += hinge_u[h][k][c] * up;
+    }
+    for (std::size_t k = 0; k < contact_row.size(); ++k) {
+      const int32_t v = contact_row[k];
+      const Eigen::Vector3d& n = contact_normal[k];
+      const double np = n[0] * p[3 * v] + n[1] * p[3 * v + 1] + n[2] * p[3 * v + 2];
+      for (int c = 0; c < 3; ++c) y[3 * v + c] += n[c] * np;
+    }
+  }
+};
+
+Hessian approximate_hessian(const PhysicsInput<double>& in, const Vec& x, const PhysicsSettings& s,
+                            const std::vector<uint8_t>& fixed) {
+  const int64_t N = static_cast<int64_t>(x.size() / 3);
+  Hessian h;
+  h.diagonal.resize(N);
+  for (int64_t v = 0; v < N; ++v)
+    h.diagonal[v] = 2 * s.inertia * in.inertia_weight[v] + (in.drag_weight.empty() ? 0.0 : 2 * s.drag * in.drag_weight[v]);
+  std::vector<Block> block(N, Block::Zero());
+  for (int64_t v = 0; v < N; ++v) block[v].diagonal().setConstant(h.diagonal[v]);
+  h.spring.resize(in.edge_i.size());
+  for (std::size_t e = 0; e < in.edge_i.size(); ++e) {
+    const int32_t i = in.edge_i[e], j = in.edge_j[e];
+    const Eigen::Vector3d d(x[3 * i] - x[3 * j], x[3 * i + 1] - x[3 * j + 1], x[3 * i + 2] - x[3 * j + 2]);
+    const double l = d.norm(), k = 2 * s.stretch * in.edge_half_k[e];
+    Block K = Block::Zero();
+    if (l > 0) {
+      const Eigen::Vector3d u = d / l;
+      const Block along = u * u.transpose();
+      K = k * (along + std::max(0.0, 1 - in.edge_rest[e] / l) * (Block::Identity() - along));
+    }
+    h.spring[e] = K;
+    block[i] += K, block[j] += K;
+  }
+  // The dihedral angle's gradient: each far corner moves along its face normal over its height
+  // above the hinge, and the hinge's ends take the opposite share by where the corner projects.
+  auto at = [&](int32_t v) { return Eigen::Vector3d(x[3 * v], x[3 * v + 1], x[3 * v + 2]); };
+  for (std::size_t k = 0; k < in.hinge_i.size() && s.bending != 0; ++k) {
+    const int32_t i = in.hinge_i[k], j = in.hinge_j[k], a = in.hinge_a[k], b = in.hinge_b[k];
+    const Eigen::Vector3d xi = at(i), e = at(j) - xi;
+    const double e2 = e.squaredNorm();
+    const double stiffness = s.bending * std::hypot(in.hinge_k_cos0[k], in.hinge_k_sin0[k]);
+    if (!(e2 > 0) || !(stiffness > 0)) continue;
+    std::array<Eigen::Vector3d, 4> u{Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(),
+                                     Eigen::Vector3d::Zero()};
+    bool degenerate = false;
+    // The corners lie on opposite sides of the hinge, so e × r points to opposite sides for them:
+    // rising together along (e × r_a, −e × r_b) folds the hinge, whatever the faces' winding.
+    const int32_t corner[2] = {a, b};
+    for (int f = 0; f < 2; ++f) {
+      const Eigen::Vector3d r = at(corner[f]) - xi;
+      const double t = r.dot(e) / e2;
+      const Eigen::Vector3d height = r - t * e;
+      const Eigen::Vector3d n = e.cross(r) * (f == 0 ? 1.0 : -1.0);
+      const double h2 = height.squaredNorm(), nn = n.norm();
+      if (!(h2 > 0) || !(nn > 0)) {
+        degenerate = true;
+        break;
+      }
+      const Eigen::Vector3d g = n / (nn * std::sqrt(h2));
+      u[2 + f] += g, u[0] -= (1 - t) * g, u[1] -= t * g;
+    }
+    if (degenerate) continue;
+    const double root_k = std::sqrt(stiffness);
+    for (auto& v : u) v *= root_k;
+    h.hinge_rows.push_back({i, j, a, b});
+    h.hinge_u.push_back(u);
+    const int32_t rows[4] = {i, j, a, b};
+    for (int q = 0; q < 4; ++q) block[rows[q]] += u[q] * u[q].transpose();
+  }
+  const int64_t B = static_cast<int64_t>(in.body_pos.size() / 3);
+  if (B > 0 && s.collision_body != 0) {
+    dataset::Points query(N, 3), body(B, 3);
+    for (int64_t v = 0; v < N; ++v)
+      for (int c = 0; c < 3; ++c) query(v, c) = static_cast<float>(x[3 * v + c]);
+    for (int64_t b = 0; b < B; ++b)
+      for (int c = 0; c < 3; ++c) body(b, c) = static_cast<float>(in.body_pos[3 * b + c]);
+    const auto nearest = dataset::nearest_body(query, body).index;
+    const double root_k = std::sqrt(s.collision_stiffness * s.collision_body);
+    for (int64_t v = 0; v < N; ++v) {
+      const int32_t a = nearest[v];
+      const Eigen::Vector3d n(in.body_normals[3 * a], in.body_normals[3 * a + 1], in.body_normals[3 * a + 2]);
+      const Eigen::Vector3d r(x[3 * v] - in.body_pos[3 * a], x[3 * v + 1] - in.body_pos[3 * a + 1],
+                              x[3 * v + 2] - in.body_pos[3 * a + 2]);
+      if (r.dot(n) >= s.body_margin) continue;
+      h.contact_row.push_back(static_cast<int32_t>(v));
+      h.contact_normal.push_back(root_k * n);
+      block[v] += h.contact_normal.back() * h.contact_normal.back().transpose();
+    }
+  }
+  h.preconditioner.resize(N);
+  for (int64_t v = 0; v < N; ++v) {
+    const bool usable = !fixed[v] && std::fabs(block[v].determinant()) > 1e-300;
+    h.preconditioner[v] = usable ? Block(block[v].inverse()) : Block::Zero();
+  }
+  return h;
+}
+
+// Conjugate gradients on H p = −g over the free rows (fixed rows stay 0).
+Vec solve(const PhysicsInput<double>& in, const Hessian& h, const Vec& g, const std::vector<uint8_t>& fixed, int iterations) {
+  const std::size_t N = h.diagonal.size();
+  Vec p(3 * N, 0.0), r(3 * N), z(3 * N), d(3 * N), q(3 * N);
+  for (std::size_t k = 0; k < 3 * N; ++k) r[k] = fixed[k / 3] ? 0.0 : -g[k];
+  auto precondition = [&](const Vec& from, Vec& to) {
+    for (std::size_t v = 0; v < N; ++v) {
+      const Eigen::Vector3d y = h.preconditioner[v] * Eigen::Vector3d(from[3 * v], from[3 * v + 1], from[3 * v + 2]);
+      for (int c = 0; c < 3; ++c) to[3 * v + c] = y[c];
+    }
+  };
+  precondition(r, z);
+  d = z;
+  double rz = dot(r, z);
+  const double stop = 1e-8 * rz;  // relative residual 1e-4 in the preconditioned norm
+  for (int it = 0; it < iterations && rz > stop && rz > 0; ++it) {
+    h.multiply(in, d, q);
+    for (std::size_t k = 0; k < 3 * N; ++k)
+      if (fixed[k / 3]) q[k] = 0;
+    const double dq = dot(d, q);
+    if (!(dq > 0)) break;
+    const double alpha = rz / dq;
+    for (std::size_t k = 0; k < 3 * N; ++k) p[k] += alpha * d[k], r[k] -= alpha * q[k];
+    precondition(r, z);
+    const double rz_next = dot(r, z);
+    const double beta = rz_next / rz;
+    rz = rz_next;
+    for (std::size_t k = 0; k < 3 * N; ++k) d[k] = z[k] + beta * d[k];
+  }
+  return p;
+}
+
+}  // namespace
+
+dataset::Points minimise_step_energy(const PhysicsInput<double>& in, dataset::Points x0, const std::vector<uint8_t>& fixed,
+                                     const PhysicsStepSettings& settings, PhysicsStepReport* report) {
+  const int64_t N = x0.rows();
+  LAYERSNET_CHECK(static_cast<int64_t>(in.x_t.size()) == 3 * N && static_cast<int64_t>(fixed.size()) == N,
+                  "minimise_step_energy: the guess has " << N << " rows, the input " << in.x_t.size() / 3
+                                                         << " vertices and the fixed mask " << fixed.size());
+  Vec x(3 * N);
+  for (int64_t v = 0; v < N; ++v)
+    for (int c = 0; c < 3; ++c) x[3 * v + c] = x0(v, c);
+  const PhysicsSettings& s = settings.energy;
+  Vec g;
+  double e = energy(in, x, s, &g);
+  if (report) report->energy_start = e / std::max<int64_t>(N, 1), report->line_search_halvings = 0;
+  for (int it = 0; it < settings.newton_iterations; ++it) {
+    const Hessian h = approximate_hessian(in, x, s, fixed);
+    const Vec p = solve(in, h, g, fixed, settings.cg_iterations);
+    const double slope = dot(g, p);
+      if (!(slope < 0)) break;  // at a minimum, or no descent direction
+    // Backtracking (Armijo): the energy is piecewise (nearest contacts), so a full step may overshoot.
+    double alpha = 1;
+    Vec trial(3 * N);
+    double e_trial = e;
+    bool accepted = false;
+    for (int halving = 0; halving < 12; ++halving, alpha *= 0.5) {
+      for (int64_t k = 0; k < 3 * N; ++k) trial[k] = x[k] + alpha * p[k];
+      e_trial = energy(in, trial, s, nullptr);
+      if (e_trial <= e + 1e-4 * alpha * slope) {
+        accepted = true;
+        break;
+      }
+      if (report) ++report->line_search_halvings;
+    }
+    if (!accepted) break;
+    x.swap(trial);
+    e = energy(in, x, s, it + 1 < settings.newton_iterations ? &g : nullptr);
+  }
+  if (report) report->energy_end = e / std::max<int64_t>(N, 1);
+  for (int64_t v = 0; v < N; ++v)
+    for (int c = 0; c < 3; ++c) x0(v, c) = static_cast<float>(x[3 * v + c]);
+  return x0;
+}
+
+dataset::Points physics_step_displacement(const dataset::TrainingSample& s, const dataset::SequenceInfo& info,
+                                          const PhysicsStepSettings& settings, PhysicsStepReport* report) {
+  const int64_t N = s.num_vertices();
+  const bool body_inertia = settings.inertia == "body";
+  LAYERSNET_CHECK(settings.inertia == "body" || settings.inertia == "world",
+                  "physics step: inertia \"" << settings.inertia << "\" is neither \"body\" nor \"world\"");
+  LAYERSNET_CHECK(s.body_carry.rows() == N && (!body_inertia || s.body_carry_prev.rows() == N),
+                  "physics step of sample '" << s.sequence_id << "' frame " << s.frame
+                                             << ": needs the body carry" << (body_inertia ? " from t-1 and from t" : "")
+                                             << "; build the sample with model::sample_options_for(the model's config)");
+  PhysicsInput<double> in = cast_physics_input<double>(physics_input_from_sample(s, info, settings.energy));
+  // The input's frame is t+1's root, where the carried guess is x̃_t + c (x̃_t = state, root-relative).
+  dataset::Points guess(N, 3);
+  std::vector<uint8_t> fixed(N);
+  for (int64_t v = 0; v < N; ++v) {
+    fixed[v] = in.inertia_weight[v] == 0;  // pinned
+    for (int c = 0; c < 3; ++c) {
+      guess(v, c) = s.state(v, c) + s.body_carry(v, c);
+      if (body_inertia)  // 2 x_t − x_{t−1} = x̃_t + c + (v_t − c_t)
+        in.x_tm1[3 * v + c] = 2 * in.x_t[3 * v + c] - (guess(v, c) + s.state(v, 3 + c) - s.body_carry_prev(v, c));
+    }
+  }
+  const dataset::Points x = minimise_step_energy(in, guess, fixed, settings, report);
+  dataset::Points displacement(N, 3);
+  for (int64_t v = 0; v < N; ++v)
+    for (int c = 0; c < 3; ++c) displacement(v, c) = x(v, c) - s.state(v, c);
+  return displacement;
+}
+
+void add_physics_step(dataset::TrainingSample& sample, const dataset::SequenceInfo& info, const ModelConfig& model) {
+  if (model.velocity_base != "physics") return;
+  PhysicsStepSettings settings;
+  settings.newton_iterations = model.physics_step_iterations;
+  settings.inertia = model.physics_step_inertia;
+  settings.energy.collision_stiffness = model.physics_step_collision_stiffness;
+  settings.energy.collision_layer = model.physics_step_layer_collision ? 1.0 : 0.0;
+  sample.physics_step = physics_step_displacement(sample, info, settings);
+}
+
+}  // namespace layersnet::losses

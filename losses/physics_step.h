@@ -1,0 +1,60 @@
+#pragma once
+// One implicit step of Blender's mass-spring cloth (the energy of losses/physics.h), the velocity
+// base of model.velocity_base = "physics": a zero network output predicts where a few Newton
+// iterations on that energy take the cloth from the body-carried guess x_t + c, so inertia, the
+// springs, bending, gravity, the wind and the body's push are in every prediction, and the
+// network learns what this coarse step misses (docs/decisions.md, "A physics step as the
+// velocity base").
+//
+// Newton: the gradient comes from the tape; the Hessian is approximated by its mass and drag,
+// the springs' PSD part k (d̂d̂ᵀ + max(0, 1 − L/l)(I − d̂d̂ᵀ)), bending's Gauss–Newton part
+// k_h ∇θ ∇θᵀ and the body contacts' k_c n nᵀ; conjugate gradients with a 3×3 block-Jacobi
+// preconditioner solve it, and a backtracking line search keeps the energy decreasing. The
+// layer contacts enter through the gradient only. Pinned vertices (no inertia weight) stay at
+// the carried guess: Blender moves them with the body. One frame is one step (Blender takes
+// `quality` substeps). Blender's frames are not minima of this energy (`layersnet inspect
+// --physics`): a few iterations, not the minimum, are what comes closest to them.
+//
+// The inertia target is Blender's 2x_t − x_{t−1} ("world"), or the cloth's velocity relative to
+// the body surface kept, x_t + c + (v_t − c_t) ("body"): cloth in contact moves with the body as
+// friction makes Blender's do, which a vertex-to-plane penalty without friction cannot.
+// Deterministic: sequential loops, double precision.
+#include "dataset/sample.h"
+#include "dataset/sequence.h"
+#include "losses/physics.h"
+#include "model/model_config.h"
+
+#include <string>
+
+namespace layersnet::losses {
+
+struct PhysicsStepSettings {
+  int newton_iterations = 3;   // 0 = the guess itself
+  int cg_iterations = 60;      // per Newton iteration (stops earlier at a relative residual of 1e-4)
+  std::string inertia = "body";  // "world" | "body" (above)
+  PhysicsSettings energy;      // Blender's constants; collision_stiffness is k_c of the step
+};
+
+struct PhysicsStepReport {
+  double energy_start = 0, energy_end = 0;  // E at the guess and at the result (per vertex)
+  int line_search_halvings = 0;             // over all iterations
+};
+
+// The step from x (N, 3) given `in` (x_t, x_{t−1} as the inertia target wants them), in the
+// physics input's coordinates. `fixed` (N) marks rows that keep x's value.
+dataset::Points minimise_step_energy(const PhysicsInput<double>& in, dataset::Points x, const std::vector<uint8_t>& fixed,
+                                     const PhysicsStepSettings& settings, PhysicsStepReport* report = nullptr);
+
+// The sample's physics step as a root-relative displacement of x_t (units/frame, (N, 3)): what
+// TrainingSample::physics_step holds. Needs sample.body_carry, and body_carry_prev for the
+// "body" inertia.
+dataset::Points physics_step_displacement(const dataset::TrainingSample& sample, const dataset::SequenceInfo& info,
+                                          const PhysicsStepSettings& settings, PhysicsStepReport* report = nullptr);
+
+// Fills sample.physics_step when the model's velocity base is "physics" (Blender's constants,
+// the model's iterations, inertia target, contact stiffness and layer term); any other base
+// leaves the sample as it is. Every sample a model sees, in training and in a rollout, passes
+// through here.
+void add_physics_step(dataset::TrainingSample& sample, const dataset::SequenceInfo& info, const ModelConfig& model);
+
+}  // namespace layersnet::losses

@@ -1,0 +1,179 @@
+// The physics step (losses/physics_step.h): the exact minimiser where the energy is quadratic,
+// a stationary point of the full energy on a synthetic two-layer scene, pinned rows that keep
+// the guess, the two inertia targets, and the model's zero output taking the step.
+#include "dataset/sample.h"
+#include "dataset/synthetic.h"
+#include "losses/physics.h"
+#include "losses/physics_step.h"
+#include "model/sample_input.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+#include <string>
+
+namespace layersnet::losses {
+namespace {
+
+PhysicsSettings only(double inertia, double drag, double gravity) {
+  PhysicsSettings s;
+  s.inertia = inertia, s.drag = drag, s.gravity = gravity;
+  s.stretch = s.bending = s.wind = s.collision_body = s.collision_layer = 0;
+  return s;
+}
+
+// ‖∇E‖ at x (N · physics_energy, the free rows only).
+double gradient_norm(const PhysicsInput<double>& in, const dataset::Points& x, const PhysicsSettings& s,
+                     const std::vector<uint8_t>& fixed) {
+  const int64_t N = x.rows();
+  std::vector<double> xd(3 * N);
+  for (int64_t v = 0; v < N; ++v)
+    for (int c = 0; c < 3; ++c) xd[3 * v + c] = x(v, c);
+  ad::Tape<double> tape;
+  const ad::Var<double> X = tape.leaf(xd.data(), N, 3);
+  tape.backward(physics_energy(tape, X, in, s).total);
+  double sq = 0;
+  for (int64_t k = 0; k < 3 * N; ++k)
+    if (!fixed[k / 3]) sq += X.grad[k] * X.grad[k];
+  return std::sqrt(sq) * static_cast<double>(N);
+}
+
+dataset::Sequence two_layers_with_wind() {
+  dataset::SyntheticOptions o;
+  o.garments = 2;
+  o.wind = true;
+  o.frames = 8;
+  return dataset::make_synthetic_sequence(o);
+}
+
+dataset::TrainingSample sample_for(const dataset::Sequence& seq, int t, const ModelConfig& m) {
+  return dataset::build_sample(seq.info, seq.frames, t, dataset::NormalisationStats{},
+                               dataset::build_structure(seq.info, dataset::kDefaultPatchSize), model::sample_options_for(m));
+}
+
+// Inertia, drag and gravity alone are quadratic: (m + c) x = m x̃ + c x_t + m g, reached in one
+// Newton iteration from any guess.
+TEST(PhysicsStep, QuadraticEnergyIsSolvedExactly) {
+  PhysicsInput<double> in;
+  in.x_t = {0, 0, 0, 1, 0, 0, 0, 2, 1};
+  in.x_tm1 = {0, 0, 0.5, 1, -0.1, 0, 0.2, 2, 1};
+  const double m[3] = {0.3, 0.5, 0.8}, c = 0.01;
+  const double g[3] = {0, 0, -0.0098};
+  for (int v = 0; v < 3; ++v) {
+    in.inertia_weight.push_back(m[v] / 2);
+    in.drag_weight.push_back(c / 2);
+    for (int k = 0; k < 3; ++k) in.external_force.push_back(m[v] * g[k]);
+  }
+  in.wind_force.assign(9, 0.0);
+  in.garment_offsets = {0, 3};
+  PhysicsStepSettings settings;
+  settings.energy = only(1, 1, 1);
+  settings.newton_iterations = 1;
+  dataset::Points guess(3, 3);
+  guess.setConstant(7.f);
+  PhysicsStepReport report;
+  const dataset::Points x = minimise_step_energy(in, guess, {0, 0, 0}, settings, &report);
+  for (int v = 0; v < 3; ++v)
+    for (int k = 0; k < 3; ++k) {
+      const double target = 2 * in.x_t[3 * v + k] - in.x_tm1[3 * v + k];
+      const double expected = (m[v] * target + c * in.x_t[3 * v + k] + m[v] * g[k]) / (m[v] + c);
+      EXPECT_NEAR(x(v, k), expected, 1e-6) << "vertex " << v << " axis " << k;
+    }
+  EXPECT_LT(report.energy_end, report.energy_start);
+  EXPECT_EQ(report.line_search_halvings, 0);
+}
+
+// The whole energy on a two-layer scene with wind (springs, bending, gravity, wind, both
+// collisions): from a guess 5 mm off, the step ends near a stationary point, lower in energy,
+// and the pinned rows keep the guess.
+TEST(PhysicsStep, ReachesAStationaryPointAndKeepsFixedRows) {
+  const dataset::Sequence seq = two_layers_with_wind();
+  ModelConfig m;
+  m.velocity_base = "physics";
+  const auto s = sample_for(seq, 5, m);
+  PhysicsStepSettings settings;
+  settings.newton_iterations = 30;
+  settings.cg_iterations = 300;
+  const PhysicsInput<double> in = cast_physics_input<double>(physics_input_from_sample(s, seq.info, settings.energy));
+  const int64_t N = s.num_vertices();
+  std::mt19937_64 rng(3);
+  std::normal_distribution<float> noise(0.f, 0.05f);  // scene units (×10 world): 5 mm
+  dataset::Points guess(N, 3);
+  for (int64_t v = 0; v < N; ++v)
+    for (int k = 0; k < 3; ++k) guess(v, k) = static_cast<float>(in.x_t[3 * v + k]) + noise(rng);
+  std::vector<uint8_t> fixed(N, 0);
+  for (int64_t v = 0; v < N; v += 7) fixed[v] = 1;
+  PhysicsStepReport report;
+  const dataset::Points x = minimise_step_energy(in, guess, fixed, settings, &report);
+  EXPECT_LT(report.energy_end, 0.5 * report.energy_start);
+  const double g0 = gradient_norm(in, guess, settings.energy, fixed), g1 = gradient_norm(in, x, settings.energy, fixed);
+  EXPECT_LT(g1, 1e-3 * g0) << "gradient " << g0 << " -> " << g1;
+  for (int64_t v = 0; v < N; ++v)
+    if (fixed[v]) {
+      EXPECT_EQ(x.row(v), guess.row(v)) << "fixed row " << v;
+    }
+  // Fewer iterations stop short of it: the loop is what gets there.
+  settings.newton_iterations = 1;
+  const dataset::Points one = minimise_step_energy(in, guess, fixed, settings);
+  EXPECT_GT(gradient_norm(in, one, settings.energy, fixed), 10 * g1);
+}
+
+// With inertia alone, the step is its inertia target: the cloth keeps its velocity relative to
+// the body surface, c + (v_t − c_t) ("body"), or in the world, v_t minus the root's acceleration
+// (the displacement is root-relative) ("world").
+TEST(PhysicsStep, InertiaTargets) {
+  const dataset::Sequence seq = two_layers_with_wind();
+  ModelConfig m;
+  m.velocity_base = "physics";
+  const int t = 5;
+  const auto s = sample_for(seq, t, m);
+  ASSERT_EQ(s.body_carry_prev.rows(), s.num_vertices());
+  PhysicsStepSettings settings;
+  settings.energy = only(1, 0, 0);
+  settings.newton_iterations = 1;
+  const dataset::Points body = physics_step_displacement(s, seq.info, settings);
+  const dataset::Points v_t = s.state.middleCols<3>(3);
+  const dataset::Points expected_body = s.body_carry + v_t - s.body_carry_prev;
+  settings.inertia = "world";
+  const dataset::Points world = physics_step_displacement(s, seq.info, settings);
+  const Eigen::RowVector3f root_acceleration = seq.info.translation.row(t + 1) - 2 * seq.info.translation.row(t) +
+                                               seq.info.translation.row(t - 1);
+  const dataset::Points expected_world = v_t.rowwise() - root_acceleration;
+  EXPECT_LT((body - expected_body).cwiseAbs().maxCoeff(), 1e-4f);
+  EXPECT_LT((world - expected_world).cwiseAbs().maxCoeff(), 1e-4f);
+  EXPECT_GT((expected_body - expected_world).cwiseAbs().maxCoeff(), 1e-2f);  // the two targets differ here
+}
+
+// The model's input takes the step as its velocity base, and refuses a sample without it.
+TEST(PhysicsStep, ModelInputTakesTheStep) {
+  const dataset::Sequence seq = two_layers_with_wind();
+  ModelConfig m;
+  m.velocity_base = "physics";
+  auto s = sample_for(seq, 5, m);
+  dataset::NormalisationStats st;
+  st.position = {Eigen::Vector3d::Zero(), Eigen::Vector3d::Ones(), 1};
+  st.velocity = {Eigen::Vector3d::Zero(), Eigen::Vector3d::Constant(0.1), 1};
+  st.acceleration = st.root_velocity = st.root_acceleration = st.velocity;
+  try {
+    (void)model::model_input_from_sample(s, st, m);
+    ADD_FAILURE() << "a sample without its physics step was accepted";
+  } catch (const std::exception& e) {
+    EXPECT_NE(std::string(e.what()).find("add_physics_step"), std::string::npos) << e.what();
+  }
+  add_physics_step(s, seq.info, m);
+  ASSERT_EQ(s.physics_step.rows(), s.num_vertices());
+  EXPECT_GT((s.physics_step - s.body_carry).cwiseAbs().maxCoeff(), 1e-3f);  // the step is not the carry
+  const auto in = model::model_input_from_sample(s, st, m);
+  ASSERT_EQ(in.body_carry.size(), static_cast<std::size_t>(3 * s.num_vertices()));
+  for (int v = 0; v < s.num_vertices(); ++v)
+    for (int k = 0; k < 3; ++k) EXPECT_EQ(in.body_carry[3 * v + k], s.physics_step(v, k));
+  // Another base leaves the sample alone.
+  m.velocity_base = "body";
+  auto plain = sample_for(seq, 5, m);
+  add_physics_step(plain, seq.info, m);
+  EXPECT_EQ(plain.physics_step.rows(), 0);
+}
+
+}  // namespace
+}  // namespace layersnet::losses
