@@ -2,7 +2,7 @@
 // one rollout written as predicted and ground-truth meshes per frame (body, each garment) to
 // open in Blender or MeshLab, plus strip.png (prediction over ground truth, a few frames).
 // Without --checkpoint, --baseline chooses the predictor (constant-velocity | follow-body |
-// nearest-body | skinned), post-processed like a model with --set eval.constraints=true.
+// nearest-body | skinned | physics-step), post-processed like a model with --set eval.constraints=true.
 #include "cli/command_registry.h"
 #include "cli/exit_codes.h"
 #include "cli/model_option.h"
@@ -60,9 +60,11 @@ int run_export(const ExportCliOptions& o) {
     predictor = std::make_unique<eval::FollowBody>();
   } else if (o.baseline == "skinned" || o.baseline == "nearest-body") {
     predictor = std::make_unique<eval::SkinnedToBody>(o.baseline == "skinned");
+  } else if (o.baseline == "physics-step") {
+    predictor = std::make_unique<eval::PhysicsStep>();
   } else {
     throw std::runtime_error("--baseline '" + o.baseline +
-                             "' is unknown: use constant-velocity, follow-body, nearest-body or skinned");
+                             "' is unknown: use constant-velocity, follow-body, nearest-body, skinned or physics-step");
   }
   // A baseline gets the same post-processing as a model when asked: --set eval.constraints=true.
   if (checkpoint.empty()) {
@@ -93,7 +95,7 @@ LAYERSNET_COMMAND(export, "Write a rollout's predicted and ground-truth meshes (
                   [](CLI::App& sub) {
                     auto o = std::make_shared<ExportCliOptions>();
                     o->model.add_to(sub, "checkpoint to roll out");
-                    sub.add_option("--baseline", o->baseline, "without --checkpoint: constant-velocity | follow-body | nearest-body | skinned (with --set eval.constraints=true: post-processed like a model)");
+                    sub.add_option("--baseline", o->baseline, "without --checkpoint: constant-velocity | follow-body | nearest-body | skinned | physics-step (with --set eval.constraints=true: post-processed like a model)");
                     sub.add_option("--dataset", o->dataset, "data set folder (default: the checkpoint's data.dataset)");
                     sub.add_option("--split", o->split, "split to take the sequence from (default: eval.split)");
                     sub.add_option("--sequence", o->sequence, "sequence id (default: the split's first)");

@@ -166,10 +166,10 @@ const Schema& schema() {
     k.add("model.decoder_ret_channels", [](Config& c) -> int& { return c.model.decoder_ret_channels; }, "3-vector channels of the decoder's RET (official 1; 3k <= width)", {1, 1024, {}});
     k.add("model.vertex_local_features", [](Config& c) -> bool& { return c.model.vertex_local_features; }, "the decoder also sees each vertex's nearest body motion, spring force and Laplacians (not in the paper)");
     k.add("model.velocity_base", [](Config& c) -> std::string& { return c.model.velocity_base; }, "what a zero network output predicts: the cloth keeps its velocity (inertia, official), moves with the body surface (body), keeps its velocity relative to the body surface (body_inertia), or takes one implicit step of Blender's cloth energy (physics)", {0, 0, {"inertia", "body", "body_inertia", "physics"}});
-    k.add("model.physics_step_iterations", [](Config& c) -> int& { return c.model.physics_step_iterations; }, "Newton iterations of the physics step (velocity_base physics)", {0, 100, {}});
-    k.add("model.physics_step_collision_stiffness", [](Config& c) -> double& { return c.model.physics_step_collision_stiffness; }, "the physics step's body-contact stiffness k_c (mass / frame^2; velocity_base physics)", {0, 1e9, {}});
-    k.add("model.physics_step_layer_collision", [](Config& c) -> bool& { return c.model.physics_step_layer_collision; }, "the physics step also pushes the outer layer out of the inner one (velocity_base physics)");
-    k.add("model.physics_step_inertia", [](Config& c) -> std::string& { return c.model.physics_step_inertia; }, "the physics step's inertia target: the cloth's velocity relative to the body surface kept (body) or Blender's 2x_t - x_{t-1} (world)", {0, 0, {"body", "world"}});
+    k.add("model.physics_step_iterations", [](Config& c) -> int& { return c.model.physics_step_iterations; }, "Newton iterations of the physics step (read with velocity_base physics only)", {0, 100, {}});
+    k.add("model.physics_step_collision_stiffness", [](Config& c) -> double& { return c.model.physics_step_collision_stiffness; }, "the physics step's body-contact stiffness k_c (mass / frame^2; read with velocity_base physics only)", {0, 1e9, {}});
+    k.add("model.physics_step_layer_collision", [](Config& c) -> bool& { return c.model.physics_step_layer_collision; }, "the physics step also pushes the outer layer out of the inner one (read with velocity_base physics only)");
+    k.add("model.physics_step_inertia", [](Config& c) -> std::string& { return c.model.physics_step_inertia; }, "the physics step's inertia target: the cloth's velocity relative to the body surface kept (body) or Blender's 2x_t - x_{t-1} (world; read with velocity_base physics only)", {0, 0, {"body", "world"}});
     k.add("model.swing_kept", [](Config& c) -> double& { return c.model.swing_kept; }, "share of the cloth's velocity relative to the body surface that a zero output keeps (velocity_base body_inertia; 1 = all, 0 = the body base)", {0, 1, {}});
     k.add("model.carry_smoothing", [](Config& c) -> int& { return c.model.carry_smoothing; }, "averaging steps over the garment mesh on the body carry (velocity_base body or body_inertia); 0 = none", {0, 1000, {}});
     k.add("model.output_smoothing", [](Config& c) -> int& { return c.model.output_smoothing; }, "averaging steps over the garment mesh on the network's per-vertex correction (not in the paper); 0 = none", {0, 1000, {}});
@@ -416,20 +416,6 @@ void validate_config(const Config& config) {
                       key("model.velocity_base", "\"body_inertia\"") + " keeps, but " +
                       key("model.velocity_base", "\"" + m.velocity_base + "\"") +
                       "; set model.velocity_base = \"body_inertia\" or leave model.swing_kept at 1");
-  if (m.velocity_base != "physics") {
-    const ModelConfig defaults;
-    std::string changed;
-    if (m.physics_step_iterations != defaults.physics_step_iterations) changed = key("model.physics_step_iterations", m.physics_step_iterations);
-    if (m.physics_step_inertia != defaults.physics_step_inertia) changed = key("model.physics_step_inertia", "\"" + m.physics_step_inertia + "\"");
-    if (m.physics_step_collision_stiffness != defaults.physics_step_collision_stiffness)
-      changed = key("model.physics_step_collision_stiffness", m.physics_step_collision_stiffness);
-    if (m.physics_step_layer_collision != defaults.physics_step_layer_collision)
-      changed = key("model.physics_step_layer_collision", m.physics_step_layer_collision ? "true" : "false");
-    if (!changed.empty())
-      throw ConfigError(changed + " shapes the physics step that only " + key("model.velocity_base", "\"physics\"") +
-                        " takes, but " + key("model.velocity_base", "\"" + m.velocity_base + "\"") +
-                        "; set model.velocity_base = \"physics\" or leave the physics step's keys at their defaults");
-  }
   if (m.patch_base_input && m.velocity_base == "inertia")
     throw ConfigError(key("model.patch_base_input", "true") + " gives each patch its body-carried base, but " +
                       key("model.velocity_base", "\"inertia\"") + " has none; set model.velocity_base = \"body\" or "

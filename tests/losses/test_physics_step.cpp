@@ -126,12 +126,14 @@ TEST(PhysicsStep, InertiaTargets) {
   const dataset::Sequence seq = two_layers_with_wind();
   ModelConfig m;
   m.velocity_base = "physics";
+  m.physics_step_inertia = "body";  // the sample then carries c_t as well
   const int t = 5;
   const auto s = sample_for(seq, t, m);
   ASSERT_EQ(s.body_carry_prev.rows(), s.num_vertices());
   PhysicsStepSettings settings;
   settings.energy = only(1, 0, 0);
   settings.newton_iterations = 1;
+  settings.inertia = "body";
   const dataset::Points body = physics_step_displacement(s, seq.info, settings);
   const dataset::Points v_t = s.state.middleCols<3>(3);
   const dataset::Points expected_body = s.body_carry + v_t - s.body_carry_prev;
