@@ -212,11 +212,11 @@ dataset::Points minimise_step_energy(const PhysicsInput<double>& in, dataset::Po
     const Hessian h = approximate_hessian(in, x, s, fixed);
     const Vec p = solve(in, h, g, fixed, settings.cg_iterations);
     const double slope = dot(g, p);
-      if (!(slope < 0)) break;  // at a minimum, or no descent direction
+    if (!(slope < 0)) break;  // at a minimum, or no descent direction
     // Backtracking (Armijo): the energy is piecewise (nearest contacts), so a full step may overshoot.
     double alpha = 1;
     Vec trial(3 * N);
-    double e_trial = e;
+    double e_trial = 0;
     bool accepted = false;
     for (int halving = 0; halving < 12; ++halving, alpha *= 0.5) {
       for (int64_t k = 0; k < 3 * N; ++k) trial[k] = x[k] + alpha * p[k];
@@ -229,7 +229,7 @@ dataset::Points minimise_step_energy(const PhysicsInput<double>& in, dataset::Po
     }
     if (!accepted) break;
     x.swap(trial);
-    e = energy(in, x, s, it + 1 < settings.newton_iterations ? &g : nullptr);
+    e = it + 1 < settings.newton_iterations ? energy(in, x, s, &g) : e_trial;  // the last needs no gradient
   }
   if (report) report->energy_end = e / std::max<int64_t>(N, 1);
   for (int64_t v = 0; v < N; ++v)
