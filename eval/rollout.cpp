@@ -6,8 +6,8 @@
 
 #include "eval/tether.h"
 
-#include "model/layersnet.h"
 #include "losses/physics_step.h"
+#include "model/layersnet.h"
 #include "model/sample_input.h"
 #include "run/checkpoint.h"
 #include "run/run_dir.h"

@@ -8,6 +8,7 @@
 #include "dataset/sequence.h"
 #include "dataset/synthetic.h"
 #include "losses/physics.h"
+#include "physics_test_scene.h"
 
 #include <gtest/gtest.h>
 
@@ -30,13 +31,7 @@ dataset::TrainingSample synthetic_sample(const dataset::Sequence& seq, int t) {
                                dataset::build_structure(seq.info, dataset::kDefaultPatchSize));
 }
 
-dataset::Sequence two_layers_with_wind() {
-  dataset::SyntheticOptions o;
-  o.garments = 2;
-  o.wind = true;
-  o.frames = 8;
-  return dataset::make_synthetic_sequence(o);
-}
+using testing::two_layers_with_wind;
 
 // x̂ = the target at t+1 plus a fixed noise of `sigma` scene units (N, 3).
 ad::RowMat<double> noisy_target(const dataset::TrainingSample& s, double sigma, unsigned seed) {

@@ -4,6 +4,7 @@
 #include "dataset/sample.h"
 #include "dataset/synthetic.h"
 #include "losses/physics.h"
+#include "physics_test_scene.h"
 #include "losses/physics_step.h"
 #include "model/sample_input.h"
 
@@ -39,13 +40,7 @@ double gradient_norm(const PhysicsInput<double>& in, const dataset::Points& x, c
   return std::sqrt(sq) * static_cast<double>(N);
 }
 
-dataset::Sequence two_layers_with_wind() {
-  dataset::SyntheticOptions o;
-  o.garments = 2;
-  o.wind = true;
-  o.frames = 8;
-  return dataset::make_synthetic_sequence(o);
-}
+using testing::two_layers_with_wind;
 
 dataset::TrainingSample sample_for(const dataset::Sequence& seq, int t, const ModelConfig& m) {
   return dataset::build_sample(seq.info, seq.frames, t, dataset::NormalisationStats{},
