@@ -45,10 +45,12 @@
 // second order; no atan2 op is needed); collisions are vertex-to-nearest-vertex planes, not
 // triangle pairs; friction and self-collision within a layer are not modelled.
 #include "autodiff/tape.h"
+#include "dataset/neighbours.h"
 #include "dataset/sample.h"
 #include "dataset/sequence.h"
 
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 namespace layersnet::losses {
@@ -85,7 +87,19 @@ struct PhysicsInput {
   std::vector<int32_t> faces;                 // (F, 3) global vertex ids
   std::vector<int32_t> garment_offsets;       // (G + 1), inner -> outer
   std::vector<T> body_pos, body_normals;      // (B, 3) at t+1
+  // A k-d tree over body_pos, for callers that evaluate many x against one body (a Newton
+  // solve); null: body_collision_energy builds one per call.
+  std::shared_ptr<const dataset::NearestVertexIndex> body_index;
 };
+
+// Sets in.body_index from in.body_pos.
+template <class T>
+void index_body(PhysicsInput<T>& in) {
+  dataset::Points body(static_cast<Eigen::Index>(in.body_pos.size() / 3), 3);
+  for (Eigen::Index b = 0; b < body.rows(); ++b)
+    for (int c = 0; c < 3; ++c) body(b, c) = static_cast<float>(in.body_pos[3 * b + c]);
+  in.body_index = std::make_shared<const dataset::NearestVertexIndex>(body);
+}
 
 // Builds the constants from a training sample (its state holds x_t, x_{t−1}, possibly the
 // model's own, self-fed) and its sequence's static data (attributes, rest shapes, pins,
@@ -105,6 +119,7 @@ PhysicsInput<U> cast_physics_input(const PhysicsInput<T>& in) {
   o.hinge_k_cos0 = cv(in.hinge_k_cos0), o.hinge_k_sin0 = cv(in.hinge_k_sin0), o.hinge_k_sum = in.hinge_k_sum;
   o.faces = in.faces, o.garment_offsets = in.garment_offsets;
   o.body_pos = cv(in.body_pos), o.body_normals = cv(in.body_normals);
+  o.body_index = in.body_index;  // built from float positions either way
   return o;
 }
 

@@ -135,12 +135,11 @@ Hessian approximate_hessian(const PhysicsInput<double>& in, const Vec& x, const 
   }
   const int64_t B = static_cast<int64_t>(in.body_pos.size() / 3);
   if (B > 0 && s.collision_body != 0) {
-    dataset::Points query(N, 3), body(B, 3);
+    LAYERSNET_CHECK(in.body_index, "physics step: the body is not indexed (losses::index_body)");
+    dataset::Points query(N, 3);
     for (int64_t v = 0; v < N; ++v)
       for (int c = 0; c < 3; ++c) query(v, c) = static_cast<float>(x[3 * v + c]);
-    for (int64_t b = 0; b < B; ++b)
-      for (int c = 0; c < 3; ++c) body(b, c) = static_cast<float>(in.body_pos[3 * b + c]);
-    const auto nearest = dataset::nearest_body(query, body).index;
+    const auto nearest = in.body_index->query(query).index;
     const double root_k = std::sqrt(s.collision_stiffness * s.collision_body);
     for (int64_t v = 0; v < N; ++v) {
       const int32_t a = nearest[v];
@@ -195,8 +194,12 @@ Vec solve(const PhysicsInput<double>& in, const Hessian& h, const Vec& g, const 
 
 }  // namespace
 
-dataset::Points minimise_step_energy(const PhysicsInput<double>& in, dataset::Points x0, const std::vector<uint8_t>& fixed,
+dataset::Points minimise_step_energy(const PhysicsInput<double>& unindexed, dataset::Points x0, const std::vector<uint8_t>& fixed,
                                      const PhysicsStepSettings& settings, PhysicsStepReport* report) {
+  // Every energy evaluation and Hessian of the solve queries the same body.
+  PhysicsInput<double> copy;
+  if (!unindexed.body_index && !unindexed.body_pos.empty()) copy = unindexed, index_body(copy);
+  const PhysicsInput<double>& in = copy.body_index ? copy : unindexed;
   const int64_t N = x0.rows();
   LAYERSNET_CHECK(static_cast<int64_t>(in.x_t.size()) == 3 * N && static_cast<int64_t>(fixed.size()) == N,
                   "minimise_step_energy: the guess has " << N << " rows, the input " << in.x_t.size() / 3
@@ -247,7 +250,9 @@ dataset::Points physics_step_displacement(const dataset::TrainingSample& s, cons
                   "physics step of sample '" << s.sequence_id << "' frame " << s.frame
                                              << ": needs the body carry" << (body_inertia ? " from t-1 and from t" : "")
                                              << "; build the sample with model::sample_options_for(the model's config)");
+  LAYERSNET_CHECK(settings.substeps >= 1, "physics step: " << settings.substeps << " substeps; give 1 or more");
   PhysicsInput<double> in = cast_physics_input<double>(physics_input_from_sample(s, info, settings.energy));
+  if (!in.body_pos.empty()) index_body(in);
   // The input's frame is t+1's root, where the carried guess is x̃_t + c (x̃_t = state, root-relative).
   dataset::Points guess(N, 3);
   std::vector<uint8_t> fixed(N);
@@ -259,7 +264,45 @@ dataset::Points physics_step_displacement(const dataset::TrainingSample& s, cons
         in.x_tm1[3 * v + c] = 2 * in.x_t[3 * v + c] - (guess(v, c) + s.state(v, 3 + c) - s.body_carry_prev(v, c));
     }
   }
-  const dataset::Points x = minimise_step_energy(in, guess, fixed, settings, report);
+  dataset::Points x;
+  if (settings.substeps == 1) {
+    x = minimise_step_energy(in, guess, fixed, settings, report);
+  } else {
+    // S implicit steps of h = 1/S frame. Each substep's energy times h² keeps the inertia term
+    // (target x + h v) and scales every force's potential by h² and the drag's (c/2h)‖y − x‖² to
+    // c h/2 ‖y − x‖². Each starts from its share of the body carry; pinned rows take that share.
+    const double h = 1.0 / settings.substeps;
+    PhysicsStepSettings sub = settings;
+    sub.substeps = 1;
+    PhysicsSettings& w = sub.energy;
+    w.drag *= h;
+    for (double* force : {&w.stretch, &w.bending, &w.gravity, &w.wind, &w.collision_body, &w.collision_layer}) *force *= h * h;
+    std::vector<double> velocity(3 * N);  // units per frame
+    for (int64_t k = 0; k < 3 * N; ++k) velocity[k] = in.x_t[k] - in.x_tm1[k];
+    const std::vector<double> start = in.x_t;
+    dataset::Points carried(N, 3);
+    PhysicsStepReport part;
+    if (report) *report = PhysicsStepReport{};
+    for (int step = 0; step < settings.substeps; ++step) {
+      for (int64_t v = 0; v < N; ++v)
+        for (int c = 0; c < 3; ++c) {
+          const int64_t k = 3 * v + c;
+          in.x_tm1[k] = in.x_t[k] - h * velocity[k];
+          carried(v, c) = static_cast<float>(in.x_t[k] + h * (guess(v, c) - start[k]));
+        }
+      x = minimise_step_energy(in, carried, fixed, sub, report ? &part : nullptr);
+      if (report) {
+        if (step == 0) report->energy_start = part.energy_start;
+        report->energy_end = part.energy_end, report->line_search_halvings += part.line_search_halvings;
+      }
+      for (int64_t v = 0; v < N; ++v)
+        for (int c = 0; c < 3; ++c) {
+          const int64_t k = 3 * v + c;
+          velocity[k] = (x(v, c) - in.x_t[k]) / h;
+          in.x_t[k] = x(v, c);
+        }
+    }
+  }
   dataset::Points displacement(N, 3);
   for (int64_t v = 0; v < N; ++v)
     for (int c = 0; c < 3; ++c) displacement(v, c) = x(v, c) - s.state(v, c);
@@ -270,6 +313,7 @@ void add_physics_step(dataset::TrainingSample& sample, const dataset::SequenceIn
   if (model.velocity_base != "physics") return;
   PhysicsStepSettings settings;
   settings.newton_iterations = model.physics_step_iterations;
+  settings.substeps = model.physics_step_substeps;
   settings.inertia = model.physics_step_inertia;
   settings.energy.collision_stiffness = model.physics_step_collision_stiffness;
   settings.energy.collision_layer = model.physics_step_layer_collision ? 1.0 : 0.0;

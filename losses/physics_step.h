@@ -11,8 +11,8 @@
 // k_h ∇θ ∇θᵀ and the body contacts' k_c n nᵀ; conjugate gradients with a 3×3 block-Jacobi
 // preconditioner solve it, and a backtracking line search keeps the energy decreasing. The
 // layer contacts enter through the gradient only. Pinned vertices (no inertia weight) stay at
-// the carried guess: Blender moves them with the body. One frame is one step (Blender takes
-// `quality` substeps). Blender's frames are not minima of this energy (`layersnet inspect
+// the carried guess: Blender moves them with the body. One frame is one step by default (Blender takes
+// `quality` substeps, 30 in the generator; two or three here come no closer to it). Blender's frames are not minima of this energy (`layersnet inspect
 // --physics`): a few iterations, not the minimum, are what comes closest to them.
 //
 // The inertia target is Blender's 2x_t − x_{t−1} ("world", the default), or the cloth's velocity
@@ -29,7 +29,8 @@
 namespace layersnet::losses {
 
 struct PhysicsStepSettings {
-  int newton_iterations = 2;   // 0 = the guess itself
+  int newton_iterations = 2;   // per substep; 0 = the guess itself
+  int substeps = 1;            // implicit steps of 1/substeps frame (Blender takes `quality`)
   int cg_iterations = 60;      // per Newton iteration (stops earlier at a relative residual of 1e-4)
   std::string inertia = "world";  // "world" | "body" (above)
   PhysicsSettings energy;      // Blender's constants; collision_stiffness is k_c of the step

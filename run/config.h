@@ -62,6 +62,7 @@ struct TrainConfig {
   int checkpoint_every = 200;           // batches between checkpoints; 0 = epoch ends only
   bool epoch_checkpoints = true;        // a checkpoint at each epoch end (else only at the run's end)
   bool validate = true;                 // one-step error on the val split after each epoch
+  bool validate_initial = true;         // and before the first update (best.h5 may be the untrained model)
   int val_samples = 0;                  // val samples used (evenly spaced); 0 = all
   int val_rollout_frames = 20;          // > 0: validate (and pick best.h5) by the mean error of a
                                         // self-fed rollout of up to this many frames per val sequence,

@@ -231,6 +231,7 @@ class Run {
   void restore(const std::string& path);
   void start_from(const std::string& path);  // train.init_from
   void run_epoch(int epoch);
+  void record_validation(double val, const std::string& when);
   bool run_batch(int epoch, int ngs, const std::vector<int64_t>& order);  // false: max_steps reached
   // The steps of run_batch, in order.
   Batch draw_batch(int ngs, const std::vector<int64_t>& order);
@@ -462,6 +463,10 @@ TrainSummary Run::execute() {
 
   // max_steps counts every batch of the run, those before a resume too.
   batches_before_ = state_.epoch * batches_per_epoch_ + (state_.position + tc.batch_size - 1) / tc.batch_size;
+  // The model before any update is a candidate too: its zero-initialised output layer predicts
+  // the velocity base, which a strong base (the physics step) may leave unbeaten on validation.
+  if (resumed_from.empty() && tc.validate_initial && adam_->step_count() == 0)
+    record_validation(validate(), "before the first update,");
   while (state_.epoch < tc.epochs) {
     if (step_cap_reached()) break;
     run_epoch(static_cast<int>(state_.epoch));
@@ -507,25 +512,28 @@ void Run::run_epoch(int epoch) {
   const double val = validate();
   state_.epoch = epoch + 1;
   state_.position = 0;
-  bool best = false;
-  if (val >= 0) {
-    summary_.last_val_error = val;
-    best = state_.best_val_error < 0 || val < state_.best_val_error;
-    if (best) state_.best_val_error = val;
-    summary_.best_val_error = state_.best_val_error;
-    const bool by_rollout = config_.train.val_rollout_frames > 0;
-    out_ << "epoch " << epoch + 1 << " validation: " << (by_rollout ? "rollout" : "one-step") << " error " << val
-         << " (best " << state_.best_val_error << ")\n";
-    metric({{"event", "val"},
-            {"epoch", epoch + 1},
-            {"step", adam_->step_count()},
-            {by_rollout ? "rollout_error" : "one_step_error", json_number(val)},
-            {"best", best}});
-  }
   // best.h5 first: a kill between the two writes resumes from the previous checkpoint and
   // writes both again.
-  if (best) save(best_checkpoint_path(options_.run_dir));
+  record_validation(val, "epoch " + std::to_string(epoch + 1));
   if (config_.train.epoch_checkpoints || state_.epoch == config_.train.epochs) save_step_checkpoint();
+}
+
+// Keeps best.h5 when `val` (negative: no validation) is the lowest so far.
+void Run::record_validation(double val, const std::string& when) {
+  if (val < 0) return;
+  summary_.last_val_error = val;
+  const bool best = state_.best_val_error < 0 || val < state_.best_val_error;
+  if (best) state_.best_val_error = val;
+  summary_.best_val_error = state_.best_val_error;
+  const bool by_rollout = config_.train.val_rollout_frames > 0;
+  out_ << when << " validation: " << (by_rollout ? "rollout" : "one-step") << " error " << val << " (best "
+       << state_.best_val_error << ")\n";
+  metric({{"event", "val"},
+          {"epoch", state_.epoch},
+          {"step", adam_->step_count()},
+          {by_rollout ? "rollout_error" : "one_step_error", json_number(val)},
+          {"best", best}});
+  if (best) save(best_checkpoint_path(options_.run_dir));
 }
 
 // One update, as its steps: draw the batch, read this rank's frames, train its samples, reduce

@@ -142,6 +142,47 @@ TEST(PhysicsStep, InertiaTargets) {
   EXPECT_GT((expected_body - expected_world).cwiseAbs().maxCoeff(), 1e-2f);  // the two targets differ here
 }
 
+// S implicit substeps under inertia and gravity alone: each adds h·g to the velocity and h·v to
+// the position, so the frame's displacement is v_t + g (S + 1) / 2S: g for one step (implicit
+// Euler), tending to g/2 (the exact parabola). Pinned rows take the whole body carry either way.
+TEST(PhysicsStep, SubstepsIntegrateGravity) {
+  dataset::Sequence seq = two_layers_with_wind();
+  auto& inner = seq.info.garments.front();
+  inner.pin.assign(inner.num_vertices, 0.f);
+  for (int v = 0; v < inner.num_vertices; v += 5) inner.pin[v] = 1.f;
+  ModelConfig m;
+  m.velocity_base = "physics";
+  const int t = 5;
+  const auto s = sample_for(seq, t, m);
+  PhysicsStepSettings settings;
+  settings.energy = only(1, 0, 1);
+  settings.newton_iterations = 1;
+  const Eigen::RowVector3f g = 1e-3f * seq.info.gravity.transpose();
+  const Eigen::RowVector3f root_acceleration = seq.info.translation.row(t + 1) - 2 * seq.info.translation.row(t) +
+                                               seq.info.translation.row(t - 1);
+  const dataset::Points v_t = s.state.middleCols<3>(3);
+  const PhysicsInput<float> in = physics_input_from_sample(s, seq.info, settings.energy);
+  int pinned = 0;
+  for (const int S : {1, 3, 8}) {
+    settings.substeps = S;
+    const dataset::Points d = physics_step_displacement(s, seq.info, settings);
+    const float share = static_cast<float>(S + 1) / static_cast<float>(2 * S);
+    pinned = 0;
+    for (int64_t v = 0; v < s.num_vertices(); ++v) {
+      if (in.inertia_weight[v] == 0) {
+        ++pinned;
+        EXPECT_LT((d.row(v) - s.body_carry.row(v)).cwiseAbs().maxCoeff(), 1e-5f) << "pinned row " << v << ", " << S << " substeps";
+        continue;
+      }
+      const Eigen::RowVector3f expected = v_t.row(v) - root_acceleration + share * g;
+      EXPECT_LT((d.row(v) - expected).cwiseAbs().maxCoeff(), 1e-5f) << "row " << v << ", " << S << " substeps";
+    }
+  }
+  EXPECT_GT(pinned, 0);  // the scene has pinned rows, so both branches ran
+  settings.substeps = 0;
+  EXPECT_THROW(physics_step_displacement(s, seq.info, settings), std::exception);
+}
+
 // The model's input takes the step as its velocity base, and refuses a sample without it.
 TEST(PhysicsStep, ModelInputTakesTheStep) {
   const dataset::Sequence seq = two_layers_with_wind();

@@ -237,14 +237,14 @@ TEST_F(TrainerTest, SameSeedAndThreadsGiveIdenticalParameters) {
   train(c2, options("c"));
   const auto wc = final_weights(dir_ / "c", c2);
   EXPECT_NE(std::memcmp(wa.data(), wc.data(), wa.size() * sizeof(float)), 0);
-  // Metrics: train lines with the loss parts, one validation per epoch.
+  // Metrics: train lines with the loss parts, one validation before the first update and one per epoch.
   const std::string metrics = read_text(dir_ / "a" / "metrics.jsonl");
   EXPECT_NE(metrics.find("\"event\":\"train\""), std::string::npos);
   EXPECT_NE(metrics.find("\"collision_layer\""), std::string::npos);
   int vals = 0;
   for (std::size_t p = metrics.find("\"event\":\"val\""); p != std::string::npos; p = metrics.find("\"event\":\"val\"", p + 1))
     ++vals;
-  EXPECT_EQ(vals, 2);
+  EXPECT_EQ(vals, 3);
   EXPECT_TRUE(fs::exists(dir_ / "a" / "best.h5"));
   EXPECT_LE(list_checkpoints((dir_ / "a").string()).size(), static_cast<std::size_t>(c.train.keep_checkpoints));
 }
@@ -305,6 +305,38 @@ TEST_F(TrainerTest, RolloutValidationFeedsPredictionsBackAndPicksBestByIt) {
   EXPECT_NE(metrics.find("\"rollout_error\""), std::string::npos);
   EXPECT_EQ(metrics.find("\"one_step_error\""), std::string::npos);
   EXPECT_TRUE(fs::exists(dir_ / "run" / "best.h5"));
+}
+
+// The model before any update is validated too: when every update makes it worse (a learning
+// rate far too large), best.h5 holds the untrained weights; train.validate_initial = false skips it.
+TEST_F(TrainerTest, TheUntrainedModelIsACandidateForBestH5) {
+  const std::string data = make_dataset(2, 1, 9);
+  const std::vector<std::string> common = {"train.epochs=2", "train.rollout_steps=[0]", "train.threads=1",
+                                           "train.learning_rate=1"};
+  const Config c = tiny_config(data, common);
+  const TrainSummary summary = train(c, options("run"));
+  const std::string metrics = read_text(dir_ / "run" / "metrics.jsonl");
+  std::vector<std::string> vals;
+  std::istringstream lines(metrics);
+  for (std::string line; std::getline(lines, line);)
+    if (line.find("\"event\":\"val\"") != std::string::npos) vals.push_back(line);
+  ASSERT_EQ(vals.size(), 3u) << metrics;
+  EXPECT_NE(vals[0].find("\"step\":0,"), std::string::npos) << vals[0];
+  EXPECT_NE(vals[0].find("\"best\":true"), std::string::npos) << vals[0];
+  for (int k = 1; k < 3; ++k) EXPECT_NE(vals[k].find("\"best\":false"), std::string::npos) << vals[k];
+  ad::ParamStore<float> untrained;
+  model::register_params(untrained, c.model);
+  model::init_params(untrained, c.model, static_cast<uint64_t>(c.train.seed));
+  ad::ParamStore<float> best;
+  model::register_params(best, c.model);
+  (void)read_checkpoint((dir_ / "run" / "best.h5").string(), best);
+  EXPECT_TRUE(std::equal(best.values().begin(), best.values().end(), untrained.values().begin()));
+  EXPECT_NE(final_weights(dir_ / "run", c), std::vector<float>(untrained.values().begin(), untrained.values().end()));
+  EXPECT_GT(summary.best_val_error, 0.0);
+  // Off: validation after each epoch only.
+  (void)train(tiny_config(data, common, {"train.validate_initial=false"}), options("off"));
+  const std::string off = read_text(dir_ / "off" / "metrics.jsonl");
+  EXPECT_EQ(off.find("\"step\":0,"), std::string::npos) << off;
 }
 
 // train.rollout_constraints: a fed-back frame is projected onto the cloth constraints (edges
