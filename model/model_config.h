@@ -64,10 +64,11 @@ struct ModelConfig {
   // corrections that differ between neighbours stretch and crumple the cloth in long rollouts;
   // averaged, neighbours are corrected together. 0 = the official decoder output.
   int output_smoothing = 0;
-  // With a body velocity base: each patch token also gets its base, the patch mean of the carry
-  // c̄_p / σ_v (root-relative like v_t), through embed.base.weight (width, 3), added to the patch
-  // embedding. The network corrects c without otherwise seeing it beyond model.body_radius. The
-  // weight starts at zero, so a model with it starts as the same model without it.
+  // With a carried velocity base (body, body_inertia or physics): each patch token also gets its
+  // base, the patch mean c̄_p / σ_v (root-relative like v_t) of the body carry or of the physics
+  // step, through embed.base.weight (width, 3), added to the patch embedding. The network corrects
+  // the base without otherwise seeing it. The weight starts at zero, so a model with it starts as
+  // the same model without it.
   bool patch_base_input = false;
   // The wind as Blender applies it: each garment vertex gets the face wind at x_t
   // (ModelInput::wind_force, dataset::face_wind_force), each patch its members' mean. The decoder

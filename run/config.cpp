@@ -174,7 +174,7 @@ const Schema& schema() {
     k.add("model.swing_kept", [](Config& c) -> double& { return c.model.swing_kept; }, "share of the cloth's velocity relative to the body surface that a zero output keeps (velocity_base body_inertia; 1 = all, 0 = the body base)", {0, 1, {}});
     k.add("model.carry_smoothing", [](Config& c) -> int& { return c.model.carry_smoothing; }, "averaging steps over the garment mesh on the body carry (velocity_base body or body_inertia); 0 = none", {0, 1000, {}});
     k.add("model.output_smoothing", [](Config& c) -> int& { return c.model.output_smoothing; }, "averaging steps over the garment mesh on the network's per-vertex correction (not in the paper); 0 = none", {0, 1000, {}});
-    k.add("model.patch_base_input", [](Config& c) -> bool& { return c.model.patch_base_input; }, "each patch token also sees its velocity base (the body carry's patch mean; velocity_base body or body_inertia; not in the paper)");
+    k.add("model.patch_base_input", [](Config& c) -> bool& { return c.model.patch_base_input; }, "each patch token also sees its velocity base (the patch mean of the body carry or of the physics step; velocity_base body, body_inertia or physics; not in the paper)");
     k.add("model.wind_force_input", [](Config& c) -> bool& { return c.model.wind_force_input; }, "each garment vertex and patch also sees the wind's force on its faces, as Blender applies it (not in the paper)");
     k.add("model.orthogonality", [](Config& c) -> std::string& { return c.model.orthogonality; }, "how W_R stays orthogonal", {0, 0, {"penalty", "exact"}});
     // [loss]
