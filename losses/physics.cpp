@@ -52,19 +52,10 @@ Var<T> collision(ad::Tape<T>& tape, const Var<T>& x, const Var<T>& anchor, const
   return ad::scale(tape, ad::sum_all(tape, pen), static_cast<T>(stiffness / 2));
 }
 
-// Rows [r0, r1) of an (R, 3) row-major array as points.
-template <class T>
-dataset::Points as_points(const T* xyz, int64_t r0, int64_t r1) {
-  dataset::Points out(r1 - r0, 3);
-  for (int64_t i = r0; i < r1; ++i)
-    for (int c = 0; c < 3; ++c) out(i - r0, c) = static_cast<float>(xyz[3 * i + c]);
-  return out;
-}
-
 // Nearest anchor rows (indices) of the query rows, on current values.
 template <class T>
 std::vector<int32_t> nearest(const T* query, int64_t q0, int64_t q1, const T* anchors, int64_t a0, int64_t a1) {
-  return dataset::nearest_body(as_points(query, q0, q1), as_points(anchors, a0, a1)).index;
+  return dataset::nearest_body(rows_as_points(query, q0, q1), rows_as_points(anchors, a0, a1)).index;
 }
 
 }  // namespace
@@ -265,7 +256,7 @@ template <class T>
 Var<T> body_collision_energy(ad::Tape<T>& tape, const Var<T>& x, const PhysicsInput<T>& in, double margin,
                              double stiffness, int64_t* contacts) {
   const int64_t B = static_cast<int64_t>(in.body_pos.size() / 3);
-  const auto idx = in.body_index ? in.body_index->query(as_points(x.value, 0, x.rows)).index
+  const auto idx = in.body_index ? in.body_index->query(rows_as_points(x.value, 0, x.rows)).index
                                  : nearest(x.value, 0, x.rows, in.body_pos.data(), 0, B);
   const Var<T> h = ad::gather_rows(tape, column(tape, in.body_pos, 3), idx);
   const Var<T> n = ad::gather_rows(tape, column(tape, in.body_normals, 3), idx);

@@ -92,13 +92,20 @@ struct PhysicsInput {
   std::shared_ptr<const dataset::NearestVertexIndex> body_index;
 };
 
+// Rows [r0, r1) of an (R, 3) row-major array as float points (for the nearest-vertex queries).
+template <class T>
+dataset::Points rows_as_points(const T* xyz, int64_t r0, int64_t r1) {
+  dataset::Points out(r1 - r0, 3);
+  for (int64_t i = r0; i < r1; ++i)
+    for (int c = 0; c < 3; ++c) out(i - r0, c) = static_cast<float>(xyz[3 * i + c]);
+  return out;
+}
+
 // Sets in.body_index from in.body_pos.
 template <class T>
 void index_body(PhysicsInput<T>& in) {
-  dataset::Points body(static_cast<Eigen::Index>(in.body_pos.size() / 3), 3);
-  for (Eigen::Index b = 0; b < body.rows(); ++b)
-    for (int c = 0; c < 3; ++c) body(b, c) = static_cast<float>(in.body_pos[3 * b + c]);
-  in.body_index = std::make_shared<const dataset::NearestVertexIndex>(body);
+  in.body_index = std::make_shared<const dataset::NearestVertexIndex>(
+      rows_as_points(in.body_pos.data(), 0, static_cast<int64_t>(in.body_pos.size() / 3)));
 }
 
 // Builds the constants from a training sample (its state holds x_t, x_{t−1}, possibly the

@@ -136,10 +136,7 @@ Hessian approximate_hessian(const PhysicsInput<double>& in, const Vec& x, const 
   const int64_t B = static_cast<int64_t>(in.body_pos.size() / 3);
   if (B > 0 && s.collision_body != 0) {
     LAYERSNET_CHECK(in.body_index, "physics step: the body is not indexed (losses::index_body)");
-    dataset::Points query(N, 3);
-    for (int64_t v = 0; v < N; ++v)
-      for (int c = 0; c < 3; ++c) query(v, c) = static_cast<float>(x[3 * v + c]);
-    const auto nearest = in.body_index->query(query).index;
+    const auto nearest = in.body_index->query(rows_as_points(x.data(), 0, N)).index;
     const double root_k = std::sqrt(s.collision_stiffness * s.collision_body);
     for (int64_t v = 0; v < N; ++v) {
       const int32_t a = nearest[v];

@@ -465,7 +465,7 @@ TrainSummary Run::execute() {
   batches_before_ = state_.epoch * batches_per_epoch_ + (state_.position + tc.batch_size - 1) / tc.batch_size;
   // The model before any update is a candidate too: its zero-initialised output layer predicts
   // the velocity base, which a strong base (the physics step) may leave unbeaten on validation.
-  if (resumed_from.empty() && tc.validate_initial && adam_->step_count() == 0)
+  if (resumed_from.empty() && tc.validate_initial)
     record_validation(validate(), "before the first update,");
   while (state_.epoch < tc.epochs) {
     if (step_cap_reached()) break;
