@@ -10,7 +10,9 @@
 // the springs' PSD part k (d̂d̂ᵀ + max(0, 1 − L/l)(I − d̂d̂ᵀ)), bending's Gauss–Newton part
 // k_h ∇θ ∇θᵀ and the body contacts' k_c n nᵀ; conjugate gradients with a 3×3 block-Jacobi
 // preconditioner solve it, and a backtracking line search keeps the energy decreasing. The
-// layer contacts enter through the gradient only. Pinned vertices (no inertia weight) stay at
+// layer contacts enter through the gradient only. Contact friction holds cloth that touches the
+// body to the body's motion, tangentially, as Blender's body friction does (off in these
+// settings; ModelConfig turns it on for the "physics" base). Pinned vertices (no inertia weight) stay at
 // the carried guess: Blender moves them with the body. One frame is one step by default (Blender takes
 // `quality` substeps, 30 in the generator; two or three here come no closer to it). Blender's frames are not minima of this energy (`layersnet inspect
 // --physics`): a few iterations, not the minimum, are what comes closest to them.
@@ -33,6 +35,10 @@ struct PhysicsStepSettings {
   int substeps = 1;            // implicit steps of 1/substeps frame (Blender takes `quality`)
   int cg_iterations = 60;      // per Newton iteration (stops earlier at a relative residual of 1e-4)
   std::string inertia = "world";  // "world" | "body" (above)
+  // Contact friction: a free vertex that starts within friction_distance (scene units) of the
+  // body along its normal pays (friction · m / 2) |tangential slip from x_t + c|²; 0 = none.
+  double friction = 0;
+  double friction_distance = 0.1;
   PhysicsSettings energy;      // Blender's constants; collision_stiffness is k_c of the step
 };
 

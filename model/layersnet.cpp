@@ -478,11 +478,30 @@ Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
     wind_v = rotated_rows(Re, in.wind_force, cand_vertex, 3);
     wind_p = rotated_rows(Rp_host, in.wind_force_patch, patches, 3);
   }
-  // First-layer weights and inputs: the extra columns sit after rel's 12, local then wind; the
-  // patch branch (rel = 0) has only the wind's.
+  // The vertex's own velocity base per candidate row, [c_v, c_v − c̄_p] / σ_v in the row's frame
+  // (p the row's patch). A carried base is implied (run/config.cpp) and checked in forward().
+  const bool vertex_base = cfg.vertex_base_input;
+  Var<T> base_in_v;
+  if (vertex_base) {
+    std::vector<T> table(Ec * 6);
+    std::vector<int32_t> rows(Ec);
+    for (int64_t k = 0; k < Ec; ++k) {
+      rows[k] = static_cast<int32_t>(k);
+      const int64_t v = cand_vertex[k], patch = in.cand_patches[k];
+      for (int c = 0; c < 3; ++c) {
+        const T inv_std = T(1) / in.std12[3 + c];
+        table[6 * k + c] = in.body_carry[3 * v + c] * inv_std;
+        table[6 * k + 3 + c] = (in.body_carry[3 * v + c] - in.body_carry_patch[3 * patch + c]) * inv_std;
+      }
+    }
+    base_in_v = rotated_rows(Re, table, rows, 6);
+  }
+  // First-layer weights and inputs: the extra columns sit after rel's 12, local, base, then wind;
+  // the patch branch (rel = 0) has only the wind's.
   auto with_extra_weight = [&](const Var<T>& W_first, bool vertex_rows) {
     std::vector<Var<T>> parts{ad::slice_cols(tape, W_first, 0, 12)};
     if (vertex_rows && local) parts.push_back(p("decoder.local.weight"));
+    if (vertex_rows && vertex_base) parts.push_back(p("decoder.base.weight"));
     if (wind) parts.push_back(p("decoder.wind.weight"));
     if (parts.size() == 1) return W_first;
     parts.push_back(ad::slice_cols(tape, W_first, 12, W_first.cols));
@@ -491,6 +510,7 @@ Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
   auto with_extra_input = [&](const Var<T>& rel_part, const Var<T>& e_part, const Var<T>& h_part, bool vertex_rows) {
     std::vector<Var<T>> parts{rel_part};
     if (vertex_rows && local) parts.push_back(loc_v);
+    if (vertex_rows && vertex_base) parts.push_back(base_in_v);
     if (wind) parts.push_back(vertex_rows ? wind_v : wind_p);
     parts.push_back(e_part);
     parts.push_back(h_part);

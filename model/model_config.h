@@ -50,6 +50,13 @@ struct ModelConfig {
   std::string physics_step_inertia = "world";
   double physics_step_collision_stiffness = 1e4;
   bool physics_step_layer_collision = false;
+  // Contact friction of the step: a vertex within physics_step_friction_distance (scene units) of
+  // the body along its normal is held to the body's tangential motion with stiffness friction × its
+  // mass (losses/physics_step.h); 0 = frictionless contact. Chosen on the validation splits
+  // (docs/decisions.md, "Contact friction in the physics step"): cloth inside the body's collision
+  // margin (0.107 units) sticks to it, as Blender's body friction (48–80 in the data) holds it.
+  double physics_step_friction = 4096;
+  double physics_step_friction_distance = 0.1;
   // "body_inertia" only: the share of the relative velocity v_t − c_t a zero output keeps,
   // v_{t+1} = c + swing_kept (v_t − c_t) + a. 1 keeps the whole swing, 0 is "body"; between them
   // the swing a self-fed rollout hands itself decays geometrically.
@@ -70,6 +77,11 @@ struct ModelConfig {
   // the base without otherwise seeing it. The weight starts at zero, so a model with it starts as
   // the same model without it.
   bool patch_base_input = false;
+  // With a carried velocity base: the decoder's vertex rows also see their own vertex's base,
+  // c_v and c_v − c̄_p (p the row's patch), / σ_v in the row's frame, through decoder.base.weight
+  // (decoder_width, 6), zero at the start. The patch token sees only its mean; this lets the
+  // network correct the step vertex by vertex (near the body above all). Not in the paper.
+  bool vertex_base_input = false;
   // The wind as Blender applies it: each garment vertex gets the face wind at x_t
   // (ModelInput::wind_force, dataset::face_wind_force), each patch its members' mean. The decoder
   // sees it in each row's frame through decoder.wind.weight (decoder_width, 3), the patch tokens

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <random>
+#include <utility>
 #include <sstream>
 
 namespace layersnet::model {
@@ -105,6 +106,7 @@ void register_params(ad::ParamStore<T>& ps, const ModelConfig& c) {
     ps.add("embed.wind_force.weight", m.d, 3);
     ps.add("decoder.wind.weight", m.dec_width, 3);
   }
+  if (c.vertex_base_input) ps.add("decoder.base.weight", m.dec_width, 6);
   ps.finalize();
 }
 
@@ -161,10 +163,12 @@ void init_params(ad::ParamStore<T>& ps, const ModelConfig& c, uint64_t seed) {
   // With the body-carried velocity base a zero output is the skinning step: start there, the
   // other weights drawn as before (the same draws as the inertial model of the same seed).
   // The patch base enters at zero: switched on, the model starts as the one without it.
-  if (c.patch_base_input) {
-    auto v = ps.value(ps.index_of("embed.base.weight"));
-    std::fill(v.begin(), v.end(), T(0));
-  }
+  for (const auto& [on, name] : {std::pair{c.patch_base_input, "embed.base.weight"},
+                                 std::pair{c.vertex_base_input, "decoder.base.weight"}})
+    if (on) {
+      auto v = ps.value(ps.index_of(name));
+      std::fill(v.begin(), v.end(), T(0));
+    }
   if (c.wind_force_input)  // likewise
     for (const char* name : {"embed.wind_force.weight", "decoder.wind.weight"}) {
       auto v = ps.value(ps.index_of(name));

@@ -10,6 +10,7 @@
 #include <limits>
 #include <sstream>
 #include <type_traits>
+#include <utility>
 
 namespace layersnet {
 
@@ -170,11 +171,14 @@ const Schema& schema() {
     k.add("model.physics_step_substeps", [](Config& c) -> int& { return c.model.physics_step_substeps; }, "implicit steps per frame of the physics step, each of 1/substeps frame (read with velocity_base physics only)", {1, 100, {}});
     k.add("model.physics_step_collision_stiffness", [](Config& c) -> double& { return c.model.physics_step_collision_stiffness; }, "the physics step's body-contact stiffness k_c (mass / frame^2; read with velocity_base physics only)", {0, 1e9, {}});
     k.add("model.physics_step_layer_collision", [](Config& c) -> bool& { return c.model.physics_step_layer_collision; }, "the physics step also pushes the outer layer out of the inner one (read with velocity_base physics only)");
+    k.add("model.physics_step_friction", [](Config& c) -> double& { return c.model.physics_step_friction; }, "the physics step's contact friction: cloth within physics_step_friction_distance of the body is held to its tangential motion with this stiffness x the vertex mass (0 = frictionless; read with velocity_base physics only)", {0, 1e6, {}});
+    k.add("model.physics_step_friction_distance", [](Config& c) -> double& { return c.model.physics_step_friction_distance; }, "scene units from the body surface (along its normal) within which the physics step's friction acts", {0, 10, {}});
     k.add("model.physics_step_inertia", [](Config& c) -> std::string& { return c.model.physics_step_inertia; }, "the physics step's inertia target: the cloth's velocity relative to the body surface kept (body) or Blender's 2x_t - x_{t-1} (world; read with velocity_base physics only)", {0, 0, {"body", "world"}});
     k.add("model.swing_kept", [](Config& c) -> double& { return c.model.swing_kept; }, "share of the cloth's velocity relative to the body surface that a zero output keeps (velocity_base body_inertia; 1 = all, 0 = the body base)", {0, 1, {}});
     k.add("model.carry_smoothing", [](Config& c) -> int& { return c.model.carry_smoothing; }, "averaging steps over the garment mesh on the body carry (velocity_base body or body_inertia); 0 = none", {0, 1000, {}});
     k.add("model.output_smoothing", [](Config& c) -> int& { return c.model.output_smoothing; }, "averaging steps over the garment mesh on the network's per-vertex correction (not in the paper); 0 = none", {0, 1000, {}});
     k.add("model.patch_base_input", [](Config& c) -> bool& { return c.model.patch_base_input; }, "each patch token also sees its velocity base (the patch mean of the body carry or of the physics step; velocity_base body, body_inertia or physics; not in the paper)");
+    k.add("model.vertex_base_input", [](Config& c) -> bool& { return c.model.vertex_base_input; }, "the decoder's vertex rows also see their own vertex's velocity base, in their frame (velocity_base body, body_inertia or physics; not in the paper)");
     k.add("model.wind_force_input", [](Config& c) -> bool& { return c.model.wind_force_input; }, "each garment vertex and patch also sees the wind's force on its faces, as Blender applies it (not in the paper)");
     k.add("model.orthogonality", [](Config& c) -> std::string& { return c.model.orthogonality; }, "how W_R stays orthogonal", {0, 0, {"penalty", "exact"}});
     // [loss]
@@ -418,10 +422,12 @@ void validate_config(const Config& config) {
                       key("model.velocity_base", "\"body_inertia\"") + " keeps, but " +
                       key("model.velocity_base", "\"" + m.velocity_base + "\"") +
                       "; set model.velocity_base = \"body_inertia\" or leave model.swing_kept at 1");
-  if (m.patch_base_input && m.velocity_base == "inertia")
-    throw ConfigError(key("model.patch_base_input", "true") + " gives each patch its body-carried base, but " +
-                      key("model.velocity_base", "\"inertia\"") + " has none; set model.velocity_base = \"body\" or "
-                      "\"body_inertia\", or model.patch_base_input = false");
+  for (const auto& [name, on] : {std::pair{"model.patch_base_input", m.patch_base_input},
+                                  std::pair{"model.vertex_base_input", m.vertex_base_input}})
+    if (on && m.velocity_base == "inertia")
+      throw ConfigError(key(name, "true") + " gives the network its velocity base, but " +
+                        key("model.velocity_base", "\"inertia\"") + " carries none; set model.velocity_base = \"physics\", "
+                        "\"body\" or \"body_inertia\", or " + name + " = false");
   if (config.loss.self_fed_truth == 0 && config.physics.weight == 0)
     throw ConfigError(key("loss.self_fed_truth", 0) + " takes the ground truth away from the self-fed samples, and " +
                       key("physics.weight", 0) + " gives them no energy in its place; set physics.weight > 0 "

@@ -79,6 +79,47 @@ TEST(PhysicsStep, QuadraticEnergyIsSolvedExactly) {
   EXPECT_EQ(report.line_search_halvings, 0);
 }
 
+// Contact friction with inertia alone is quadratic too: a vertex within friction_distance of a
+// flat body keeps 1/(1 + μ) of its tangential slip from the carried start (its normal motion is
+// free), a vertex beyond it takes its inertia target, and μ = 0 is the frictionless step.
+TEST(PhysicsStep, ContactFrictionHoldsTouchingClothToTheBody) {
+  PhysicsInput<double> in;
+  for (int i = -3; i <= 3; ++i)  // a 7 x 7 body grid in z = 0, normals +z, spacing 0.5 units
+    for (int j = -3; j <= 3; ++j) {
+      in.body_pos.insert(in.body_pos.end(), {0.5 * i, 0.5 * j, 0.0});
+      in.body_normals.insert(in.body_normals.end(), {0.0, 0.0, 1.0});
+    }
+  in.x_t = {0.1, 0.0, 0.2, 0.0, 0.1, 2.0};       // touching (0.2 units above), free (2 units)
+  in.x_tm1 = {0.0, 0.0, 0.25, -0.1, 0.1, 2.05};  // both slide +x and sink 0.05 a frame
+  for (int v = 0; v < 2; ++v) in.inertia_weight.push_back(0.4 / 2);
+  in.drag_weight.assign(2, 0.0);
+  in.external_force.assign(6, 0.0);
+  in.wind_force.assign(6, 0.0);
+  in.garment_offsets = {0, 2};
+  dataset::Points start(2, 3);  // x_t + c: the body carries the cloth 0.3 along +y
+  for (int v = 0; v < 2; ++v)
+    for (int k = 0; k < 3; ++k) start(v, k) = static_cast<float>(in.x_t[3 * v + k] + (k == 1 ? 0.3 : 0.0));
+  PhysicsStepSettings settings;
+  settings.energy = only(1, 0, 0);
+  settings.newton_iterations = 1;
+  settings.friction_distance = 0.3;
+  for (const double mu : {0.0, 1.0, 9.0}) {
+    settings.friction = mu;
+    const dataset::Points x = minimise_step_energy(in, start, {0, 0}, settings);
+    for (int v = 0; v < 2; ++v)
+      for (int k = 0; k < 3; ++k) {
+        const double target = 2 * in.x_t[3 * v + k] - in.x_tm1[3 * v + k];
+        const bool held = v == 0 && k < 2;  // tangential axes of the touching vertex
+        const double expected = held ? (target + mu * start(v, k)) / (1 + mu) : target;
+        EXPECT_NEAR(x(v, k), expected, 1e-6) << "mu " << mu << " vertex " << v << " axis " << k;
+      }
+  }
+  settings.friction_distance = 0.1;  // the touching vertex is now beyond it
+  settings.friction = 9.0;
+  const dataset::Points x = minimise_step_energy(in, start, {0, 0}, settings);
+  EXPECT_NEAR(x(0, 1), 2 * in.x_t[1] - in.x_tm1[1], 1e-6);
+}
+
 // The whole energy on a two-layer scene with wind (springs, bending, gravity, wind, both
 // collisions): from a guess 5 mm off, the step ends near a stationary point, lower in energy,
 // and the pinned rows keep the guess.

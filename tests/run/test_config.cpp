@@ -265,14 +265,18 @@ TEST_F(ConfigTest, SwingKeptNeedsTheBodyInertiaBase) {
   EXPECT_THROW(load_config({}, {"model.velocity_base=body_inertia", "model.swing_kept=1.5"}), ConfigError);
 }
 
-// The patch base input is the body carry's patch mean; the official base has none.
-TEST_F(ConfigTest, PatchBaseInputNeedsABodyBase) {
+// The base inputs are the carried base (patch mean, per vertex); the official base has none.
+TEST_F(ConfigTest, BaseInputsNeedACarriedBase) {
   EXPECT_TRUE(load_config({}, {"model.velocity_base=body", "model.patch_base_input=true"}).model.patch_base_input);
-  try {
-    load_config({}, {"model.patch_base_input=true"});
-    ADD_FAILURE() << "no ConfigError";
-  } catch (const ConfigError& e) {
-    EXPECT_NE(std::string(e.what()).find("model.velocity_base = \"inertia\" (default)"), std::string::npos) << e.what();
+  EXPECT_TRUE(load_config({}, {"model.velocity_base=physics", "model.vertex_base_input=true"}).model.vertex_base_input);
+  for (const std::string name : {"model.patch_base_input", "model.vertex_base_input"}) {
+    try {
+      load_config({}, {name + "=true"});
+      ADD_FAILURE() << "no ConfigError for " << name;
+    } catch (const ConfigError& e) {
+      EXPECT_NE(std::string(e.what()).find(name + " = true (set at --set"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("model.velocity_base = \"inertia\" (default)"), std::string::npos) << e.what();
+    }
   }
 }
 
