@@ -21,6 +21,16 @@ double dot(const Vec& a, const Vec& b) {
   return s;
 }
 
+// Body vertex a's normal n (as stored) and the offset r = x − body_pos[a] of a point x from it.
+struct BodyOffset {
+  Eigen::Vector3d n, r;
+};
+
+BodyOffset offset_from_body(const PhysicsInput<double>& in, int32_t a, const Eigen::Vector3d& x) {
+  const Eigen::Vector3d n(in.body_normals[3 * a], in.body_normals[3 * a + 1], in.body_normals[3 * a + 2]);
+  return {n, x - Eigen::Vector3d(in.body_pos[3 * a], in.body_pos[3 * a + 1], in.body_pos[3 * a + 2])};
+}
+
 // The step's contact friction (PhysicsStepSettings::friction): each free vertex that starts within
 // friction_distance of the body along its normal (nearest body vertex within twice that) pays
 // (w/2) |P (x − x0)|² for slipping tangentially away from its start x0 = x_t + c, which moves
@@ -57,10 +67,8 @@ Friction contact_friction(const PhysicsInput<double>& in, const dataset::Points&
   const double within = settings.friction_distance, reach = 2 * settings.friction_distance;
   for (int64_t v = 0; v < N; ++v) {
     if (fixed[v]) continue;
-    const int32_t a = nearest.index[v];
     const Eigen::Vector3d x0 = start.row(v).transpose().cast<double>();
-    const Eigen::Vector3d n(in.body_normals[3 * a], in.body_normals[3 * a + 1], in.body_normals[3 * a + 2]);
-    const Eigen::Vector3d r = x0 - Eigen::Vector3d(in.body_pos[3 * a], in.body_pos[3 * a + 1], in.body_pos[3 * a + 2]);
+    const auto [n, r] = offset_from_body(in, nearest.index[v], x0);
     if (r.dot(n) >= within || r.norm() > reach) continue;
     f.rows.push_back(static_cast<int32_t>(v));
     f.anchor.push_back(x0);
@@ -196,10 +204,7 @@ Hessian approximate_hessian(const PhysicsInput<double>& in, const Vec& x, const 
     const auto nearest = in.body_index->query(rows_as_points(x.data(), 0, N)).index;
     const double root_k = std::sqrt(s.collision_stiffness * s.collision_body);
     for (int64_t v = 0; v < N; ++v) {
-      const int32_t a = nearest[v];
-      const Eigen::Vector3d n(in.body_normals[3 * a], in.body_normals[3 * a + 1], in.body_normals[3 * a + 2]);
-      const Eigen::Vector3d r(x[3 * v] - in.body_pos[3 * a], x[3 * v + 1] - in.body_pos[3 * a + 1],
-                              x[3 * v + 2] - in.body_pos[3 * a + 2]);
+      const auto [n, r] = offset_from_body(in, nearest[v], Eigen::Vector3d(x[3 * v], x[3 * v + 1], x[3 * v + 2]));
       if (r.dot(n) >= s.body_margin) continue;
       h.contact_row.push_back(static_cast<int32_t>(v));
       h.contact_normal.push_back(root_k * n);

@@ -162,7 +162,7 @@ void init_params(ad::ParamStore<T>& ps, const ModelConfig& c, uint64_t seed) {
   }
   // With the body-carried velocity base a zero output is the skinning step: start there, the
   // other weights drawn as before (the same draws as the inertial model of the same seed).
-  // The patch base enters at zero: switched on, the model starts as the one without it.
+  // The base inputs enter at zero: switched on, the model starts as the one without them.
   for (const auto& [on, name] : {std::pair{c.patch_base_input, "embed.base.weight"},
                                  std::pair{c.vertex_base_input, "decoder.base.weight"}})
     if (on) {
