@@ -294,6 +294,38 @@ Var<T> layer_collision_energy(ad::Tape<T>& tape, const Var<T>& x, const PhysicsI
 }
 
 template <class T>
+void add_contact_friction(PhysicsInput<T>& in, const dataset::Points& start, double mu, double distance) {
+  in.friction_rows.clear(), in.friction_anchor.clear(), in.friction_normal.clear(), in.friction_half_weight.clear();
+  const int64_t N = start.rows();
+  LAYERSNET_CHECK(static_cast<int64_t>(in.inertia_weight.size()) == N,
+                  "add_contact_friction: the start has " << N << " rows, the input " << in.inertia_weight.size() << " vertices");
+  if (!(mu > 0) || in.body_pos.empty()) return;
+  const auto nearest_body = in.body_index ? in.body_index->query(start).index
+                                          : dataset::nearest_body(start, rows_as_points(in.body_pos.data(), 0,
+                                                                  static_cast<int64_t>(in.body_pos.size() / 3))).index;
+  for (int64_t v = 0; v < N; ++v) {
+    if (!(in.inertia_weight[v] > 0)) continue;  // pinned: moves with the body anyway
+    const Eigen::Vector3d x0 = start.row(v).transpose().cast<double>();
+    const auto [n, r] = offset_from_body(in, nearest_body[v], x0);
+    const Eigen::Vector3d unit = n.normalized();
+    if (r.dot(unit) >= distance || r.norm() > 2 * distance) continue;
+    in.friction_rows.push_back(static_cast<int32_t>(v));
+    for (int c = 0; c < 3; ++c)
+      in.friction_anchor.push_back(static_cast<T>(x0[c])), in.friction_normal.push_back(static_cast<T>(unit[c]));
+    in.friction_half_weight.push_back(static_cast<T>(mu * in.inertia_weight[v]));
+  }
+}
+
+template <class T>
+Var<T> friction_energy(ad::Tape<T>& tape, const Var<T>& x, const PhysicsInput<T>& in) {
+  // ‖P d‖² = ‖d‖² − (n·d)² for a unit n.
+  const Var<T> d = ad::sub(tape, ad::gather_rows(tape, x, in.friction_rows), column(tape, in.friction_anchor, 3));
+  const Var<T> along = ad::row_sum(tape, ad::mul(tape, d, column(tape, in.friction_normal, 3)));
+  const Var<T> slip2 = ad::sub(tape, ad::row_sum(tape, ad::mul(tape, d, d)), ad::mul(tape, along, along));
+  return weighted_sum(tape, slip2, in.friction_half_weight);
+}
+
+template <class T>
 PhysicsTerms<T> physics_energy(ad::Tape<T>& tape, const Var<T>& x, const PhysicsInput<T>& in, const PhysicsSettings& ps) {
   const int64_t N = x.rows;
   LAYERSNET_CHECK(x.cols == 3 && static_cast<int64_t>(in.x_t.size()) == 3 * N,
@@ -320,6 +352,7 @@ PhysicsTerms<T> physics_energy(ad::Tape<T>& tape, const Var<T>& x, const Physics
   if (in.garment_offsets.size() >= 3)
     add(ps.collision_layer, out.collision_layer,
         [&] { return layer_collision_energy(tape, x, in, ps.layer_margin, ps.collision_stiffness, &out.layer_contacts); });
+  if (!in.friction_rows.empty()) add(ps.friction, out.friction, [&] { return friction_energy(tape, x, in); });
   LAYERSNET_CHECK(!weighted.empty(), "physics_energy: every term's weight is 0");
   out.total = weighted[0];
   for (std::size_t k = 1; k < weighted.size(); ++k) out.total = ad::add(tape, out.total, weighted[k]);
@@ -334,6 +367,8 @@ PhysicsTerms<T> physics_energy(ad::Tape<T>& tape, const Var<T>& x, const Physics
   template Var<T> work_energy(ad::Tape<T>&, const Var<T>&, const PhysicsInput<T>&, const std::vector<T>&);            \
   template Var<T> body_collision_energy(ad::Tape<T>&, const Var<T>&, const PhysicsInput<T>&, double, double, int64_t*); \
   template Var<T> layer_collision_energy(ad::Tape<T>&, const Var<T>&, const PhysicsInput<T>&, double, double, int64_t*); \
+  template Var<T> friction_energy(ad::Tape<T>&, const Var<T>&, const PhysicsInput<T>&);                               \
+  template void add_contact_friction(PhysicsInput<T>&, const dataset::Points&, double, double);                      \
   template PhysicsTerms<T> physics_energy(ad::Tape<T>&, const Var<T>&, const PhysicsInput<T>&, const PhysicsSettings&);
 LAYERSNET_PHYSICS_INSTANTIATE(float)
 LAYERSNET_PHYSICS_INSTANTIATE(double)

@@ -23,6 +23,8 @@
 //   collision_body   k_c/2 Σ_v min((x_v − h_a)·n_a − d_b, 0)², a = nearest body vertex at t+1
 //   collision_layer  k_c/2 Σ_v min((x_v − y_a)·n_a − d_l, 0)² over the outer garment's vertices,
 //              y_a the nearest inner-garment vertex (predicted), n_a its predicted normal
+//   friction   Σ_v μ m_v/2 ‖P_v (x_v − x0_v)‖² over the contacts add_contact_friction chose (none
+//              unless it is called): x0 the body-carried start, P_v = I − n nᵀ at the body there
 //
 // Per-layer stiffness is what Blender simulated (SequenceInfo::stiffness_per_layer): each
 // layer's stored value, or under the older generator rule (one cloth object, inner values as the
@@ -43,11 +45,15 @@
 // `quality`; compression uses the same quadratic as tension (Blender's angular model uses the
 // Choi-Ko buckling curve for compression); 1 − cos(θ − θ0) stands for (θ − θ0)²/2 (equal to
 // second order; no atan2 op is needed); collisions are vertex-to-nearest-vertex planes, not
-// triangle pairs; friction and self-collision within a layer are not modelled.
+// triangle pairs; contact friction is a tangential spring to where the body carries the vertex
+// (Blender's is Coulomb friction inside its collision response); self-collision within a layer is
+// not modelled.
 #include "autodiff/tape.h"
 #include "dataset/neighbours.h"
 #include "dataset/sample.h"
 #include "dataset/sequence.h"
+
+#include <Eigen/Core>
 
 #include <cstdint>
 #include <memory>
@@ -58,7 +64,7 @@ namespace layersnet::losses {
 struct PhysicsSettings {
   // Weight of each term inside the energy (1 = as Blender; 0 = term absent, no op recorded).
   double inertia = 1, drag = 1, stretch = 1, bending = 1, gravity = 1, wind = 1, collision_body = 1,
-         collision_layer = 1;
+         collision_layer = 1, friction = 1;
   double air_damping = 1.0;  // Blender's air_damping (Cvi), default 1; the generator keeps it
   // Collision target distances (scene units): Blender pushes to 8/9 of its detection distance,
   // (distance_min + the body's thickness_outer) for the body and 2 × self_distance_min for cloth;
@@ -87,6 +93,10 @@ struct PhysicsInput {
   std::vector<int32_t> faces;                 // (F, 3) global vertex ids
   std::vector<int32_t> garment_offsets;       // (G + 1), inner -> outer
   std::vector<T> body_pos, body_normals;      // (B, 3) at t+1
+  // Contact friction (add_contact_friction): the rows held, their start x0 and the body's unit
+  // normal there ((F, 3) each), and μ m_v / 2 (F, 1).
+  std::vector<int32_t> friction_rows;
+  std::vector<T> friction_anchor, friction_normal, friction_half_weight;
   // A k-d tree over body_pos, for callers that evaluate many x against one body (a Newton
   // solve); null: body_collision_energy builds one per call.
   std::shared_ptr<const dataset::NearestVertexIndex> body_index;
@@ -108,6 +118,25 @@ void index_body(PhysicsInput<T>& in) {
       rows_as_points(in.body_pos.data(), 0, static_cast<int64_t>(in.body_pos.size() / 3)));
 }
 
+// Body vertex a's stored normal n and the offset r = x − body_pos[a] of a point x from it.
+struct BodyOffset {
+  Eigen::Vector3d n, r;
+};
+template <class T>
+BodyOffset offset_from_body(const PhysicsInput<T>& in, int32_t a, const Eigen::Vector3d& x) {
+  const Eigen::Vector3d n(in.body_normals[3 * a], in.body_normals[3 * a + 1], in.body_normals[3 * a + 2]);
+  return {n, x - Eigen::Vector3d(in.body_pos[3 * a], in.body_pos[3 * a + 1], in.body_pos[3 * a + 2])};
+}
+
+// Contact friction, as Blender's body friction holds cloth that touches the body: each vertex
+// with mass (not pinned) whose start x0 (N, 3; the body-carried x_t + c, in the input's
+// coordinates) lies within `distance` scene units of the body along its normal, its nearest body
+// vertex within 2 · distance, pays μ m / 2 ‖P (x − x0)‖² for slipping tangentially (P = I − n nᵀ,
+// n the body normal there). The contacts and normals are fixed, so the energy stays smooth.
+// Replaces any contacts set before; μ = 0 or no body: none.
+template <class T>
+void add_contact_friction(PhysicsInput<T>& in, const dataset::Points& start, double mu, double distance);
+
 // Builds the constants from a training sample (its state holds x_t, x_{t−1}, possibly the
 // model's own, self-fed) and its sequence's static data (attributes, rest shapes, pins,
 // translation, gravity, wind).
@@ -126,6 +155,8 @@ PhysicsInput<U> cast_physics_input(const PhysicsInput<T>& in) {
   o.hinge_k_cos0 = cv(in.hinge_k_cos0), o.hinge_k_sin0 = cv(in.hinge_k_sin0), o.hinge_k_sum = in.hinge_k_sum;
   o.faces = in.faces, o.garment_offsets = in.garment_offsets;
   o.body_pos = cv(in.body_pos), o.body_normals = cv(in.body_normals);
+  o.friction_rows = in.friction_rows, o.friction_anchor = cv(in.friction_anchor);
+  o.friction_normal = cv(in.friction_normal), o.friction_half_weight = cv(in.friction_half_weight);
   o.body_index = in.body_index;  // built from float positions either way
   return o;
 }
@@ -135,7 +166,7 @@ template <class T>
 struct PhysicsTerms {
   ad::Var<T> total;  // (1, 1) Σ weight_k term_k / N
   double inertia = 0, drag = 0, stretch = 0, bending = 0, gravity = 0, wind = 0, collision_body = 0,
-         collision_layer = 0;
+         collision_layer = 0, friction = 0;
   int64_t body_contacts = 0, layer_contacts = 0;  // vertices inside a margin
 };
 
@@ -162,6 +193,8 @@ ad::Var<T> body_collision_energy(ad::Tape<T>& tape, const ad::Var<T>& x, const P
 template <class T>
 ad::Var<T> layer_collision_energy(ad::Tape<T>& tape, const ad::Var<T>& x, const PhysicsInput<T>& in, double margin,
                                   double stiffness, int64_t* contacts = nullptr);
+template <class T>
+ad::Var<T> friction_energy(ad::Tape<T>& tape, const ad::Var<T>& x, const PhysicsInput<T>& in);
 
 // The HOOD-style schedule: `start` until step `ramp_start`, then linear to `end` over
 // `ramp_steps` updates (0 = `end` at once after ramp_start).

@@ -21,66 +21,8 @@ double dot(const Vec& a, const Vec& b) {
   return s;
 }
 
-// Body vertex a's normal n (as stored) and the offset r = x − body_pos[a] of a point x from it.
-struct BodyOffset {
-  Eigen::Vector3d n, r;
-};
-
-BodyOffset offset_from_body(const PhysicsInput<double>& in, int32_t a, const Eigen::Vector3d& x) {
-  const Eigen::Vector3d n(in.body_normals[3 * a], in.body_normals[3 * a + 1], in.body_normals[3 * a + 2]);
-  return {n, x - Eigen::Vector3d(in.body_pos[3 * a], in.body_pos[3 * a + 1], in.body_pos[3 * a + 2])};
-}
-
-// The step's contact friction (PhysicsStepSettings::friction): each free vertex that starts within
-// friction_distance of the body along its normal (nearest body vertex within twice that) pays
-// (w/2) |P (x − x0)|² for slipping tangentially away from its start x0 = x_t + c, which moves
-// with the body; P = I − n nᵀ (n the body normal there), w = friction × its mass. The contacts
-// and normals are fixed for the whole step, so the energy stays smooth.
-struct Friction {
-  std::vector<int32_t> rows;
-  std::vector<Eigen::Vector3d> anchor, normal;
-  std::vector<double> weight;
-
-  Eigen::Vector3d tangential(std::size_t k, const Eigen::Vector3d& r) const { return r - normal[k] * normal[k].dot(r); }
-
-  // Adds its energy to the return value and, when `grad` is given, its gradient.
-  double add(const Vec& x, Vec* grad) const {
-    double e = 0;
-    for (std::size_t k = 0; k < rows.size(); ++k) {
-      const int32_t v = rows[k];
-      const Eigen::Vector3d slip =
-          tangential(k, Eigen::Vector3d(x[3 * v], x[3 * v + 1], x[3 * v + 2]) - anchor[k]);
-      e += 0.5 * weight[k] * slip.squaredNorm();
-      if (grad)
-        for (int c = 0; c < 3; ++c) (*grad)[3 * v + c] += weight[k] * slip[c];
-    }
-    return e;
-  }
-};
-
-Friction contact_friction(const PhysicsInput<double>& in, const dataset::Points& start, const std::vector<uint8_t>& fixed,
-                          const PhysicsStepSettings& settings) {
-  Friction f;
-  const int64_t N = start.rows();
-  if (!(settings.friction > 0) || in.body_pos.empty()) return f;
-  const dataset::NearestBody nearest = in.body_index->query(start);
-  const double within = settings.friction_distance, reach = 2 * settings.friction_distance;
-  for (int64_t v = 0; v < N; ++v) {
-    if (fixed[v]) continue;
-    const Eigen::Vector3d x0 = start.row(v).transpose().cast<double>();
-    const auto [n, r] = offset_from_body(in, nearest.index[v], x0);
-    if (r.dot(n) >= within || r.norm() > reach) continue;
-    f.rows.push_back(static_cast<int32_t>(v));
-    f.anchor.push_back(x0);
-    f.normal.push_back(n.normalized());
-    f.weight.push_back(settings.friction * 2 * settings.energy.inertia * in.inertia_weight[v]);
-  }
-  return f;
-}
-
-// N · physics_energy (the energy itself, not per vertex) plus the friction's and, when `grad` is
-// given, its gradient.
-double energy(const PhysicsInput<double>& in, const Vec& x, const PhysicsSettings& s, const Friction& friction, Vec* grad) {
+// N · physics_energy (the energy itself, not per vertex) and, when `grad` is given, its gradient.
+double energy(const PhysicsInput<double>& in, const Vec& x, const PhysicsSettings& s, Vec* grad) {
   const int64_t N = static_cast<int64_t>(x.size() / 3);
   ad::Tape<double> tape;
   const ad::Var<double> X = grad ? tape.leaf(x.data(), N, 3) : tape.constant(x.data(), N, 3);
@@ -91,13 +33,12 @@ double energy(const PhysicsInput<double>& in, const Vec& x, const PhysicsSetting
     grad->assign(X.grad, X.grad + 3 * N);
     for (double& g : *grad) g *= scale;
   }
-  return terms.total.scalar() * scale + friction.add(x, grad);
+  return terms.total.scalar() * scale;
 }
 
 // The approximate Hessian of N · E at x (see the header): per-vertex scalars, spring blocks,
 // body-contact blocks and the friction's tangential blocks.
 struct Hessian {
-  const Friction* friction = nullptr;
   Vec diagonal;                                 // (N) mass and drag
   std::vector<Block> spring;                    // (E)
   std::vector<int32_t> contact_row;             // vertices in contact
@@ -106,6 +47,7 @@ struct Hessian {
   // Bending, Gauss–Newton: k_h u uᵀ with u = ∂θ/∂(x_i, x_j, x_a, x_b), stored as sqrt(k_h) u.
   std::vector<std::array<int32_t, 4>> hinge_rows;
   std::vector<std::array<Eigen::Vector3d, 4>> hinge_u;
+  double friction = 0;  // the friction term's weight
 
   void multiply(const PhysicsInput<double>& in, const Vec& p, Vec& y) const {
     const std::size_t N = diagonal.size();
@@ -130,19 +72,20 @@ struct Hessian {
       const double np = n[0] * p[3 * v] + n[1] * p[3 * v + 1] + n[2] * p[3 * v + 2];
       for (int c = 0; c < 3; ++c) y[3 * v + c] += n[c] * np;
     }
-    for (std::size_t k = 0; k < friction->rows.size(); ++k) {
-      const int32_t v = friction->rows[k];
-      const Eigen::Vector3d t = friction->tangential(k, Eigen::Vector3d(p[3 * v], p[3 * v + 1], p[3 * v + 2]));
-      for (int c = 0; c < 3; ++c) y[3 * v + c] += friction->weight[k] * t[c];
+    for (std::size_t k = 0; k < in.friction_rows.size(); ++k) {
+      const int32_t v = in.friction_rows[k];
+      const Eigen::Vector3d n(&in.friction_normal[3 * k]), q(p[3 * v], p[3 * v + 1], p[3 * v + 2]);
+      const Eigen::Vector3d t = 2 * friction * in.friction_half_weight[k] * (q - n * n.dot(q));
+      for (int c = 0; c < 3; ++c) y[3 * v + c] += t[c];
     }
   }
 };
 
 Hessian approximate_hessian(const PhysicsInput<double>& in, const Vec& x, const PhysicsSettings& s,
-                            const Friction& friction, const std::vector<uint8_t>& fixed) {
+                            const std::vector<uint8_t>& fixed) {
   const int64_t N = static_cast<int64_t>(x.size() / 3);
   Hessian h;
-  h.friction = &friction;
+  h.friction = s.friction;
   h.diagonal.resize(N);
   for (int64_t v = 0; v < N; ++v)
     h.diagonal[v] = 2 * s.inertia * in.inertia_weight[v] + (in.drag_weight.empty() ? 0.0 : 2 * s.drag * in.drag_weight[v]);
@@ -211,8 +154,10 @@ Hessian approximate_hessian(const PhysicsInput<double>& in, const Vec& x, const 
       block[v] += h.contact_normal.back() * h.contact_normal.back().transpose();
     }
   }
-  for (std::size_t k = 0; k < friction.rows.size(); ++k)
-    block[friction.rows[k]] += friction.weight[k] * (Block::Identity() - friction.normal[k] * friction.normal[k].transpose());
+  for (std::size_t k = 0; k < in.friction_rows.size(); ++k) {
+    const Eigen::Vector3d n(&in.friction_normal[3 * k]);
+    block[in.friction_rows[k]] += 2 * s.friction * in.friction_half_weight[k] * (Block::Identity() - n * n.transpose());
+  }
   h.preconditioner.resize(N);
   for (int64_t v = 0; v < N; ++v) {
     const bool usable = !fixed[v] && std::fabs(block[v].determinant()) > 1e-300;
@@ -255,12 +200,12 @@ Vec solve(const PhysicsInput<double>& in, const Hessian& h, const Vec& g, const 
 
 }  // namespace
 
-dataset::Points minimise_step_energy(const PhysicsInput<double>& unindexed, dataset::Points x0, const std::vector<uint8_t>& fixed,
+dataset::Points minimise_step_energy(const PhysicsInput<double>& input, dataset::Points x0, const std::vector<uint8_t>& fixed,
                                      const PhysicsStepSettings& settings, PhysicsStepReport* report) {
-  // Every energy evaluation and Hessian of the solve queries the same body.
-  PhysicsInput<double> copy;
-  if (!unindexed.body_index && !unindexed.body_pos.empty()) copy = unindexed, index_body(copy);
-  const PhysicsInput<double>& in = copy.body_index ? copy : unindexed;
+  // Every energy evaluation and Hessian of the solve queries the same body; the friction holds
+  // the contacts of the step's start.
+  PhysicsInput<double> in = input;
+  if (!in.body_index && !in.body_pos.empty()) index_body(in);
   const int64_t N = x0.rows();
   LAYERSNET_CHECK(static_cast<int64_t>(in.x_t.size()) == 3 * N && static_cast<int64_t>(fixed.size()) == N,
                   "minimise_step_energy: the guess has " << N << " rows, the input " << in.x_t.size() / 3
@@ -269,12 +214,12 @@ dataset::Points minimise_step_energy(const PhysicsInput<double>& unindexed, data
   for (int64_t v = 0; v < N; ++v)
     for (int c = 0; c < 3; ++c) x[3 * v + c] = x0(v, c);
   const PhysicsSettings& s = settings.energy;
-  const Friction friction = contact_friction(in, x0, fixed, settings);
+  add_contact_friction(in, x0, settings.friction, settings.friction_distance);
   Vec g;
-  double e = energy(in, x, s, friction, &g);
+  double e = energy(in, x, s, &g);
   if (report) report->energy_start = e / std::max<int64_t>(N, 1), report->line_search_halvings = 0;
   for (int it = 0; it < settings.newton_iterations; ++it) {
-    const Hessian h = approximate_hessian(in, x, s, friction, fixed);
+    const Hessian h = approximate_hessian(in, x, s, fixed);
     const Vec p = solve(in, h, g, fixed, settings.cg_iterations);
     const double slope = dot(g, p);
     if (!(slope < 0)) break;  // at a minimum, or no descent direction
@@ -285,7 +230,7 @@ dataset::Points minimise_step_energy(const PhysicsInput<double>& unindexed, data
     bool accepted = false;
     for (int halving = 0; halving < 12; ++halving, alpha *= 0.5) {
       for (int64_t k = 0; k < 3 * N; ++k) trial[k] = x[k] + alpha * p[k];
-      e_trial = energy(in, trial, s, friction, nullptr);
+      e_trial = energy(in, trial, s, nullptr);
       if (e_trial <= e + 1e-4 * alpha * slope) {
         accepted = true;
         break;
@@ -294,7 +239,7 @@ dataset::Points minimise_step_energy(const PhysicsInput<double>& unindexed, data
     }
     if (!accepted) break;
     x.swap(trial);
-    e = it + 1 < settings.newton_iterations ? energy(in, x, s, friction, &g) : e_trial;  // the last needs no gradient
+    e = it + 1 < settings.newton_iterations ? energy(in, x, s, &g) : e_trial;  // the last needs no gradient
   }
   if (report) report->energy_end = e / std::max<int64_t>(N, 1);
   for (int64_t v = 0; v < N; ++v)

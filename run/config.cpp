@@ -205,6 +205,7 @@ const Schema& schema() {
     k.add("physics.wind", [](Config& c) -> double& { return c.physics.wind; }, "physics: wind work term weight", weight);
     k.add("physics.collision_body", [](Config& c) -> double& { return c.physics.collision_body; }, "physics: body collision penalty weight", weight);
     k.add("physics.collision_layer", [](Config& c) -> double& { return c.physics.collision_layer; }, "physics: outer-inner layer collision penalty weight", weight);
+    k.add("physics.friction", [](Config& c) -> double& { return c.physics.friction; }, "physics: contact friction term weight (the physics step's model.physics_step_friction within model.physics_step_friction_distance of the body; needs model.velocity_base = \"physics\"; 0 = none)", weight);
     k.add("physics.air_damping", [](Config& c) -> double& { return c.physics.air_damping; }, "physics: the simulator's air damping (Blender default 1)", {0, 1e6, {}});
     k.add("physics.body_margin", [](Config& c) -> double& { return c.physics.body_margin; }, "physics: distance kept from the body (scene units; Blender's push-out distance of the generator's settings)", {0, 10, {}});
     k.add("physics.layer_margin", [](Config& c) -> double& { return c.physics.layer_margin; }, "physics: distance kept between the layers (scene units)", {0, 10, {}});
@@ -432,6 +433,10 @@ void validate_config(const Config& config) {
     throw ConfigError(key("loss.self_fed_truth", 0) + " takes the ground truth away from the self-fed samples, and " +
                       key("physics.weight", 0) + " gives them no energy in its place; set physics.weight > 0 "
                       "(e.g. 0.1) or loss.self_fed_truth > 0");
+  if (config.physics.friction > 0 && m.velocity_base != "physics")
+    throw ConfigError(key("physics.friction", config.physics.friction) + " holds touching cloth where the body carries it, "
+                      "as the physics step does, but " + key("model.velocity_base", "\"" + m.velocity_base + "\"") +
+                      " carries no physics step; set model.velocity_base = \"physics\" or physics.friction = 0");
   if (m.rotation_equivalent && 3 * m.decoder_ret_channels > m.width)
     throw ConfigError(key("model.decoder_ret_channels", m.decoder_ret_channels) + " needs 3 x that many channels, more "
                       "than " + key("model.width", m.width) + "; set model.decoder_ret_channels <= " +

@@ -107,6 +107,9 @@ struct PhysicsConfig {
   bool self_fed_only = true;     // only samples whose input is the model's own (T_n > 0), where the data is silent
   // Terms inside the energy (1 = as Blender's solver weighs them; 0 = term absent).
   double inertia = 1, drag = 1, stretch = 1, bending = 1, gravity = 1, wind = 1, collision_body = 1, collision_layer = 1;
+  // The physics step's contact friction (model.physics_step_friction and _distance) as a term of
+  // the energy, so the loss holds touching cloth as the step does; 0 = none (needs the physics base).
+  double friction = 0;
   double air_damping = 1.0;      // Blender's air_damping the data was made with (its default)
   double body_margin = (0.1 + 0.02) * 8.0 / 9.0;   // scene units: Blender's push-out distance (generator's settings)
   double layer_margin = 2 * 0.06 * 8.0 / 9.0;      // scene units, cloth-cloth

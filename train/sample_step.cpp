@@ -63,7 +63,7 @@ namespace {
 losses::PhysicsSettings physics_settings(const PhysicsConfig& pc, double collision_stiffness) {
   losses::PhysicsSettings s;
   s.inertia = pc.inertia, s.drag = pc.drag, s.stretch = pc.stretch, s.bending = pc.bending, s.gravity = pc.gravity;
-  s.wind = pc.wind, s.collision_body = pc.collision_body, s.collision_layer = pc.collision_layer;
+  s.wind = pc.wind, s.collision_body = pc.collision_body, s.collision_layer = pc.collision_layer, s.friction = pc.friction;
   s.air_damping = pc.air_damping, s.body_margin = pc.body_margin, s.layer_margin = pc.layer_margin;
   s.collision_stiffness = collision_stiffness;
   return s;
@@ -146,7 +146,13 @@ SampleOutcome train_sample(const TrainData& data, Window& window, int t, int sel
   if (score_physics) {
     // Beside the supervised loss: the energy of this prediction given its own (self-fed) state.
     const losses::PhysicsSettings settings = physics_settings(config.physics, physics.collision_stiffness);
-    const losses::PhysicsInput<float> physics_input = losses::physics_input_from_sample(s, *window.info, settings);
+    losses::PhysicsInput<float> physics_input = losses::physics_input_from_sample(s, *window.info, settings);
+    if (config.physics.friction > 0) {
+      // The step's contacts: where the body carries x_t (the sample's body carry, t+1's root frame).
+      const dataset::Points start = s.state.leftCols<3>() + s.body_carry;
+      losses::add_contact_friction(physics_input, start, config.model.physics_step_friction,
+                                   config.model.physics_step_friction_distance);
+    }
     const losses::PhysicsTerms<float> energy =
         losses::physics_energy(tape, ad::slice_cols(tape, pred.vertex, 0, 3), physics_input, settings);
     const ad::Var<float> added = ad::scale(tape, energy.total, static_cast<float>(physics.weight));

@@ -100,10 +100,40 @@ TEST_F(PhysicsGradcheck, LayerCollision) {
   ASSERT_GT(contacts, 0) << "the check must cross the margin somewhere";
   check([](auto& t, const auto& x, const auto& in) { return layer_collision_energy(t, x, in, 0.3, 1e3); });
 }
+// Contacts from x_t (as if the body carried nothing) within 0.6 units of the body.
+TEST_F(PhysicsGradcheck, Friction) {
+  const int64_t N = x_.rows();
+  add_contact_friction(input_, rows_as_points(input_.x_t.data(), 0, N), 50.0, 0.6);
+  ASSERT_GT(input_.friction_rows.size(), 0u) << "the check needs touching vertices";
+  ASSERT_LT(static_cast<int64_t>(input_.friction_rows.size()), N) << "and free ones";
+  check([](auto& t, const auto& x, const auto& in) { return friction_energy(t, x, in); });
+}
 TEST_F(PhysicsGradcheck, Total) {
   PhysicsSettings settings;
   settings.body_margin = 0.5, settings.layer_margin = 0.3;
+  add_contact_friction(input_, rows_as_points(input_.x_t.data(), 0, x_.rows()), 50.0, 0.6);
   check([&](auto& t, const auto& x, const auto& in) { return physics_energy(t, x, in, settings).total; });
+}
+
+// One vertex 0.05 above a body vertex with normal +z, one 3 units away: the touching vertex pays
+// μ m/2 for its tangential slip only, the far one nothing; a pinned vertex is never held; μ = 0
+// holds none.
+TEST(Physics, FrictionHoldsTangentialSlipOfTouchingVertices) {
+  PhysicsInput<double> in;
+  in.body_pos = {0, 0, 0, 1, 0, 0};
+  in.body_normals = {0, 0, 2, 0, 0, 1};  // stored normals need not be unit
+  in.inertia_weight = {0.3, 0.3, 0.0};
+  dataset::Points start(3, 3);
+  start << 0.f, 0.f, 0.05f, 0.f, 0.f, 3.f, 1.f, 0.f, 0.05f;
+  add_contact_friction(in, start, 4.0, 0.1);
+  ASSERT_EQ(in.friction_rows, std::vector<int32_t>{0});
+  EXPECT_DOUBLE_EQ(in.friction_half_weight[0], 4.0 * 0.3);
+  const std::vector<double> x = {0.2, -0.1, 0.5, 7, 7, 7, 5, 5, 5};
+  ad::Tape<double> tape;
+  const double slip2 = 0.2 * 0.2 + 0.1 * 0.1;  // the 0.45 along the normal is free
+  EXPECT_NEAR(friction_energy(tape, tape.constant(x.data(), 3, 3), in).scalar(), 1.2 * slip2, 1e-9);
+  add_contact_friction(in, start, 0.0, 0.1);
+  EXPECT_TRUE(in.friction_rows.empty());
 }
 
 // Two triangles sharing the edge (0, 1): rest flat, the hinge vertex 3 folded up by 90°.

@@ -280,6 +280,19 @@ TEST_F(ConfigTest, BaseInputsNeedACarriedBase) {
   }
 }
 
+// The energy's friction holds cloth where the physics step carries it: no physics base, no friction.
+TEST_F(ConfigTest, PhysicsFrictionNeedsThePhysicsBase) {
+  EXPECT_EQ(load_config({}, {"model.velocity_base=physics", "physics.friction=1"}).physics.friction, 1.0);
+  EXPECT_EQ(load_config({}, {}).physics.friction, 0.0);
+  try {
+    load_config({}, {"physics.friction=1"});
+    ADD_FAILURE() << "no ConfigError";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("physics.friction = 1 (set at --set"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("model.velocity_base = \"inertia\" (default)"), std::string::npos) << e.what();
+  }
+}
+
 TEST_F(ConfigTest, SelfFedTruthOffNeedsThePhysicsEnergy) {
   const Config c = load_config({}, {"loss.self_fed_truth=0", "physics.weight=0.1"});
   EXPECT_EQ(c.loss.self_fed_truth, 0.0);

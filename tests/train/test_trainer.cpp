@@ -494,6 +494,31 @@ TEST_F(TrainerTest, PhysicsEnergyJoinsTheLossOnSelfFedSamplesOnly) {
   }
 }
 
+// physics.friction: the energy gains the physics step's contact friction (here within 10 units,
+// so the tiny scene touches): the physics term grows by it, the rest of the loss stays, and the
+// gradient changes.
+TEST_F(TrainerTest, PhysicsFrictionJoinsTheEnergy) {
+  const std::string data = make_dataset(1, 1, 10);
+  const std::vector<std::string> common = {"train.threads=1", "physics.weight=0.5", "model.velocity_base=physics",
+                                           "model.physics_step_friction_distance=10"};
+  auto with = [&](const std::string& extra) {
+    std::vector<std::string> o = common;
+    o.push_back(extra);
+    return tiny_config(data, o);
+  };
+  const Config off = with("physics.friction=0"), on = with("physics.friction=1");
+  SampleProbe probe(off);
+  const PhysicsStep step = physics_step_at(on.physics, 0);
+  const auto [loss_off, grad_off] = probe.run(off, 2, step);
+  const auto [loss_on, grad_on] = probe.run(on, 2, step);
+  EXPECT_GT(loss_on.physics, loss_off.physics) << "no contact was held";
+  EXPECT_EQ(loss_on.vertex, loss_off.vertex);
+  EXPECT_NEAR(loss_on.total - loss_off.total, 0.5 * (loss_on.physics - loss_off.physics), 1e-5 * std::abs(loss_on.total));
+  double diff = 0;
+  for (std::size_t i = 0; i < grad_on.size(); ++i) diff += std::abs(grad_on[i] - grad_off[i]);
+  EXPECT_GT(diff, 0.0) << "the friction did not reach the gradient";
+}
+
 // loss.self_fed_truth scales the terms that compare with the ground-truth cloth on self-fed
 // samples only: a sample fed the data keeps every term, a self-fed one with weight 0 is scored by
 // the collision terms and the physics energy alone.
