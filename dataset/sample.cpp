@@ -3,6 +3,8 @@
 
 #include "dataset/wind.h"
 
+#include <Eigen/Geometry>
+
 #include <algorithm>
 #include <map>
 
@@ -73,6 +75,57 @@ void build_vertex_neighbours(const SequenceInfo& info, SequenceStructure& s) {
   }
 }
 
+// Unit normal of the triangle (p, q, r) as wound (zero when degenerate).
+Eigen::Vector3d unit_normal(const Eigen::Vector3d& p, const Eigen::Vector3d& q, const Eigen::Vector3d& r) {
+  const Eigen::Vector3d n = (q - p).cross(r - p);
+  const double len = n.norm();
+  return len > 0 ? Eigen::Vector3d(n / len) : Eigen::Vector3d::Zero();
+}
+
+// SequenceStructure::edges and hinges; needs vertex_neighbours (the rest lengths without a template).
+void build_edges_and_hinges(const SequenceInfo& info, SequenceStructure& s) {
+  struct Side {
+    int32_t p, q, opposite;  // directed edge p -> q of a face as wound, and its third vertex
+  };
+  const Csr& csr = s.vertex_neighbours;
+  auto neighbour_rest = [&](int32_t a, int32_t b) {
+    for (int32_t k = csr.offsets[a]; k < csr.offsets[a + 1]; ++k)
+      if (csr.items[k] == b) return static_cast<double>(s.neighbour_rest[k]);
+    return 0.0;
+  };
+  for (int g = 0; g < info.num_garments(); ++g) {
+    const GarmentMesh& mesh = info.garments[g];
+    const int32_t o = s.vertex_offsets[g];
+    const bool has_rest = mesh.rest.rows() == mesh.num_vertices;
+    auto rest = [&](int32_t v) { return Eigen::Vector3d(mesh.rest.row(v).transpose().cast<double>()); };
+    std::map<std::pair<int32_t, int32_t>, std::vector<Side>> sides;
+    for (int f = 0; f < mesh.num_faces(); ++f)
+      for (int c = 0; c < 3; ++c) {
+        const int32_t a = mesh.faces(f, c), b = mesh.faces(f, (c + 1) % 3), opposite = mesh.faces(f, (c + 2) % 3);
+        sides[{std::min(a, b), std::max(a, b)}].push_back({a, b, opposite});
+      }
+    for (const auto& [key, list] : sides) {
+      const auto [a, b] = key;
+      const double length = has_rest ? (rest(a) - rest(b)).norm() : neighbour_rest(o + a, o + b);
+      s.edges.push_back({o + a, o + b, g, length});
+      if (list.size() != 2) continue;  // boundary (or non-manifold) edge: no hinge
+      const Side& A = list[0];
+      const Side& B = list[1];
+      double cos0 = 1.0, sin0 = 0.0;
+      if (has_rest) {
+        const Eigen::Vector3d nA = unit_normal(rest(A.p), rest(A.q), rest(A.opposite));
+        const Eigen::Vector3d nB = unit_normal(rest(B.p), rest(B.q), rest(B.opposite));
+        Eigen::Vector3d e = rest(A.p) - rest(A.q);
+        e = e.norm() > 0 ? Eigen::Vector3d(e.normalized()) : e;
+        cos0 = nA.dot(nB), sin0 = nA.cross(nB).dot(e);
+      } else if (A.p == B.p) {
+        cos0 = -1.0;  // inconsistent winding: flat means opposite normals
+      }
+      s.hinges.push_back({o + A.p, o + A.q, o + A.opposite, o + B.p, o + B.q, o + B.opposite, g, length, cos0, sin0});
+    }
+  }
+}
+
 }  // namespace
 
 Eigen::Matrix<float, 1, 5> normalised_attributes(const GarmentAttributes& g, float body_friction) {
@@ -107,6 +160,7 @@ std::shared_ptr<const SequenceStructure> build_structure(const SequenceInfo& inf
   s->attributes.resize(static_cast<Eigen::Index>(rows.size()), 5);
   for (size_t i = 0; i < rows.size(); ++i) s->attributes.row(static_cast<Eigen::Index>(i)) = rows[i];
   build_vertex_neighbours(info, *s);
+  build_edges_and_hinges(info, *s);
   s->body = body_topology(info.body_faces, info.num_body_vertices);
   return s;
 }

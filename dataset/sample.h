@@ -74,6 +74,21 @@ struct SequenceStructure {
   std::vector<float> neighbour_rest;      // aligned with vertex_neighbours.items
   BodyTopology body;                      // the body mesh's vertex neighbours (body_skin.h)
   std::vector<int32_t> faces;             // (F·3) every garment's triangles, ids into the N vertices
+  // Every garment edge once, and a hinge at every edge two faces share: the cloth's springs and
+  // bending (losses/physics.h). Rest lengths (scene units) and angles come from the /rest
+  // template in double; without one, from the edge's neighbour_rest, and the rest angle is flat.
+  struct Edge {
+    int32_t i, j, garment;  // i < j, global vertex ids
+    double rest_length;
+  };
+  // Face A = (i, j, a) as wound, face B = (p, q, b) as wound, {p, q} = {i, j}; cos0 and sin0 of
+  // the rest dihedral angle (sin about the unit i − j).
+  struct Hinge {
+    int32_t i, j, a, p, q, b, garment;
+    double rest_length, cos0, sin0;
+  };
+  std::vector<Edge> edges;    // per garment, in ascending (i, j)
+  std::vector<Hinge> hinges;  // in the order of their edges
   int num_vertices() const { return all.num_vertices; }
   int num_patches() const { return all.num_patches; }
 };

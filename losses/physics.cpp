@@ -7,12 +7,9 @@
 #include "dataset/wind.h"
 #include "model/tape_helpers.h"
 
-#include <Eigen/Geometry>
 
 #include <algorithm>
 #include <cmath>
-#include <map>
-#include <utility>
 
 namespace layersnet::losses {
 namespace {
@@ -21,13 +18,6 @@ using ad::Var;
 
 // Blender's vertex-group scaled setting: base + w·|max − base| (the absolute value is Blender's).
 double group_scaled(double base, double max, double weight) { return base + weight * std::fabs(max - base); }
-
-// Unit normal of the triangle (p, q, r) as wound, in double.
-Eigen::Vector3d unit_normal(const Eigen::Vector3d& p, const Eigen::Vector3d& q, const Eigen::Vector3d& r) {
-  const Eigen::Vector3d n = (q - p).cross(r - p);
-  const double len = n.norm();
-  return len > 0 ? Eigen::Vector3d(n / len) : Eigen::Vector3d::Zero();
-}
 
 template <class T>
 Var<T> column(ad::Tape<T>& tape, const std::vector<T>& v, int64_t cols) {
@@ -101,23 +91,6 @@ PhysicsInput<float> physics_input_from_sample(const dataset::TrainingSample& s, 
       for (int c = 0; c < 3; ++c) in.external_force[3 * gv + c] = static_cast<float>(mesh.attributes.mass * g[c]);
     }
   }
-  // Rest shape per garment (scene units, double): the template, else x_t (then rest lengths come
-  // from the sample structure's UV lengths and rest angles are flat).
-  std::vector<std::vector<Eigen::Vector3d>> rest(G);
-  std::vector<bool> has_rest(G);
-  for (int k = 0; k < G; ++k) {
-    const auto& mesh = info.garments[k];
-    has_rest[k] = mesh.rest.rows() == mesh.num_vertices;
-    for (int v = 0; v < mesh.num_vertices; ++v)
-      rest[k].push_back(has_rest[k] ? mesh.rest.row(v).transpose().cast<double>()
-                                    : Eigen::Vector3d(in.x_t[3 * (offsets[k] + v)], in.x_t[3 * (offsets[k] + v) + 1],
-                                                      in.x_t[3 * (offsets[k] + v) + 2]));
-  }
-  // Structural springs: every mesh edge with its rest length; the average over the whole cloth
-  // object (all layers: the generator makes one) sets Blender's stiffness scale.
-  struct Side {
-    int32_t p, q, opposite;  // directed edge p -> q of a face as wound, and its third vertex
-  };
   // The stiffness Blender simulated each layer with (SequenceInfo::stiffness_per_layer).
   std::vector<double> layer_tension(G), layer_bending(G);
   for (int k = 0; k < G; ++k) {
@@ -131,57 +104,24 @@ PhysicsInput<float> physics_input_from_sample(const dataset::TrainingSample& s, 
                            ? own.bending_stiffness
                            : group_scaled(inner.bending_stiffness, info.garments.back().attributes.bending_stiffness, outer_group);
   }
-  std::vector<double> edge_rest_d, edge_tension;
-  struct HingeD {
-    int32_t i, j, a, p, q, b;
-    double rest_length, cos0, sin0, bending;
-  };
-  std::vector<HingeD> hinges;
-  // Rest length of a mesh edge as the sample structure holds it (template, else UV × scale).
-  const auto& csr = s.structure->vertex_neighbours;
-  auto structure_rest = [&](int32_t a, int32_t b) {
-    for (int32_t k = csr.offsets[a]; k < csr.offsets[a + 1]; ++k)
-      if (csr.items[k] == b) return static_cast<double>(s.structure->neighbour_rest[k]);
-    return 0.0;
-  };
-  for (int k = 0; k < G; ++k) {
-    const auto& mesh = info.garments[k];
-    std::map<std::pair<int32_t, int32_t>, std::vector<Side>> sides;
-    for (int f = 0; f < mesh.num_faces(); ++f)
-      for (int c = 0; c < 3; ++c) {
-        const int32_t a = mesh.faces(f, c), b = mesh.faces(f, (c + 1) % 3), o = mesh.faces(f, (c + 2) % 3);
-        sides[{std::min(a, b), std::max(a, b)}].push_back({a, b, o});
-      }
-    for (const auto& [key, list] : sides) {
-      const auto [a, b] = key;
-      double len = (rest[k][a] - rest[k][b]).norm();
-      if (!has_rest[k]) len = structure_rest(offsets[k] + a, offsets[k] + b);  // UV length × scale
-      in.edge_i.push_back(offsets[k] + a), in.edge_j.push_back(offsets[k] + b);
-      edge_rest_d.push_back(len), edge_tension.push_back(layer_tension[k]);
-      if (list.size() != 2) continue;  // boundary (or non-manifold) edge: no bending spring
-      const Side& A = list[0];
-      const Side& Bs = list[1];
-      const Eigen::Vector3d nA = unit_normal(rest[k][A.p], rest[k][A.q], rest[k][A.opposite]);
-      const Eigen::Vector3d nB = unit_normal(rest[k][Bs.p], rest[k][Bs.q], rest[k][Bs.opposite]);
-      Eigen::Vector3d e = rest[k][A.p] - rest[k][A.q];
-      e = e.norm() > 0 ? Eigen::Vector3d(e.normalized()) : e;
-      double c0 = has_rest[k] ? nA.dot(nB) : 1.0, s0 = has_rest[k] ? nA.cross(nB).dot(e) : 0.0;
-      if (!has_rest[k] && A.p == Bs.p) c0 = -1.0;  // inconsistent winding: flat means opposite normals
-      const int32_t o = offsets[k];
-      hinges.push_back({o + A.p, o + A.q, o + A.opposite, o + Bs.p, o + Bs.q, o + Bs.opposite, len, c0, s0, layer_bending[k]});
-    }
-  }
+  // Structural springs: every mesh edge; the average rest length over the whole cloth object (all
+  // layers: the generator makes one) sets Blender's stiffness scale.
+  const auto& edges = s.structure->edges;
   double avg = 0;
-  for (double l : edge_rest_d) avg += l;
-  avg = edge_rest_d.empty() ? 1.0 : avg / static_cast<double>(edge_rest_d.size());
+  for (const auto& e : edges) avg += e.rest_length;
+  avg = edges.empty() ? 1.0 : avg / static_cast<double>(edges.size());
   constexpr double kFltEpsilon = 1.1920929e-7;  // Blender adds FLT_EPSILON to the average
-  for (std::size_t e = 0; e < edge_rest_d.size(); ++e) {
-    const double k = edge_tension[e] / (avg + kFltEpsilon);
-    in.edge_rest.push_back(static_cast<float>(edge_rest_d[e]));
-    in.edge_half_k.push_back(static_cast<float>(k / 2));
+  const std::size_t E = edges.size(), H = s.structure->hinges.size();
+  in.edge_i.reserve(E), in.edge_j.reserve(E), in.edge_rest.reserve(E), in.edge_half_k.reserve(E);
+  for (const auto& e : edges) {
+    in.edge_i.push_back(e.i), in.edge_j.push_back(e.j);
+    in.edge_rest.push_back(static_cast<float>(e.rest_length));
+    in.edge_half_k.push_back(static_cast<float>(layer_tension[e.garment] / (avg + kFltEpsilon) / 2));
   }
-  for (const HingeD& h : hinges) {
-    const double k = h.bending * h.rest_length * 0.1;
+  for (auto* v : {&in.hinge_i, &in.hinge_j, &in.hinge_a, &in.hinge_p, &in.hinge_q, &in.hinge_b}) v->reserve(H);
+  in.hinge_k_cos0.reserve(H), in.hinge_k_sin0.reserve(H);
+  for (const auto& h : s.structure->hinges) {
+    const double k = layer_bending[h.garment] * h.rest_length * 0.1;
     in.hinge_i.push_back(h.i), in.hinge_j.push_back(h.j), in.hinge_a.push_back(h.a);
     in.hinge_p.push_back(h.p), in.hinge_q.push_back(h.q), in.hinge_b.push_back(h.b);
     in.hinge_k_cos0.push_back(static_cast<float>(k * h.cos0));
