@@ -24,7 +24,10 @@ double dot(const Vec& a, const Vec& b) {
 // N · physics_energy (the energy itself, not per vertex) and, when `grad` is given, its gradient.
 double energy(const PhysicsInput<double>& in, const Vec& x, const PhysicsSettings& s, Vec* grad) {
   const int64_t N = static_cast<int64_t>(x.size() / 3);
-  ad::Tape<double> tape;
+  // One tape per thread, reset for each evaluation: its arena keeps its pages from one evaluation
+  // and one frame to the next instead of the kernel zeroing fresh ones.
+  thread_local ad::Tape<double> tape;
+  tape.reset();
   const ad::Var<double> X = grad ? tape.leaf(x.data(), N, 3) : tape.constant(x.data(), N, 3);
   const PhysicsTerms<double> terms = physics_energy(tape, X, in, s);
   const double scale = static_cast<double>(std::max<int64_t>(N, 1));
