@@ -323,6 +323,7 @@ void add_physics_step(dataset::TrainingSample& sample, const dataset::SequenceIn
   if (model.velocity_base != "physics") return;
   PhysicsStepSettings settings;
   settings.newton_iterations = model.physics_step_iterations;
+  settings.cg_iterations = model.physics_step_cg_iterations;
   settings.substeps = model.physics_step_substeps;
   settings.inertia = model.physics_step_inertia;
   settings.energy.collision_stiffness = model.physics_step_collision_stiffness;

@@ -46,6 +46,9 @@ struct ModelConfig {
   // the velocity base"): two iterations, not the minimum, one step per frame, Blender's inertia,
   // no layer term.
   int physics_step_iterations = 2;
+  // Conjugate-gradient iterations per Newton iteration (fewer stop the linear solve short: a
+  // speed-accuracy trade measured in docs/decisions.md, "Fewer conjugate-gradient iterations").
+  int physics_step_cg_iterations = 60;
   int physics_step_substeps = 1;
   std::string physics_step_inertia = "world";
   double physics_step_collision_stiffness = 1e4;
