@@ -254,5 +254,26 @@ TEST(PhysicsStep, ModelInputTakesTheStep) {
   EXPECT_EQ(plain.physics_step.rows(), 0);
 }
 
+// The model's step settings reach the step: one conjugate-gradient iteration stops the solve
+// short of the default's, and the result equals physics_step_displacement with the same settings.
+TEST(PhysicsStep, TakesTheModelsConjugateGradientIterations) {
+  const dataset::Sequence seq = two_layers_with_wind();
+  ModelConfig m;
+  m.velocity_base = "physics";
+  auto full = sample_for(seq, 5, m);
+  add_physics_step(full, seq.info, m);
+  m.physics_step_cg_iterations = 1;
+  auto short_solve = sample_for(seq, 5, m);
+  add_physics_step(short_solve, seq.info, m);
+  EXPECT_GT((full.physics_step - short_solve.physics_step).cwiseAbs().maxCoeff(), 1e-4f);
+  PhysicsStepSettings settings;
+  settings.cg_iterations = 1;
+  settings.friction = m.physics_step_friction;
+  settings.friction_distance = m.physics_step_friction_distance;
+  settings.energy.collision_stiffness = m.physics_step_collision_stiffness;
+  settings.energy.collision_layer = 0;
+  EXPECT_EQ((physics_step_displacement(short_solve, seq.info, settings) - short_solve.physics_step).cwiseAbs().maxCoeff(), 0.f);
+}
+
 }  // namespace
 }  // namespace layersnet::losses
