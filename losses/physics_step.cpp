@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <utility>
 
 namespace layersnet::losses {
 namespace {
@@ -203,11 +204,10 @@ Vec solve(const PhysicsInput<double>& in, const Hessian& h, const Vec& g, const 
 
 }  // namespace
 
-dataset::Points minimise_step_energy(const PhysicsInput<double>& input, dataset::Points x0, const std::vector<uint8_t>& fixed,
+dataset::Points minimise_step_energy(PhysicsInput<double> in, dataset::Points x0, const std::vector<uint8_t>& fixed,
                                      const PhysicsStepSettings& settings, PhysicsStepReport* report) {
   // Every energy evaluation and Hessian of the solve queries the same body; the friction holds
   // the contacts of the step's start.
-  PhysicsInput<double> in = input;
   if (!in.body_index && !in.body_pos.empty()) index_body(in);
   const int64_t N = x0.rows();
   LAYERSNET_CHECK(static_cast<int64_t>(in.x_t.size()) == 3 * N && static_cast<int64_t>(fixed.size()) == N,
@@ -276,7 +276,7 @@ dataset::Points physics_step_displacement(const dataset::TrainingSample& s, cons
   }
   dataset::Points x;
   if (settings.substeps == 1) {
-    x = minimise_step_energy(in, guess, fixed, settings, report);
+    x = minimise_step_energy(std::move(in), guess, fixed, settings, report);
   } else {
     // S implicit steps of h = 1/S frame. Each substep's energy times h² keeps the inertia term
     // (target x + h v) and scales every force's potential by h² and the drag's (c/2h)‖y − x‖² to
@@ -319,8 +319,7 @@ dataset::Points physics_step_displacement(const dataset::TrainingSample& s, cons
   return displacement;
 }
 
-void add_physics_step(dataset::TrainingSample& sample, const dataset::SequenceInfo& info, const ModelConfig& model) {
-  if (model.velocity_base != "physics") return;
+PhysicsStepSettings physics_step_settings(const ModelConfig& model) {
   PhysicsStepSettings settings;
   settings.newton_iterations = model.physics_step_iterations;
   settings.cg_iterations = model.physics_step_cg_iterations;
@@ -330,7 +329,12 @@ void add_physics_step(dataset::TrainingSample& sample, const dataset::SequenceIn
   settings.energy.collision_layer = model.physics_step_layer_collision ? 1.0 : 0.0;
   settings.friction = model.physics_step_friction;
   settings.friction_distance = model.physics_step_friction_distance;
-  sample.physics_step = physics_step_displacement(sample, info, settings);
+  return settings;
+}
+
+void add_physics_step(dataset::TrainingSample& sample, const dataset::SequenceInfo& info, const ModelConfig& model) {
+  if (model.velocity_base != "physics") return;
+  sample.physics_step = physics_step_displacement(sample, info, physics_step_settings(model));
 }
 
 }  // namespace layersnet::losses

@@ -49,7 +49,7 @@ struct PhysicsStepReport {
 
 // The step from x (N, 3) given `in` (x_t, x_{t−1} as the inertia target wants them), in the
 // physics input's coordinates. `fixed` (N) marks rows that keep x's value.
-dataset::Points minimise_step_energy(const PhysicsInput<double>& in, dataset::Points x, const std::vector<uint8_t>& fixed,
+dataset::Points minimise_step_energy(PhysicsInput<double> in, dataset::Points x, const std::vector<uint8_t>& fixed,
                                      const PhysicsStepSettings& settings, PhysicsStepReport* report = nullptr);
 
 // The sample's physics step as a root-relative displacement of x_t (units/frame, (N, 3)): what
@@ -58,8 +58,12 @@ dataset::Points minimise_step_energy(const PhysicsInput<double>& in, dataset::Po
 dataset::Points physics_step_displacement(const dataset::TrainingSample& sample, const dataset::SequenceInfo& info,
                                           const PhysicsStepSettings& settings, PhysicsStepReport* report = nullptr);
 
-// Fills sample.physics_step when the model's velocity base is "physics" (Blender's constants,
-// the model's iterations, inertia target, contact stiffness and layer term); any other base
+// The step a model takes (Blender's constants, the model's iterations, inertia target, contact
+// stiffness, layer term and friction).
+PhysicsStepSettings physics_step_settings(const ModelConfig& model);
+
+// Fills sample.physics_step with the step of physics_step_settings(model) when the model's
+// velocity base is "physics"; any other base
 // leaves the sample as it is. Every sample a model sees, in training and in a rollout, passes
 // through here.
 void add_physics_step(dataset::TrainingSample& sample, const dataset::SequenceInfo& info, const ModelConfig& model);

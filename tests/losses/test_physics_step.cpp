@@ -266,12 +266,8 @@ TEST(PhysicsStep, TakesTheModelsConjugateGradientIterations) {
   auto short_solve = sample_for(seq, 5, m);
   add_physics_step(short_solve, seq.info, m);
   EXPECT_GT((full.physics_step - short_solve.physics_step).cwiseAbs().maxCoeff(), 1e-4f);
-  PhysicsStepSettings settings;
-  settings.cg_iterations = 1;
-  settings.friction = m.physics_step_friction;
-  settings.friction_distance = m.physics_step_friction_distance;
-  settings.energy.collision_stiffness = m.physics_step_collision_stiffness;
-  settings.energy.collision_layer = 0;
+  const PhysicsStepSettings settings = physics_step_settings(m);
+  ASSERT_EQ(settings.cg_iterations, 1);
   EXPECT_EQ((physics_step_displacement(short_solve, seq.info, settings) - short_solve.physics_step).cwiseAbs().maxCoeff(), 0.f);
 }
 
