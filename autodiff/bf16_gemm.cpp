@@ -5,25 +5,111 @@
 
 #include <algorithm>
 #include <bit>
+#include <cstdlib>
 #include <cstring>
 #include <map>
 #include <mutex>
 #include <stdexcept>
+#include <string>
 #include <tuple>
 
-#ifdef __AVX512BF16__
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
+#define LAYERSNET_AMX_KERNEL 1
+#include <cpuid.h>
+#include <sys/syscall.h>
+#include <unistd.h>
+#endif
+#if defined(__AVX512BF16__) || defined(LAYERSNET_AMX_KERNEL)
 #include <immintrin.h>
 #endif
 
 namespace layersnet::ad {
 
-bool bf16_available() {
-#ifdef __AVX512BF16__
-  return true;
+namespace {
+
+#ifdef LAYERSNET_AMX_KERNEL
+// The CPU has AMX-TILE, AMX-BF16, AVX-512 F/BW/BF16, the OS saves their state, and Linux
+// lets this process use the tile data (it must be asked for once per process).
+bool detect_amx() {
+  unsigned a = 0, b = 0, c = 0, d = 0;
+  if (!__get_cpuid_count(7, 0, &a, &b, &c, &d)) return false;
+  const bool amx = ((d >> 24) & 1u) && ((d >> 22) & 1u);        // AMX-TILE, AMX-BF16
+  const bool avx512 = ((b >> 16) & 1u) && ((b >> 30) & 1u);     // AVX512F, AVX512BW
+  if (!amx || !avx512 || a < 1) return false;
+  if (!__get_cpuid_count(7, 1, &a, &b, &c, &d) || !((a >> 5) & 1u)) return false;  // AVX512-BF16
+  if (!__get_cpuid(1, &a, &b, &c, &d) || !((c >> 27) & 1u)) return false;           // OSXSAVE
+  unsigned lo = 0, hi = 0;
+  __asm__ volatile("xgetbv" : "=a"(lo), "=d"(hi) : "c"(0));
+  const unsigned wanted = (1u << 1) | (1u << 2) | (7u << 5) | (3u << 17);  // SSE, AVX, AVX-512, tiles
+  if ((lo & wanted) != wanted) return false;
+  constexpr long kArchReqXcompPerm = 0x1023, kXfeatureXtiledata = 18;
+  return syscall(SYS_arch_prctl, kArchReqXcompPerm, kXfeatureXtiledata) == 0;
+}
+#endif
+
+bool amx_usable() {
+#ifdef LAYERSNET_AMX_KERNEL
+  static const bool usable = detect_amx();
+  return usable;
 #else
   return false;
 #endif
 }
+
+Bf16Kernel choose_kernel() {
+  const char* env = std::getenv("LAYERSNET_BF16_KERNEL");
+  if (env && *env) {
+    const std::string name = env;
+    Bf16Kernel k;
+    if (name == "amx-bf16" || name == "amx") k = Bf16Kernel::kAmx;
+    else if (name == "avx512-bf16" || name == "avx512") k = Bf16Kernel::kAvx512;
+    else if (name == "scalar") k = Bf16Kernel::kScalar;
+    else
+      throw std::runtime_error("LAYERSNET_BF16_KERNEL='" + name +
+                               "' is unknown; use amx-bf16, avx512-bf16 or scalar, or unset it for the fastest");
+    if (!bf16_kernel_available(k))
+      throw std::runtime_error("LAYERSNET_BF16_KERNEL='" + name + "' cannot run on this CPU or build; unset it (the " +
+                               "fastest available is used) or name another");
+    return k;
+  }
+  if (bf16_kernel_available(Bf16Kernel::kAmx)) return Bf16Kernel::kAmx;
+  if (bf16_kernel_available(Bf16Kernel::kAvx512)) return Bf16Kernel::kAvx512;
+  return Bf16Kernel::kScalar;
+}
+
+}  // namespace
+
+bool bf16_kernel_available(Bf16Kernel kernel) {
+  switch (kernel) {
+    case Bf16Kernel::kAmx: return amx_usable();
+    case Bf16Kernel::kAvx512:
+#ifdef __AVX512BF16__
+      return true;
+#else
+      return false;
+#endif
+    case Bf16Kernel::kScalar: return true;
+  }
+  return false;
+}
+
+Bf16Kernel bf16_kernel() {
+  static const Bf16Kernel kernel = choose_kernel();
+  return kernel;
+}
+
+const char* bf16_kernel_name(Bf16Kernel kernel) {
+  switch (kernel) {
+    case Bf16Kernel::kAmx: return "amx-bf16";
+    case Bf16Kernel::kAvx512: return "avx512-bf16";
+    case Bf16Kernel::kScalar: return "scalar reference";
+  }
+  return "?";
+}
+
+const char* bf16_kernel_name() { return bf16_kernel_name(bf16_kernel()); }
+
+bool bf16_available() { return bf16_kernel() != Bf16Kernel::kScalar; }
 
 const char* matmul_precision_name(MatmulPrecision p) {
   return p == MatmulPrecision::kBFloat16 ? "bf16" : "float32";
@@ -34,8 +120,6 @@ MatmulPrecision parse_matmul_precision(const std::string& text) {
   if (text == "bf16" || text == "bfloat16") return MatmulPrecision::kBFloat16;
   throw std::invalid_argument("matmul precision '" + text + "' is unknown; use float32 or bf16");
 }
-
-const char* bf16_kernel_name() { return bf16_available() ? "avx512-bf16" : "scalar reference"; }
 
 uint16_t float_to_bf16(float f) {
   const uint32_t u = std::bit_cast<uint32_t>(f);
@@ -62,6 +146,12 @@ std::shared_ptr<const Bf16PackedWeights> bf16_pack_weights(const float* W, int64
     for (int64_t c = 0; c < cin; ++c) dst[(c / 2) * 32 + (c % 2)] = float_to_bf16(W[r * cin + c]);
   }
   w->source.assign(W, W + cout * cin);
+  if (bf16_kernel_available(Bf16Kernel::kAmx)) {
+    w->tile_pairs = (w->pairs + 15) / 16 * 16;
+    w->tiles.assign(static_cast<std::size_t>(w->groups * w->tile_pairs * 32), uint16_t{0});
+    for (int64_t g = 0; g < w->groups; ++g)
+      std::copy_n(w->data.data() + g * w->pairs * 32, w->pairs * 32, w->tiles.data() + g * w->tile_pairs * 32);
+  }
   return w;
 }
 
@@ -289,15 +379,173 @@ void forward_avx512(const float* x, int64_t n, int64_t cin, const Bf16PackedWeig
 }  // namespace
 #endif
 
-void bf16_linear_forward(const float* x, int64_t n, int64_t cin, const Bf16PackedWeights& w, const float* b,
-                         bool relu, float* out) {
-  check_shapes("bf16_linear_forward", n, cin, w);
-  if (n == 0) return;
-#ifdef __AVX512BF16__
-  forward_avx512(x, n, cin, w, b, relu, out);
-#else
-  bf16_linear_forward_scalar(x, n, cin, w, b, relu, out);
+
+// ---- AMX kernel ---------------------------------------------------------------------------
+
+#ifdef LAYERSNET_AMX_KERNEL
+namespace {
+
+#define LAYERSNET_AMX_TARGET __attribute__((target("amx-tile,amx-bf16,avx512f,avx512bw,avx512bf16")))
+
+// Tiles: 0-3 outputs (16 rows x 16 floats), 4-5 rows of x (16 rows x 16 pairs), 6-7 weights
+// (16 pairs x 16 columns, VNNI). A block of 32 rows x 32 columns takes 4 products per 32 channels.
+constexpr int64_t kAmxRows = 32;
+
+struct alignas(64) TileConfig {
+  uint8_t palette = 1, start_row = 0;
+  uint8_t reserved[14] = {};
+  uint16_t colsb[16] = {};
+  uint8_t rows[16] = {};
+};
+
+LAYERSNET_AMX_TARGET void load_tile_config() {
+  TileConfig cfg;
+  for (int t = 0; t < 8; ++t) {
+    cfg.colsb[t] = 64;
+    cfg.rows[t] = 16;
+  }
+  __asm__ volatile("" ::: "memory");
+  _tile_loadconfig(&cfg);
+}
+
+// Rows [0, m) of x (m <= 32) as bf16 pairs, xb: (32, tile_pairs) zero past Cin and past m.
+LAYERSNET_AMX_TARGET void convert_block(const float* x, int64_t m, int64_t cin, int64_t tile_pairs, uint32_t* xb) {
+  std::memset(xb, 0, sizeof(uint32_t) * static_cast<std::size_t>(kAmxRows * tile_pairs));
+  for (int64_t i = 0; i < m; ++i) {
+    const float* xi = x + i * cin;
+    uint16_t* dst = reinterpret_cast<uint16_t*>(xb + i * tile_pairs);
+    for (int64_t c = 0; c < cin; c += 32) {
+      const int64_t rem = cin - c;
+      const __mmask16 lo_mask = rem >= 16 ? __mmask16(0xFFFF) : static_cast<__mmask16>((1u << rem) - 1u);
+      const __mmask16 hi_mask =
+          rem >= 32 ? __mmask16(0xFFFF) : rem > 16 ? static_cast<__mmask16>((1u << (rem - 16)) - 1u) : __mmask16(0);
+      const __m512 lo = _mm512_maskz_loadu_ps(lo_mask, xi + c);
+      const __m512 hi = _mm512_maskz_loadu_ps(hi_mask, xi + c + 16);
+      const __m512bh v = _mm512_cvtne2ps_pbh(hi, lo);  // the same rounding as float_to_bf16
+      _mm512_storeu_si512(dst + c, reinterpret_cast<const __m512i&>(v));  // within the padded row
+    }
+  }
+  __asm__ volatile("" ::: "memory");  // the tile loads below read xb
+}
+
+// Output rows [r0, r0 + 16 * (1 + TWO_ROWS)) x column groups g, g + TWO_COLS of the block.
+// bias_tiles: per group, 16 rows of its 16 biases (the accumulators start there, as in the
+// other kernels). The products are stored to `scratch` (32 x 32 floats) and copied out.
+template <bool TWO_ROWS, bool TWO_COLS>
+LAYERSNET_AMX_TARGET void amx_block(const uint32_t* xb, int64_t tile_pairs, const uint16_t* wg, const float* bias_g,
+                                    float* scratch) {
+  const long x_stride = static_cast<long>(tile_pairs * 4);
+  const uint16_t* wg1 = wg + tile_pairs * 32;
+  _tile_loadd(0, bias_g, 64);
+  if constexpr (TWO_ROWS) _tile_loadd(1, bias_g, 64);
+  if constexpr (TWO_COLS) {
+    _tile_loadd(2, bias_g + 256, 64);
+    if constexpr (TWO_ROWS) _tile_loadd(3, bias_g + 256, 64);
+  }
+  for (int64_t kb = 0; kb < tile_pairs; kb += 16) {
+    _tile_loadd(4, xb + kb, x_stride);
+    if constexpr (TWO_ROWS) _tile_loadd(5, xb + 16 * tile_pairs + kb, x_stride);
+    _tile_loadd(6, wg + kb * 32, 64);
+    _tile_dpbf16ps(0, 4, 6);
+    if constexpr (TWO_ROWS) _tile_dpbf16ps(1, 5, 6);
+    if constexpr (TWO_COLS) {
+      _tile_loadd(7, wg1 + kb * 32, 64);
+      _tile_dpbf16ps(2, 4, 7);
+      if constexpr (TWO_ROWS) _tile_dpbf16ps(3, 5, 7);
+    }
+  }
+  _tile_stored(0, scratch, 128);
+  if constexpr (TWO_ROWS) _tile_stored(1, scratch + 16 * 32, 128);
+  if constexpr (TWO_COLS) {
+    _tile_stored(2, scratch + 16, 128);
+    if constexpr (TWO_ROWS) _tile_stored(3, scratch + 16 * 32 + 16, 128);
+  }
+}
+
+LAYERSNET_AMX_TARGET void forward_amx(const float* x, int64_t n, int64_t cin, const Bf16PackedWeights& w,
+                                      const float* b, bool relu, float* out) {
+  const int64_t cout = w.cout, tp = w.tile_pairs, groups = w.groups;
+  LAYERSNET_CHECK(tp > 0 && static_cast<int64_t>(w.tiles.size()) == groups * tp * 32,
+                  "bf16 amx kernel: the weights were packed without their tile layout (packed before AMX was usable?)");
+  const int64_t n_blocks = (n + kAmxRows - 1) / kAmxRows;
+#pragma omp parallel if (n_blocks > 1 && run_parallel(n, cin + cout))
+  {
+    static thread_local std::vector<uint32_t> xb;     // (32, tile_pairs)
+    static thread_local std::vector<float> bias_rows;  // (groups, 16, 16)
+    alignas(64) float scratch[kAmxRows * 32];
+    if (xb.size() < static_cast<std::size_t>(kAmxRows * tp)) xb.resize(static_cast<std::size_t>(kAmxRows * tp));
+    bias_rows.assign(static_cast<std::size_t>(groups * 256), 0.0f);
+    if (b)
+      for (int64_t g = 0; g < groups; ++g)
+        for (int64_t j = 0; j < 16 && 16 * g + j < cout; ++j)
+          for (int64_t i = 0; i < 16; ++i) bias_rows[static_cast<std::size_t>(g * 256 + i * 16 + j)] = b[16 * g + j];
+    load_tile_config();
+#pragma omp for schedule(dynamic, 1)
+    for (int64_t blk = 0; blk < n_blocks; ++blk) {
+      const int64_t r0 = blk * kAmxRows, m = std::min(kAmxRows, n - r0);
+      convert_block(x + r0 * cin, m, cin, tp, xb.data());
+      const bool two_rows = m > 16;
+      for (int64_t g = 0; g < groups; g += 2) {
+        const bool two_cols = g + 1 < groups;
+        const uint16_t* wg = w.tiles.data() + g * tp * 32;
+        const float* bias_g = bias_rows.data() + g * 256;
+        if (two_rows) {
+          if (two_cols) amx_block<true, true>(xb.data(), tp, wg, bias_g, scratch);
+          else amx_block<true, false>(xb.data(), tp, wg, bias_g, scratch);
+        } else {
+          if (two_cols) amx_block<false, true>(xb.data(), tp, wg, bias_g, scratch);
+          else amx_block<false, false>(xb.data(), tp, wg, bias_g, scratch);
+        }
+        const int64_t col0 = 16 * g, cols = std::min<int64_t>(two_cols ? 32 : 16, cout - col0);
+        const __mmask16 m0 = cols >= 16 ? __mmask16(0xFFFF) : static_cast<__mmask16>((1u << cols) - 1u);
+        const __mmask16 m1 = cols >= 32 ? __mmask16(0xFFFF)
+                             : cols > 16 ? static_cast<__mmask16>((1u << (cols - 16)) - 1u)
+                                         : __mmask16(0);
+        const __m512 zero = _mm512_setzero_ps();
+        for (int64_t i = 0; i < m; ++i) {
+          __m512 v0 = _mm512_load_ps(scratch + i * 32), v1 = _mm512_load_ps(scratch + i * 32 + 16);
+          if (relu) {  // max(0, NaN) is NaN: a diverging rollout stays visible
+            v0 = _mm512_max_ps(zero, v0);
+            v1 = _mm512_max_ps(zero, v1);
+          }
+          _mm512_mask_storeu_ps(out + (r0 + i) * cout + col0, m0, v0);
+          if (m1) _mm512_mask_storeu_ps(out + (r0 + i) * cout + col0 + 16, m1, v1);
+        }
+      }
+    }
+    _tile_release();
+  }
+}
+
+#undef LAYERSNET_AMX_TARGET
+
+}  // namespace
 #endif
+
+void bf16_linear_forward(const float* x, int64_t n, int64_t cin, const Bf16PackedWeights& w, const float* b,
+                         bool relu, float* out, Bf16Kernel kernel) {
+  check_shapes("bf16_linear_forward", n, cin, w);
+  LAYERSNET_CHECK(bf16_kernel_available(kernel),
+                  "bf16_linear_forward: the " << bf16_kernel_name(kernel) << " kernel cannot run on this CPU or build");
+  if (n == 0) return;
+  switch (kernel) {
+    case Bf16Kernel::kAmx:
+#ifdef LAYERSNET_AMX_KERNEL
+      forward_amx(x, n, cin, w, b, relu, out);
+      return;
+#else
+      break;
+#endif
+    case Bf16Kernel::kAvx512:
+#ifdef __AVX512BF16__
+      forward_avx512(x, n, cin, w, b, relu, out);
+      return;
+#else
+      break;
+#endif
+    case Bf16Kernel::kScalar: break;
+  }
+  bf16_linear_forward_scalar(x, n, cin, w, b, relu, out);
 }
 
 }  // namespace layersnet::ad

@@ -18,9 +18,19 @@
 // error (about Cin 2^-24 Σ_k |x_k w_k|): relative error ~ 2^-7 of Σ|x w| at worst, far less
 // on average (errors of random sign).
 //
-// Kernels: the AVX-512 BF16 one when compiled with __AVX512BF16__ (-march=native on a CPU
-// that has it), else a scalar reference with the same rounding; bf16_available() says which
-// runs. Rows are independent, so results do not depend on the thread count.
+// Kernels, chosen at run time (bf16_kernel()):
+// - "amx-bf16": Intel AMX tiles (TDPBF16PS, 16 x 16 float outputs per instruction), on CPUs
+//   that have AMX-TILE, AMX-BF16 and AVX-512 BF16 and whose kernel grants the tile state
+//   (Linux >= 5.16). Compiled on every x86-64 build, used only where the CPU has it. Each
+//   output sums the same bf16 products in 32-channel blocks; the tile unit's internal order
+//   of those additions is not VDPBF16PS's, so it may differ from the other two in the last
+//   bits (within the bound below; tests/autodiff/test_bf16.cpp).
+// - "avx512-bf16": VDPBF16PS, when compiled with __AVX512BF16__ (-march=native on a CPU that
+//   has it).
+// - "scalar reference": the same rounding and order as avx512-bf16, on any CPU.
+// The best available one runs; LAYERSNET_BF16_KERNEL=amx-bf16|avx512-bf16|scalar picks another
+// (for measurements; naming one the CPU lacks is an error). Rows are independent, so results
+// do not depend on the thread count.
 //
 // Packed weights and the cache: W is packed once into the VNNI-pair layout (for every group
 // of 16 output columns and every pair of input channels, 32 bf16 values
@@ -47,10 +57,19 @@ constexpr int64_t kBf16MinChannels = 16;
 // "float32" | "fp32" | "bf16" | "bfloat16" -> MatmulPrecision; throws naming the choices.
 MatmulPrecision parse_matmul_precision(const std::string& text);
 
-// True when the AVX-512 BF16 kernel is compiled in (else the scalar reference runs).
+enum class Bf16Kernel { kScalar, kAvx512, kAmx };
+
+// Whether this build on this CPU can run `kernel` (the scalar one always can).
+bool bf16_kernel_available(Bf16Kernel kernel);
+// The kernel bf16_linear_forward runs: LAYERSNET_BF16_KERNEL if set (std::runtime_error naming
+// the variable and the choices when unknown or unavailable), else the fastest available.
+Bf16Kernel bf16_kernel();
+// "amx-bf16", "avx512-bf16" or "scalar reference".
+const char* bf16_kernel_name(Bf16Kernel kernel);
+const char* bf16_kernel_name();  // of bf16_kernel()
+
+// True when bf16_kernel() is a vector kernel (faster than float32); false for the scalar one.
 bool bf16_available();
-// "avx512-bf16" or "scalar reference".
-const char* bf16_kernel_name();
 
 // float <-> bfloat16 bits (rounding as above).
 uint16_t float_to_bf16(float f);
@@ -66,6 +85,10 @@ struct Bf16PackedWeights {
   int64_t groups = 0;  // ceil(Cout / 16)
   std::vector<uint16_t> data;  // groups * pairs * 32
   std::vector<float> source;   // Cout * Cin (the cache's validation copy)
+  // The same layout with each group's pairs padded with zeros to tile_pairs (a multiple of
+  // 16: one AMX tile holds 16 pairs of 16 columns); made only where the AMX kernel can run.
+  int64_t tile_pairs = 0;
+  std::vector<uint16_t> tiles;  // groups * tile_pairs * 32
 };
 
 // Packs W: (Cout, Cin).
@@ -86,9 +109,9 @@ void bf16_clear_weight_cache();
 // out = x Wᵀ + b (then max(., 0) with relu). x: (N, Cin); w packed from (Cout, Cin) with
 // Cin = x's columns; b: (Cout) or null; out: (N, Cout). Rows spread over the OpenMP
 // threads (serial for small N or inside a parallel region). No allocation after the first
-// call on a thread (a per-thread bf16 row buffer grows once).
+// call on a thread (a per-thread bf16 row buffer grows once). `kernel` must be available.
 void bf16_linear_forward(const float* x, int64_t n, int64_t cin, const Bf16PackedWeights& w, const float* b,
-                         bool relu, float* out);
+                         bool relu, float* out, Bf16Kernel kernel = bf16_kernel());
 
 // The scalar reference path, whatever the CPU (tests compare the kernel against it).
 void bf16_linear_forward_scalar(const float* x, int64_t n, int64_t cin, const Bf16PackedWeights& w, const float* b,

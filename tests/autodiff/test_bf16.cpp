@@ -14,6 +14,7 @@
 
 #include <bit>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <iostream>
 #include <limits>
@@ -42,10 +43,21 @@ struct Shape {
   int64_t n, cin, cout;
 };
 
+// Every kernel this build can run on this CPU (the scalar reference always).
+std::vector<Bf16Kernel> available_kernels() {
+  std::vector<Bf16Kernel> ks;
+  for (Bf16Kernel k : {Bf16Kernel::kScalar, Bf16Kernel::kAvx512, Bf16Kernel::kAmx})
+    if (bf16_kernel_available(k)) ks.push_back(k);
+  return ks;
+}
+
 // Odd and degenerate shapes: one row, no rows, odd Cin, Cout not a multiple of 16, row
 // counts not multiples of the 6-row tile or the 48-row block, and sizes that run in parallel.
-const std::vector<Shape> kShapes = {{1, 16, 16},  {0, 8, 20},   {7, 33, 17},   {13, 1, 5},     {5, 2, 64},
-                                    {37, 31, 47}, {50, 128, 128}, {97, 268, 268}, {1000, 40, 70}, {2003, 129, 33}};
+// (and of the AMX kernel's 16-row tiles and 32-row blocks, and its 32-channel blocks).
+const std::vector<Shape> kShapes = {{1, 16, 16},    {0, 8, 20},     {7, 33, 17},    {13, 1, 5},
+                                    {5, 2, 64},     {37, 31, 47},   {50, 128, 128}, {97, 268, 268},
+                                    {1000, 40, 70}, {2003, 129, 33}, {16, 32, 16},  {33, 64, 48},
+                                    {31, 65, 33}};
 
 // Double reference of out = x̂ ŵᵀ + b, and S = |b| + Σ|x̂ ŵ| per entry. x: (N, Cin); W: (Cout, Cin).
 void reference(const std::vector<float>& x, const std::vector<float>& W, const float* b, const Shape& s, bool round,
@@ -104,67 +116,78 @@ TEST(Bf16, ScalarConversionMatchesTheInstruction) {
 }
 #endif
 
-// The kernel (AVX-512 BF16 or scalar) against the double reference of the rounded inputs,
-// and the scalar path against the same reference.
-TEST(Bf16, KernelMatchesDoubleReferenceOfRoundedInputs) {
-  // The AVX-512 kernel adds in the order of Intel's VDPBF16PS pseudo-code, as the scalar
-  // path does: the two agree bit for bit (observed on AMD Zen 4 too).
-  double worst_vs_scalar = 0;
-  for (const Shape& s : kShapes) {
-    const auto x = random_floats(s.n * s.cin, 11), W = random_floats(s.cout * s.cin, 12, 0.2f),
-               b = random_floats(s.cout, 13);
-    const auto packed = bf16_pack_weights(W.data(), s.cout, s.cin);
-    std::vector<float> out(static_cast<std::size_t>(s.n * s.cout), -7.0f), scalar = out;
-    bf16_linear_forward(x.data(), s.n, s.cin, *packed, b.data(), false, out.data());
-    bf16_linear_forward_scalar(x.data(), s.n, s.cin, *packed, b.data(), false, scalar.data());
-    std::vector<double> ref, mag;
-    reference(x, W, b.data(), s, true, ref, mag);
-    for (std::size_t e = 0; e < ref.size(); ++e) {
-      const double tol = (s.cin + 2) * kUf * mag[e];
-      ASSERT_LE(std::abs(out[e] - ref[e]), tol) << "kernel, shape " << s.n << "x" << s.cin << ">" << s.cout << " entry " << e;
-      ASSERT_LE(std::abs(scalar[e] - ref[e]), tol) << "scalar, shape " << s.n << "x" << s.cin << ">" << s.cout;
-      worst_vs_scalar = std::max(worst_vs_scalar, std::abs(double(out[e]) - scalar[e]) / mag[e]);
+// Each kernel against the double reference of the rounded inputs. The AVX-512 kernel adds in
+// the order of Intel's VDPBF16PS pseudo-code, as the scalar path does: the two agree bit for bit
+// (observed on AMD Zen 4 and Intel Xeon). The AMX tile unit sums the same products in its own
+// order, so it only has to keep the float accumulation bound.
+TEST(Bf16, KernelsMatchTheDoubleReferenceOfRoundedInputs) {
+  for (Bf16Kernel k : available_kernels()) {
+    double worst_vs_scalar = 0;
+    for (const Shape& s : kShapes) {
+      const auto x = random_floats(s.n * s.cin, 11), W = random_floats(s.cout * s.cin, 12, 0.2f),
+                 b = random_floats(s.cout, 13);
+      const auto packed = bf16_pack_weights(W.data(), s.cout, s.cin);
+      std::vector<float> out(static_cast<std::size_t>(s.n * s.cout), -7.0f), scalar = out;
+      bf16_linear_forward(x.data(), s.n, s.cin, *packed, b.data(), false, out.data(), k);
+      bf16_linear_forward_scalar(x.data(), s.n, s.cin, *packed, b.data(), false, scalar.data());
+      std::vector<double> ref, mag;
+      reference(x, W, b.data(), s, true, ref, mag);
+      for (std::size_t e = 0; e < ref.size(); ++e) {
+        const double tol = (s.cin + 2) * kUf * mag[e];
+        ASSERT_LE(std::abs(out[e] - ref[e]), tol)
+            << bf16_kernel_name(k) << ", shape " << s.n << "x" << s.cin << ">" << s.cout << " entry " << e;
+        ASSERT_LE(std::abs(scalar[e] - ref[e]), tol) << "scalar, shape " << s.n << "x" << s.cin << ">" << s.cout;
+        worst_vs_scalar = std::max(worst_vs_scalar, std::abs(double(out[e]) - scalar[e]) / mag[e]);
+      }
+    }
+    std::cout << bf16_kernel_name(k) << " vs scalar path: max |diff| / S = " << worst_vs_scalar << "\n";
+    if (k != Bf16Kernel::kAmx) {
+      EXPECT_EQ(worst_vs_scalar, 0.0) << bf16_kernel_name(k);
     }
   }
-  std::cout << "kernel vs scalar path: max |diff| / S = " << worst_vs_scalar << "\n";
-  EXPECT_EQ(worst_vs_scalar, 0.0);
 }
 
 TEST(Bf16, WithinTheBf16BoundOfTheFloatProduct) {
+  for (Bf16Kernel k : available_kernels())
   for (const Shape& s : kShapes) {
     if (s.n == 0) continue;
     const auto x = random_floats(s.n * s.cin, 21), W = random_floats(s.cout * s.cin, 22, 0.2f),
                b = random_floats(s.cout, 23);
     std::vector<float> out(static_cast<std::size_t>(s.n * s.cout));
-    bf16_linear_forward(x.data(), s.n, s.cin, *bf16_pack_weights(W.data(), s.cout, s.cin), b.data(), false, out.data());
+    bf16_linear_forward(x.data(), s.n, s.cin, *bf16_pack_weights(W.data(), s.cout, s.cin), b.data(), false, out.data(),
+                        k);
     std::vector<double> ref, mag;
     reference(x, W, b.data(), s, false, ref, mag);
     double worst = 0;
     for (std::size_t e = 0; e < ref.size(); ++e) {
       const double err = std::abs(out[e] - ref[e]) / mag[e];
-      ASSERT_LE(err, 2 * kU + kU * kU + 2 * (s.cin + 2) * kUf) << "shape " << s.n << "x" << s.cin << ">" << s.cout;
+      ASSERT_LE(err, 2 * kU + kU * kU + 2 * (s.cin + 2) * kUf)
+          << bf16_kernel_name(k) << ", shape " << s.n << "x" << s.cin << ">" << s.cout;
       worst = std::max(worst, err);
     }
     // The inputs really were rounded (not a float product in disguise): some entry is off by
     // far more than float accumulation could explain.
     if (s.n * s.cout >= 16) {
-      EXPECT_GT(worst, kU / 16) << s.n << "x" << s.cin << ">" << s.cout;  // float alone: < (Cin + 2) u_f ~ kU / 200
+      EXPECT_GT(worst, kU / 16) << bf16_kernel_name(k) << ", " << s.n << "x" << s.cin << ">" << s.cout;  // float alone: < (Cin + 2) u_f ~ kU / 200
     }
   }
 }
 
 TEST(Bf16, ReluIsTheMaxOfTheSameProducts) {
+  for (Bf16Kernel k : available_kernels())
   for (const Shape& s : kShapes) {
     const auto x = random_floats(s.n * s.cin, 31), W = random_floats(s.cout * s.cin, 32, 0.2f);
     const auto packed = bf16_pack_weights(W.data(), s.cout, s.cin);
     std::vector<float> y(static_cast<std::size_t>(s.n * s.cout)), r = y, rs = y;
-    bf16_linear_forward(x.data(), s.n, s.cin, *packed, nullptr, false, y.data());  // no bias too
-    bf16_linear_forward(x.data(), s.n, s.cin, *packed, nullptr, true, r.data());
+    bf16_linear_forward(x.data(), s.n, s.cin, *packed, nullptr, false, y.data(), k);  // no bias too
+    bf16_linear_forward(x.data(), s.n, s.cin, *packed, nullptr, true, r.data(), k);
     bf16_linear_forward_scalar(x.data(), s.n, s.cin, *packed, nullptr, true, rs.data());
     int negatives = 0;
     for (std::size_t e = 0; e < y.size(); ++e) {
-      ASSERT_EQ(r[e], std::max(0.0f, y[e]));
-      ASSERT_EQ(rs[e] == 0.0f, r[e] == 0.0f);
+      ASSERT_EQ(r[e], std::max(0.0f, y[e])) << bf16_kernel_name(k);
+      if (k != Bf16Kernel::kAmx || std::abs(y[e]) > 1e-3f) {  // AMX may round a near-zero sum to the other side
+        ASSERT_EQ(rs[e] == 0.0f, r[e] == 0.0f) << bf16_kernel_name(k);
+      }
       negatives += y[e] < 0;
     }
     if (y.size() >= 64) {
@@ -177,14 +200,27 @@ TEST(Bf16, SameBitsForAnyThreadCount) {
   const Shape s{5000, 72, 40};
   const auto x = random_floats(s.n * s.cin, 41), W = random_floats(s.cout * s.cin, 42), b = random_floats(s.cout, 43);
   const auto packed = bf16_pack_weights(W.data(), s.cout, s.cin);
-  std::vector<float> one(static_cast<std::size_t>(s.n * s.cout)), two = one;
-  const int was = omp_get_max_threads();
-  omp_set_num_threads(1);
-  bf16_linear_forward(x.data(), s.n, s.cin, *packed, b.data(), true, one.data());
-  omp_set_num_threads(2);
-  bf16_linear_forward(x.data(), s.n, s.cin, *packed, b.data(), true, two.data());
-  omp_set_num_threads(was);
-  EXPECT_EQ(std::memcmp(one.data(), two.data(), sizeof(float) * one.size()), 0);
+  for (Bf16Kernel k : available_kernels()) {
+    std::vector<float> one(static_cast<std::size_t>(s.n * s.cout)), two = one;
+    const int was = omp_get_max_threads();
+    omp_set_num_threads(1);
+    bf16_linear_forward(x.data(), s.n, s.cin, *packed, b.data(), true, one.data(), k);
+    omp_set_num_threads(2);
+    bf16_linear_forward(x.data(), s.n, s.cin, *packed, b.data(), true, two.data(), k);
+    omp_set_num_threads(was);
+    EXPECT_EQ(std::memcmp(one.data(), two.data(), sizeof(float) * one.size()), 0) << bf16_kernel_name(k);
+  }
+}
+
+// The fastest kernel runs unless LAYERSNET_BF16_KERNEL names another (not set under ctest).
+TEST(Bf16, TheFastestAvailableKernelRuns) {
+  if (std::getenv("LAYERSNET_BF16_KERNEL")) GTEST_SKIP() << "LAYERSNET_BF16_KERNEL is set";
+  const Bf16Kernel expected = bf16_kernel_available(Bf16Kernel::kAmx)      ? Bf16Kernel::kAmx
+                              : bf16_kernel_available(Bf16Kernel::kAvx512) ? Bf16Kernel::kAvx512
+                                                                           : Bf16Kernel::kScalar;
+  EXPECT_EQ(bf16_kernel(), expected);
+  EXPECT_EQ(bf16_available(), expected != Bf16Kernel::kScalar);
+  EXPECT_STREQ(bf16_kernel_name(), bf16_kernel_name(expected));
 }
 
 // ---- the hook in linear / linear_relu ---------------------------------------------------------

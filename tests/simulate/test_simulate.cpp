@@ -197,7 +197,7 @@ TEST_F(Simulate, SameAnswerAsTheInternalRolloutFromRest) {
   EXPECT_NE(stressed.find("scene"), std::string::npos) << stressed;
 }
 
-// Without --precision the products run in bfloat16 where the build has the AVX-512 BF16 kernel
+// Without --precision the products run in bfloat16 where the CPU runs the AMX or AVX-512 BF16 kernel
 // and in float32 otherwise; the bf16 rollout stays close to the float32 one.
 TEST_F(Simulate, AutoPrecisionIsBf16WhereTheKernelExists) {
   int code = 0;
