@@ -165,9 +165,10 @@ NearestBody NearestVertexIndex::query_within(const Eigen::Ref<const Points>& que
   // only adds points strictly closer than the current bound.
   const float bound = std::isfinite(max_distance) ? std::nextafter(max_distance * max_distance, std::numeric_limits<float>::max())
                                                   : std::numeric_limits<float>::max();
-  // A query costs about a microsecond: below a few thousand, waking a team costs more than it
-  // saves (the physics step queries a garment's vertices several times per frame).
-#pragma omp parallel for schedule(static) if (Q > 4096)
+  // A query costs about a microsecond; from a few hundred on, a second thread pays on a machine
+  // whose cores are free (on one loaded by other processes it may not: docs/decisions.md,
+  // "Nearest-vertex queries on the threads again").
+#pragma omp parallel for schedule(static) if (Q > 512)
   for (Eigen::Index q = 0; q < Q; ++q) {
     const float pt[3] = {queries(q, 0), queries(q, 1), queries(q, 2)};
     uint32_t idx = 0;
