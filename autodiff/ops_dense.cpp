@@ -36,13 +36,27 @@ void check_same_shape(const char* op, const Var<T>& a, const Var<T>& b) {
 }
 
 // Calls f with rows [r0, r0 + n) of b broadcast to (n, cols), as an Eigen matrix expression.
+// A broadcast row or column is first written out into a per-thread block (one row block, in
+// L2): Eigen's replicate() expressions index every element and do not vectorise, which made
+// the broadcast products several times slower than the same-shape ones.
 template <class T, class F>
 void with_b_block(const Var<T>& b, int64_t rows, int64_t cols, int64_t r0, int64_t n, F&& f) {
   const ConstMatMap<T> bv(b.value, b.rows, b.cols);
-  if (b.rows == rows && b.cols == cols) f(bv.middleRows(r0, n));
-  else if (b.rows == 1 && b.cols == 1) f(RowMat<T>::Constant(n, cols, b.value[0]));
-  else if (b.rows == 1) f(bv.replicate(n, 1));
-  else f(bv.middleRows(r0, n).replicate(1, cols));
+  if (b.rows == rows && b.cols == cols) {
+    f(bv.middleRows(r0, n));
+  } else if (b.rows == 1 && b.cols == 1) {
+    f(RowMat<T>::Constant(n, cols, b.value[0]));
+  } else {
+    static thread_local std::vector<T> buffer;  // grows to one row block, then reused
+    if (buffer.size() < static_cast<std::size_t>(n * cols)) buffer.resize(static_cast<std::size_t>(n * cols));
+    MatMap<T> dense(buffer.data(), n, cols);
+    if (b.rows == 1) {
+      for (int64_t r = 0; r < n; ++r) dense.row(r) = bv.row(0);
+    } else {
+      for (int64_t r = 0; r < n; ++r) dense.row(r).setConstant(b.value[r0 + r]);
+    }
+    f(ConstMatMap<T>(buffer.data(), n, cols));
+  }
 }
 
 // Adds the (rows, cols) gradient e(r0, n, bb), reduced onto b's broadcast shape, into b's
