@@ -3,7 +3,8 @@
 generate` is still adding sequences to it.
 
 Writes OUT/dataset.json: the manifest of DATA as it is now, its training split cut to the
-sequences whose files exist (validation and test are kept whole and must be complete), and links
+sequences whose files exist (validation and test are kept whole and must be complete; a test
+split of which no file exists yet, as while scripts/make_data.sh makes it last, is emptied), and links
 every kept sequence file (and scene.json, if present) into OUT. The training split's statistics then come
 from `layersnet prepare OUT`; a run trained on OUT keeps the same data when DATA grows. With
 --max-train N only the first N of them (in the manifest's order) are kept, so that a frozen set
@@ -42,10 +43,15 @@ def main(argv):
     def present(sid):
         return os.path.isfile(os.path.join(data, sid + ".h5"))
 
-    for name, ids in splits.items():
+    dropped = []
+    for name, ids in list(splits.items()):
         if name == "train":
             continue  # may be incomplete: cut below
         missing = [sid for sid in ids if not present(sid)]
+        if name == "test" and missing and len(missing) == len(ids):
+            dropped.append(name)
+            splits[name] = []
+            continue
         if missing:
             fail(f"split {name} is incomplete ({len(missing)} of {len(ids)} files missing, e.g. {missing[0]}.h5); "
                  "generate it first (`layersnet generate ... --splits " + name + "`)")
@@ -69,6 +75,7 @@ def main(argv):
         json.dump(manifest, f, indent=2)
     print(f"freeze_train_split: {out}: {len(kept_train)} of the {listed} listed training sequences, "
           + ", ".join(f"{n} {len(ids)}" for n, ids in manifest["splits"].items() if n != "train")
+          + "".join(f"; {n}: none of its files exist yet, emptied" for n in dropped)
           + f"; next: layersnet prepare {out}")
 
 

@@ -54,6 +54,12 @@ TEST(FreezeTrainSplit, KeepsTheTrainingSequencesThatExistAndTheWholeOtherSplits)
   EXPECT_EQ(read_manifest((dir / "first").string()).train, (std::vector<std::string>{"s0000"}));
   EXPECT_NE(freeze(dir / "growing", dir / "three", "--max-train 3"), 0);
 
+  // A test split not begun yet is emptied (the data generation makes it last); a begun one must be whole.
+  fs::remove(growing.sequence_path(growing.test.front()));
+  ASSERT_EQ(freeze(dir / "growing", dir / "no_test"), 0);
+  EXPECT_TRUE(read_manifest((dir / "no_test").string()).test.empty());
+  EXPECT_EQ(read_manifest((dir / "no_test").string()).val, growing.val);
+
   // A folder that already holds a manifest is not overwritten; an incomplete validation split is refused.
   EXPECT_NE(freeze(dir / "growing", dir / "frozen"), 0);
   fs::remove(growing.sequence_path(growing.val.front()));
