@@ -1,5 +1,5 @@
 #pragma once
-// Graph and geometry ops (autodiff/ops_graph.h, ops_geometry.h, ops_attention.h):
+// Graph, geometry and solver ops (autodiff/ops_graph.h, ops_geometry.h, ops_attention.h, ops_solve.h):
 // X(EnumName, function_stem). Add a line per new op.
 #define LAYERSNET_GRAPH_OPS(X)      \
   X(GatherRows, gather_rows)        \
@@ -12,4 +12,5 @@
   X(Cross3, cross3)                 \
   X(Rotate3, rotate3)               \
   X(RotMapApply, rot_map_apply)     \
-  X(RotInvAttention, rot_inv_attention)
+  X(RotInvAttention, rot_inv_attention) \
+  X(BlockSpdSolve, block_spd_solve)

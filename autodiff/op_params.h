@@ -79,9 +79,21 @@ struct RiaParams {
   std::span<const int32_t> edges_by_sender;
 };
 
+// BlockSpdSolve (autodiff/ops_solve.h): a symmetric positive-definite matrix A of 3×3 blocks,
+// a scale per block row and the solver's limits.
+template <class T>
+struct BlockSpd {
+  std::span<const int32_t> offsets;  // (N+1) CSR over block rows
+  std::span<const int32_t> columns;  // (nnz) block column of each block, in [0, N)
+  std::span<const T> blocks;         // (nnz · 9) row-major 3×3 blocks; A must be symmetric
+  std::span<const T> scale;          // (N) s
+  int iterations = 60;               // conjugate-gradient iterations at most
+  T tolerance = T(1e-6);             // stop when the preconditioned residual is this fraction of the start's
+};
+
 template <class T>
 using OpParams = std::variant<std::monostate, ScaleParams<T>, HingeSqParams<T>, ReduceParams<T>, ConcatColsParams<T>,
                               SliceColsParams, RowIndexParams, SegmentParams, RowNormalizeParams<T>, RotationParams,
-                              RiaParams<T>>;
+                              RiaParams<T>, BlockSpd<T>>;
 
 }  // namespace layersnet::ad

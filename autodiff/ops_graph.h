@@ -11,7 +11,8 @@
 // order; segment reductions are parallelised over segments). No atomics.
 //
 // Geometry ops (norms, cross products, rotations) are in ops_geometry.h; the fused
-// Rotation Invariant Attention is in ops_attention.h. This header includes both.
+// Rotation Invariant Attention is in ops_attention.h, the block linear solve in ops_solve.h.
+// This header includes them.
 #include "autodiff/tape.h"
 
 #include <cstdint>
@@ -70,3 +71,4 @@ void check_indices(const char* what, std::span<const int32_t> idx, int64_t bound
 
 #include "autodiff/ops_attention.h"
 #include "autodiff/ops_geometry.h"
+#include "autodiff/ops_solve.h"

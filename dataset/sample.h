@@ -106,6 +106,19 @@ Eigen::Matrix<float, 1, 5> normalised_attributes(const GarmentAttributes& g, flo
 
 std::shared_ptr<const SequenceStructure> build_structure(const SequenceInfo& info, float patch_size);
 
+// A symmetric positive-definite matrix A of 3×3 blocks over the garment vertices (block CSR)
+// and a scale s per vertex: y = A⁻¹ (s ⊙ b) moves the cloth as the physics step's last Newton
+// system would (losses/physics_step.h). A pinned vertex has an identity block, no other block in
+// its row or column, and scale 0.
+template <class T>
+struct BlockSystem {
+  std::vector<int32_t> offsets;  // (N+1) CSR over block rows
+  std::vector<int32_t> columns;  // (nnz) block column of each block
+  std::vector<T> blocks;         // (nnz · 9) row-major 3×3 blocks
+  std::vector<T> scale;          // (N) s
+  bool empty() const { return offsets.empty(); }
+};
+
 struct TrainingSample {
   std::string sequence_id;
   int frame = 0;  // t
@@ -137,6 +150,9 @@ struct TrainingSample {
   // One implicit step of Blender's cloth energy from x_t as a root-relative displacement
   // (losses/physics_step.h): units/frame.  (N, 3); empty unless the caller adds it.
   Points physics_step;
+  // The step's linear system at its result, for a network correction that the step solves
+  // (model.physics_step_correction = "solved"); empty unless the caller adds it.
+  BlockSystem<float> physics_system;
   int num_vertices() const { return static_cast<int>(state.rows()); }
   int num_patches() const { return static_cast<int>(patch_state.rows()); }
 };

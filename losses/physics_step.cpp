@@ -47,6 +47,7 @@ struct Hessian {
   std::vector<Block> spring;                    // (E)
   std::vector<int32_t> contact_row;             // vertices in contact
   std::vector<Eigen::Vector3d> contact_normal;  // their body normals, scaled by sqrt(k_c)
+  std::vector<Block> diagonal_block;            // (N) each vertex's diagonal block
   std::vector<Block> preconditioner;            // (N) inverse of each vertex's diagonal block
   // Bending, Gauss–Newton: k_h u uᵀ with u = ∂θ/∂(x_i, x_j, x_a, x_b), stored as sqrt(k_h) u.
   std::vector<std::array<int32_t, 4>> hinge_rows;
@@ -167,7 +168,50 @@ Hessian approximate_hessian(const PhysicsInput<double>& in, const Vec& x, const 
     const bool usable = !fixed[v] && std::fabs(block[v].determinant()) > 1e-300;
     h.preconditioner[v] = usable ? Block(block[v].inverse()) : Block::Zero();
   }
+  h.diagonal_block = std::move(block);
   return h;
+}
+
+// The Hessian as a block CSR matrix over the free vertices (what Hessian::multiply applies),
+// with each vertex's inertia weight as its scale: A⁻¹ (s ⊙ a) is where the step's last Newton
+// system moves the cloth when its inertia target moves by a. Fixed rows: identity, scale 0.
+dataset::BlockSystem<float> assemble_system(const PhysicsInput<double>& in, const Hessian& h, const PhysicsSettings& s,
+                                            const std::vector<uint8_t>& fixed) {
+  const std::size_t N = h.diagonal.size();
+  std::vector<std::vector<std::pair<int32_t, Block>>> rows(N);
+  auto add = [&](int32_t r, int32_t c, const Block& b) {
+    if (fixed[r] || fixed[c]) return;
+    for (auto& [col, block] : rows[r])
+      if (col == c) {
+        block += b;
+        return;
+      }
+    rows[r].emplace_back(c, b);
+  };
+  for (std::size_t v = 0; v < N; ++v) add(static_cast<int32_t>(v), static_cast<int32_t>(v), h.diagonal_block[v]);
+  for (std::size_t e = 0; e < h.spring.size(); ++e) {
+    add(in.edge_i[e], in.edge_j[e], -h.spring[e]);
+    add(in.edge_j[e], in.edge_i[e], -h.spring[e]);
+  }
+  for (std::size_t k = 0; k < h.hinge_rows.size(); ++k)
+    for (int p = 0; p < 4; ++p)
+      for (int q = 0; q < 4; ++q)
+        if (p != q) add(h.hinge_rows[k][p], h.hinge_rows[k][q], h.hinge_u[k][p] * h.hinge_u[k][q].transpose());
+  dataset::BlockSystem<float> out;
+  out.offsets.reserve(N + 1);
+  out.offsets.push_back(0);
+  out.scale.resize(N);
+  for (std::size_t v = 0; v < N; ++v) {
+    if (fixed[v]) rows[v].emplace_back(static_cast<int32_t>(v), Block::Identity());
+    std::sort(rows[v].begin(), rows[v].end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+    for (const auto& [col, block] : rows[v]) {
+      out.columns.push_back(col);
+      for (int e = 0; e < 9; ++e) out.blocks.push_back(static_cast<float>(block(e / 3, e % 3)));
+    }
+    out.offsets.push_back(static_cast<int32_t>(out.columns.size()));
+    out.scale[v] = fixed[v] ? 0.0f : static_cast<float>(2 * s.inertia * in.inertia_weight[v]);
+  }
+  return out;
 }
 
 // Conjugate gradients on H p = −g over the free rows (fixed rows stay 0).
@@ -205,7 +249,8 @@ Vec solve(const PhysicsInput<double>& in, const Hessian& h, const Vec& g, const 
 }  // namespace
 
 dataset::Points minimise_step_energy(PhysicsInput<double> in, dataset::Points x0, const std::vector<uint8_t>& fixed,
-                                     const PhysicsStepSettings& settings, PhysicsStepReport* report) {
+                                     const PhysicsStepSettings& settings, PhysicsStepReport* report,
+                                     dataset::BlockSystem<float>* system) {
   // Every energy evaluation and Hessian of the solve queries the same body; the friction holds
   // the contacts of the step's start.
   if (!in.body_index && !in.body_pos.empty()) index_body(in);
@@ -245,13 +290,15 @@ dataset::Points minimise_step_energy(PhysicsInput<double> in, dataset::Points x0
     e = it + 1 < settings.newton_iterations ? energy(in, x, s, &g) : e_trial;  // the last needs no gradient
   }
   if (report) report->energy_end = e / std::max<int64_t>(N, 1);
+  if (system) *system = assemble_system(in, approximate_hessian(in, x, s, fixed), s, fixed);
   for (int64_t v = 0; v < N; ++v)
     for (int c = 0; c < 3; ++c) x0(v, c) = static_cast<float>(x[3 * v + c]);
   return x0;
 }
 
 dataset::Points physics_step_displacement(const dataset::TrainingSample& s, const dataset::SequenceInfo& info,
-                                          const PhysicsStepSettings& settings, PhysicsStepReport* report) {
+                                          const PhysicsStepSettings& settings, PhysicsStepReport* report,
+                                          dataset::BlockSystem<float>* system) {
   const int64_t N = s.num_vertices();
   const bool body_inertia = settings.inertia == "body";
   LAYERSNET_CHECK(settings.inertia == "body" || settings.inertia == "world",
@@ -261,6 +308,8 @@ dataset::Points physics_step_displacement(const dataset::TrainingSample& s, cons
                                              << ": needs the body carry" << (body_inertia ? " from t-1 and from t" : "")
                                              << "; build the sample with model::sample_options_for(the model's config)");
   LAYERSNET_CHECK(settings.substeps >= 1, "physics step: " << settings.substeps << " substeps; give 1 or more");
+  LAYERSNET_CHECK(!system || settings.substeps == 1,
+                  "physics step: its linear system is made for one step per frame, not " << settings.substeps << " substeps");
   PhysicsInput<double> in = cast_physics_input<double>(physics_input_from_sample(s, info, settings.energy));
   if (!in.body_pos.empty()) index_body(in);
   // The input's frame is t+1's root, where the carried guess is x̃_t + c (x̃_t = state, root-relative).
@@ -276,7 +325,7 @@ dataset::Points physics_step_displacement(const dataset::TrainingSample& s, cons
   }
   dataset::Points x;
   if (settings.substeps == 1) {
-    x = minimise_step_energy(std::move(in), guess, fixed, settings, report);
+    x = minimise_step_energy(std::move(in), guess, fixed, settings, report, system);
   } else {
     // S implicit steps of h = 1/S frame. Each substep's energy times h² keeps the inertia term
     // (target x + h v) and scales every force's potential by h² and the drag's (c/2h)‖y − x‖² to
@@ -334,7 +383,9 @@ PhysicsStepSettings physics_step_settings(const ModelConfig& model) {
 
 void add_physics_step(dataset::TrainingSample& sample, const dataset::SequenceInfo& info, const ModelConfig& model) {
   if (model.velocity_base != "physics") return;
-  sample.physics_step = physics_step_displacement(sample, info, physics_step_settings(model));
+  const bool solved = model.physics_step_correction == "solved";
+  sample.physics_step = physics_step_displacement(sample, info, physics_step_settings(model), nullptr,
+                                                  solved ? &sample.physics_system : nullptr);
 }
 
 }  // namespace layersnet::losses

@@ -48,22 +48,29 @@ struct PhysicsStepReport {
 };
 
 // The step from x (N, 3) given `in` (x_t, x_{t−1} as the inertia target wants them), in the
-// physics input's coordinates. `fixed` (N) marks rows that keep x's value.
+// physics input's coordinates. `fixed` (N) marks rows that keep x's value. `system`, when given,
+// receives the approximate Hessian at the result with the inertia weights as its scale
+// (dataset::BlockSystem): A⁻¹ (s ⊙ a) is how the last Newton system would move the cloth if the
+// inertia target moved by a (springs and bending resist what stretches and folds it).
 dataset::Points minimise_step_energy(PhysicsInput<double> in, dataset::Points x, const std::vector<uint8_t>& fixed,
-                                     const PhysicsStepSettings& settings, PhysicsStepReport* report = nullptr);
+                                     const PhysicsStepSettings& settings, PhysicsStepReport* report = nullptr,
+                                     dataset::BlockSystem<float>* system = nullptr);
 
 // The sample's physics step as a root-relative displacement of x_t (units/frame, (N, 3)): what
 // TrainingSample::physics_step holds. Needs sample.body_carry, and body_carry_prev for the
 // "body" inertia.
+// `system` as minimise_step_energy's (one step per frame only).
 dataset::Points physics_step_displacement(const dataset::TrainingSample& sample, const dataset::SequenceInfo& info,
-                                          const PhysicsStepSettings& settings, PhysicsStepReport* report = nullptr);
+                                          const PhysicsStepSettings& settings, PhysicsStepReport* report = nullptr,
+                                          dataset::BlockSystem<float>* system = nullptr);
 
 // The step a model takes (Blender's constants, the model's iterations, inertia target, contact
 // stiffness, layer term and friction).
 PhysicsStepSettings physics_step_settings(const ModelConfig& model);
 
 // Fills sample.physics_step with the step of physics_step_settings(model) when the model's
-// velocity base is "physics"; any other base
+// velocity base is "physics", and sample.physics_system when the model solves its correction
+// through the step (model.physics_step_correction = "solved"); any other base
 // leaves the sample as it is. Every sample a model sees, in training and in a rollout, passes
 // through here.
 void add_physics_step(dataset::TrainingSample& sample, const dataset::SequenceInfo& info, const ModelConfig& model);

@@ -60,6 +60,12 @@ struct ModelConfig {
   // margin (0.107 units) sticks to it, as Blender's body friction (48–80 in the data) holds it.
   double physics_step_friction = 4096;
   double physics_step_friction_distance = 0.1;
+  // How the network's correction a joins the step: "added" (x_{t+1} = x_t + s + a) or "solved":
+  // a moves the step's inertia target and the step's last Newton system answers,
+  // x_{t+1} = x_t + s + A⁻¹ (M a) (A the step's approximate Hessian at its result, M the masses;
+  // TrainingSample::physics_system), so the springs and bending resist a correction that would
+  // stretch or fold the cloth while a rigid one passes. One step per frame, no output_smoothing.
+  std::string physics_step_correction = "added";
   // "body_inertia" only: the share of the relative velocity v_t − c_t a zero output keeps,
   // v_{t+1} = c + swing_kept (v_t − c_t) + a. 1 keeps the whole swing, 0 is "body"; between them
   // the swing a self-fed rollout hands itself decays geometrically.

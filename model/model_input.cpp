@@ -69,6 +69,11 @@ void validate(const ModelInput<T>& in) {
   if (!in.body_carry.empty() || !in.body_carry_patch.empty())
     check_size("body_carry_patch", in.body_carry_patch.size(), P * 3);
   if (!in.vertex_mesh_offsets.empty()) check_csr("vertex_mesh", in.vertex_mesh_offsets, in.vertex_mesh_neighbours, N, 0, N);
+  if (!in.system_offsets.empty()) {
+    check_csr("system", in.system_offsets, in.system_columns, N, 0, N);
+    check_size("system_blocks", in.system_blocks.size(), static_cast<int64_t>(in.system_columns.size()) * 9);
+    check_size("system_scale", in.system_scale.size(), N);
+  }
   check_size("mean12", in.mean12.size(), 12);
   check_size("std12", in.std12.size(), 12);
 }

@@ -102,6 +102,11 @@ struct ModelInput {
   // Garment mesh neighbours of each vertex, for ModelConfig::output_smoothing (empty when it is
   // 0). A vertex without mesh neighbours lists itself, so averaging keeps its value.  CSR over N.
   std::vector<int32_t> vertex_mesh_offsets, vertex_mesh_neighbours;
+  // The physics step's linear system at its result, for ModelConfig::physics_step_correction =
+  // "solved" (TrainingSample::physics_system; empty otherwise): a symmetric positive-definite
+  // matrix of 3×3 blocks, CSR over the N vertices, and the inertia weight of each vertex.
+  std::vector<int32_t> system_offsets, system_columns;  // (N+1), (nnz)
+  std::vector<T> system_blocks, system_scale;           // (nnz · 9) row-major, (N)
 
   // ---- statistics -----------------------------------------------------------------------------------------
   // Per-column mean and std of the 12-d state ([pos, vel] stats repeated for both frames).
@@ -131,6 +136,8 @@ ModelInput<U> cast_input(const ModelInput<T>& in) {
   o.vertex_local = cv(in.vertex_local);
   o.body_carry = cv(in.body_carry), o.body_carry_patch = cv(in.body_carry_patch);
   o.vertex_mesh_offsets = in.vertex_mesh_offsets, o.vertex_mesh_neighbours = in.vertex_mesh_neighbours;
+  o.system_offsets = in.system_offsets, o.system_columns = in.system_columns;
+  o.system_blocks = cv(in.system_blocks), o.system_scale = cv(in.system_scale);
   o.mean12 = cv(in.mean12), o.std12 = cv(in.std12);
   return o;
 }

@@ -280,6 +280,15 @@ ModelInput<float> model_input_from_sample(const dataset::TrainingSample& s, cons
                                                       << s.physics_step.rows() << " rows for " << N
                                                       << " vertices): add it with losses::add_physics_step");
       in.body_carry.assign(s.physics_step.data(), s.physics_step.data() + 3 * N);
+      if (cfg.physics_step_correction == "solved") {
+        const dataset::BlockSystem<float>& a = s.physics_system;
+        LAYERSNET_CHECK(static_cast<int64_t>(a.offsets.size()) == N + 1,
+                        "model.physics_step_correction = \"solved\" needs the sample's physics_system ("
+                            << a.offsets.size() << " row offsets for " << N
+                            << " vertices): add it with losses::add_physics_step");
+        in.system_offsets = a.offsets, in.system_columns = a.columns;
+        in.system_blocks = a.blocks, in.system_scale = a.scale;
+      }
     } else {
       in.body_carry.assign(s.body_carry.data(), s.body_carry.data() + 3 * N);
     }

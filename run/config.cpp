@@ -174,6 +174,7 @@ const Schema& schema() {
     k.add("model.physics_step_layer_collision", [](Config& c) -> bool& { return c.model.physics_step_layer_collision; }, "the physics step also pushes the outer layer out of the inner one (read with velocity_base physics only)");
     k.add("model.physics_step_friction", [](Config& c) -> double& { return c.model.physics_step_friction; }, "the physics step's contact friction: cloth within physics_step_friction_distance of the body is held to its tangential motion with this stiffness x the vertex mass (0 = frictionless; read with velocity_base physics only)", {0, 1e6, {}});
     k.add("model.physics_step_friction_distance", [](Config& c) -> double& { return c.model.physics_step_friction_distance; }, "scene units from the body surface (along its normal) within which the physics step's friction acts", {0, 10, {}});
+    k.add("model.physics_step_correction", [](Config& c) -> std::string& { return c.model.physics_step_correction; }, "how the network's correction joins the physics step: added after it, or solved through its last Newton system, so that springs and bending resist a correction that stretches or folds the cloth (needs velocity_base physics, one substep, no output_smoothing)", {0, 0, {"added", "solved"}});
     k.add("model.physics_step_inertia", [](Config& c) -> std::string& { return c.model.physics_step_inertia; }, "the physics step's inertia target: the cloth's velocity relative to the body surface kept (body) or Blender's 2x_t - x_{t-1} (world; read with velocity_base physics only)", {0, 0, {"body", "world"}});
     k.add("model.swing_kept", [](Config& c) -> double& { return c.model.swing_kept; }, "share of the cloth's velocity relative to the body surface that a zero output keeps (velocity_base body_inertia; 1 = all, 0 = the body base)", {0, 1, {}});
     k.add("model.carry_smoothing", [](Config& c) -> int& { return c.model.carry_smoothing; }, "averaging steps over the garment mesh on the body carry (velocity_base body or body_inertia); 0 = none", {0, 1000, {}});
@@ -438,6 +439,19 @@ void validate_config(const Config& config) {
     throw ConfigError(key("physics.friction", config.physics.friction) + " holds touching cloth where the body carries it, "
                       "as the physics step does, but " + key("model.velocity_base", "\"" + m.velocity_base + "\"") +
                       " carries no physics step; set model.velocity_base = \"physics\" or physics.friction = 0");
+  if (m.physics_step_correction == "solved") {
+    const std::string what = key("model.physics_step_correction", "\"solved\"") + " passes the correction through the physics step's linear system, but ";
+    if (m.velocity_base != "physics")
+      throw ConfigError(what + key("model.velocity_base", "\"" + m.velocity_base + "\"") +
+                        " takes no physics step; set model.velocity_base = \"physics\" or model.physics_step_correction = \"added\"");
+    if (m.physics_step_substeps != 1)
+      throw ConfigError(what + key("model.physics_step_substeps", m.physics_step_substeps) +
+                        " makes several systems; set model.physics_step_substeps = 1 or model.physics_step_correction = \"added\"");
+    if (m.output_smoothing > 0)
+      throw ConfigError(what + key("model.output_smoothing", m.output_smoothing) +
+                        " smooths the same correction another way; set model.output_smoothing = 0 or "
+                        "model.physics_step_correction = \"added\"");
+  }
   if (m.rotation_equivalent && 3 * m.decoder_ret_channels > m.width)
     throw ConfigError(key("model.decoder_ret_channels", m.decoder_ret_channels) + " needs 3 x that many channels, more "
                       "than " + key("model.width", m.width) + "; set model.decoder_ret_channels <= " +

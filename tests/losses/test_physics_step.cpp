@@ -1,6 +1,7 @@
 // The physics step (losses/physics_step.h): the exact minimiser where the energy is quadratic,
 // a stationary point of the full energy on a synthetic two-layer scene, pinned rows that keep
 // the guess, the two inertia targets, and the model's zero output taking the step.
+#include "autodiff/ops_solve.h"
 #include "dataset/sample.h"
 #include "dataset/synthetic.h"
 #include "losses/physics.h"
@@ -269,6 +270,65 @@ TEST(PhysicsStep, TakesTheModelsConjugateGradientIterations) {
   const PhysicsStepSettings settings = physics_step_settings(m);
   ASSERT_EQ(settings.cg_iterations, 1);
   EXPECT_EQ((physics_step_displacement(short_solve, seq.info, settings) - short_solve.physics_step).cwiseAbs().maxCoeff(), 0.f);
+}
+
+// The step's linear system (model.physics_step_correction = "solved") is its answer to a moved
+// inertia target: moving v_t by a small a moves the step's result by about A⁻¹ (s ⊙ a). The
+// system is symmetric and positive definite along a (pinned rows: tests/autodiff/test_gradcheck_solve.cpp).
+TEST(PhysicsStep, ItsSystemIsTheStepsAnswerToAMovedTarget) {
+  const dataset::Sequence seq = two_layers_with_wind();
+  ModelConfig m;
+  m.velocity_base = "physics";
+  m.physics_step_correction = "solved";
+  auto s = sample_for(seq, 5, m);
+  add_physics_step(s, seq.info, m);
+  const dataset::BlockSystem<float>& A = s.physics_system;
+  const int N = s.num_vertices();
+  ASSERT_EQ(static_cast<int>(A.offsets.size()), N + 1);
+  ASSERT_EQ(A.blocks.size(), 9 * A.columns.size());
+  // Symmetric: block (i, j) is the transpose of block (j, i).
+  auto block_at = [&](int i, int j) -> const float* {
+    for (int32_t k = A.offsets[i]; k < A.offsets[i + 1]; ++k)
+      if (A.columns[k] == j) return &A.blocks[9 * k];
+    return nullptr;
+  };
+  for (int i = 0; i < N; ++i) {
+    if (A.scale[i] == 0) {
+      ASSERT_EQ(A.offsets[i + 1] - A.offsets[i], 1) << "a pinned row holds only its identity block";
+    }
+    for (int32_t k = A.offsets[i]; k < A.offsets[i + 1]; ++k) {
+      const float* other = block_at(A.columns[k], i);
+      ASSERT_NE(other, nullptr) << i << ", " << A.columns[k];
+      for (int e = 0; e < 9; ++e) ASSERT_EQ(A.blocks[9 * k + e], other[3 * (e % 3) + e / 3]);
+    }
+  }
+  // The step again with every free v_t moved by a.
+  std::mt19937 rng(3);
+  std::normal_distribution<float> noise(0.f, 2e-3f);
+  dataset::TrainingSample moved = s;
+  std::vector<double> a(3 * N, 0.0);
+  for (int v = 0; v < N; ++v)
+    for (int c = 0; c < 3; ++c)
+      if (A.scale[v] > 0) moved.state(v, 3 + c) += static_cast<float>(a[3 * v + c] = noise(rng));
+  const dataset::Points delta = physics_step_displacement(moved, seq.info, physics_step_settings(m)) - s.physics_step;
+  ad::Tape<double> tape;
+  const std::vector<int32_t> offsets = A.offsets, columns = A.columns;
+  const std::vector<double> blocks(A.blocks.begin(), A.blocks.end()), scale(A.scale.begin(), A.scale.end());
+  const ad::Var<double> y = ad::block_spd_solve(tape, ad::BlockSpd<double>{offsets, columns, blocks, scale, 500, 1e-10},
+                                                tape.constant(a.data(), N, 3));
+  double diff = 0, norm = 0, positive = 0;
+  for (int k = 0; k < 3 * N; ++k) {
+    diff += std::pow(delta(k / 3, k % 3) - y.value[k], 2);
+    norm += y.value[k] * y.value[k];
+    positive += a[k] * y.value[k];  // aᵀ A⁻¹ S a > 0
+  }
+  std::cout << "step's answer against the system's: |diff| / |y| = " << std::sqrt(diff / norm) << "\n";
+  EXPECT_LT(std::sqrt(diff / norm), 0.15);  // 0.049 here: two Newton iterations, not the linear answer
+  EXPECT_GT(positive, 0.0);
+  // The solve damps the random (mostly stretching) a: it moves the cloth less than a.
+  double a_norm = 0;
+  for (double v : a) a_norm += v * v;
+  EXPECT_LT(norm, 0.5 * a_norm);
 }
 
 }  // namespace

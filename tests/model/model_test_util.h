@@ -1,11 +1,12 @@
 #pragma once
 // Shared fixtures for the model tests: a tiny configuration, a small synthetic sequence, and
-// its windows through the production road (dataset::build_sample -> model_input_from_sample,
-// losses::loss_input_from_sample); drawn values for parameters that start at zero.
+// its windows through the production road (dataset::build_sample -> losses::add_physics_step ->
+// model_input_from_sample, losses::loss_input_from_sample); drawn values for parameters that start at zero.
 #include "autodiff/params.h"
 #include "dataset/sample.h"
 #include "dataset/stats.h"
 #include "dataset/synthetic.h"
+#include "losses/physics_step.h"
 #include "losses/sample_loss_input.h"
 #include "model/model_config.h"
 #include "model/sample_input.h"
@@ -62,6 +63,7 @@ inline Window window(const dataset::Sequence& seq, const dataset::NormalisationS
                      int t = kFrame) {
   Window w;
   w.sample = dataset::build_sample(seq.info, seq.frames, t, stats, nullptr, sample_options_for(c));
+  losses::add_physics_step(w.sample, seq.info, c);  // as the trainer and the rollouts do
   w.input = model_input_from_sample(w.sample, stats, c);
   w.target = losses::loss_input_from_sample(w.sample, seq.info);
   return w;

@@ -39,7 +39,10 @@ double loss_value(ad::ParamStore<T>& ps, const ModelConfig& c, const LossConfig&
 
 // JAX check_grads style: <∇L, d> against the central difference along one random direction.
 // `after_init` may move parameters that start at zero, so that the paths behind them count.
-void directional_check(const ModelConfig& c, const std::function<void(ad::ParamStore<double>&)>& after_init = {}) {
+// The tiny scene's garments touch the body and each other, so the collision terms count too,
+// unless `collisions` is false (the physics step's prediction pushes the cloth out of the body).
+void directional_check(const ModelConfig& c, const std::function<void(ad::ParamStore<double>&)>& after_init = {},
+                       bool collisions = true) {
   const auto s = make_sample<double>(testing::tiny_scene(), c);
   ad::ParamStore<double> ps;
   register_params(ps, c);
@@ -68,8 +71,10 @@ void directional_check(const ModelConfig& c, const std::function<void(ad::ParamS
   EXPECT_GT(std::abs(numeric), 1e-6);
   EXPECT_NEAR(analytic, numeric, 1e-10 + 1e-4 * std::abs(numeric))
       << "attention " << c.attention << ", RET " << c.rotation_equivalent;
-  EXPECT_GT(terms.body_collisions, 0);
-  EXPECT_GT(terms.layer_collisions, 0);
+  if (collisions) {
+    EXPECT_GT(terms.body_collisions, 0);
+    EXPECT_GT(terms.layer_collisions, 0);
+  }
 }
 
 TEST(ModelGradcheck, WholeModelRiaRet) { directional_check(testing::tiny_config()); }
@@ -133,6 +138,35 @@ TEST(ModelGradcheck, WholeModelBodyBasePatchBaseInput) { check_base_input(&Model
 
 TEST(ModelGradcheck, WholeModelBodyBaseVertexBaseInput) {
   check_base_input(&ModelConfig::vertex_base_input, "decoder.base.weight");
+}
+
+// The correction solved through the physics step's system: a zero output is the step itself, as
+// with the added correction; a drawn output moves the cloth less than the same correction added
+// (the springs resist it), and the gradient through the solve holds.
+TEST(ModelGradcheck, WholeModelPhysicsBaseSolvedCorrection) {
+  auto added = testing::tiny_config();
+  added.velocity_base = "physics";
+  auto solved = added;
+  solved.physics_step_correction = "solved";
+  const auto sa = make_sample<double>(testing::tiny_scene(), added);
+  const auto ss = make_sample<double>(testing::tiny_scene(), solved);
+  ASSERT_TRUE(sa.input.system_offsets.empty());
+  ASSERT_EQ(static_cast<int64_t>(ss.input.system_offsets.size()), ss.input.N + 1);
+  ad::ParamStore<double> ps;
+  register_params(ps, solved);
+  init_params(ps, solved, 3);
+  auto predict = [&](const ModelConfig& cfg, const ModelInput<double>& in) {
+    ad::Tape<double> tape;
+    return Eigen::MatrixXd(forward(tape, ps, cfg, in).vertex.val());
+  };
+  EXPECT_EQ((predict(added, sa.input) - predict(solved, ss.input)).cwiseAbs().maxCoeff(), 0.0);
+  testing::draw_normal(ps, "decoder.proj.2.weight", 5);
+  const Eigen::MatrixXd a_added = predict(added, sa.input).rightCols(3), a_solved = predict(solved, ss.input).rightCols(3);
+  EXPECT_GT(a_added.norm(), 1e-6);
+  EXPECT_GT(a_solved.norm(), 0.0);
+  EXPECT_LT(a_solved.norm(), a_added.norm());
+  directional_check(
+      solved, [&](ad::ParamStore<double>& p) { testing::draw_normal(p, "decoder.proj.2.weight", 5); }, false);
 }
 
 // The wind force input: zero weights give the model without it (its initial state); drawn, they

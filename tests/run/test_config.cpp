@@ -293,6 +293,28 @@ TEST_F(ConfigTest, PhysicsFrictionNeedsThePhysicsBase) {
   }
 }
 
+TEST_F(ConfigTest, SolvedCorrectionNeedsOnePhysicsStepAndNoSmoothing) {
+  EXPECT_EQ(load_config({}, {"model.velocity_base=physics", "model.physics_step_correction=solved"}).model.physics_step_correction,
+            "solved");
+  EXPECT_EQ(load_config({}, {}).model.physics_step_correction, "added");
+  const std::vector<std::pair<std::vector<std::string>, std::string>> refused = {
+      {{"model.physics_step_correction=solved"}, "model.velocity_base = \"inertia\" (default)"},
+      {{"model.velocity_base=physics", "model.physics_step_correction=solved", "model.physics_step_substeps=2"},
+       "model.physics_step_substeps = 2 (set at --set"},
+      {{"model.velocity_base=physics", "model.physics_step_correction=solved", "model.output_smoothing=1"},
+       "model.output_smoothing = 1 (set at --set"},
+  };
+  for (const auto& [sets, named] : refused) {
+    try {
+      load_config({}, sets);
+      ADD_FAILURE() << "no ConfigError for " << named;
+    } catch (const ConfigError& e) {
+      EXPECT_NE(std::string(e.what()).find("model.physics_step_correction = \"solved\""), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find(named), std::string::npos) << e.what();
+    }
+  }
+}
+
 TEST_F(ConfigTest, SelfFedTruthOffNeedsThePhysicsEnergy) {
   const Config c = load_config({}, {"loss.self_fed_truth=0", "physics.weight=0.1"});
   EXPECT_EQ(c.loss.self_fed_truth, 0.0);
