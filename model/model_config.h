@@ -65,6 +65,7 @@ struct ModelConfig {
   // x_{t+1} = x_t + s + A⁻¹ (M a) (A the step's approximate Hessian at its result, M the masses;
   // TrainingSample::physics_system), so the springs and bending resist a correction that would
   // stretch or fold the cloth while a rigid one passes. One step per frame, no output_smoothing.
+  // "added" on validation (docs/decisions.md, "The correction solved through the step").
   std::string physics_step_correction = "added";
   // "body_inertia" only: the share of the relative velocity v_t − c_t a zero output keeps,
   // v_{t+1} = c + swing_kept (v_t − c_t) + a. 1 keeps the whole swing, 0 is "body"; between them
