@@ -1,5 +1,6 @@
 #include "autodiff/ops_solve.h"
 
+#include "autodiff/conjugate_gradients.h"
 #include "autodiff/ops_graph.h"
 
 #include <Eigen/Dense>
@@ -40,11 +41,10 @@ std::vector<double> solve(const BlockSpd<T>& A, const T* rhs, bool scale_rhs) {
         for (int e = 0; e < 9; ++e) d(e / 3, e % 3) = static_cast<double>(A.blocks[9 * k + e]);
         if (std::fabs(d.determinant()) > 1e-300) inverse_diagonal[r] = d.inverse();
       }
-  const std::size_t n = static_cast<std::size_t>(3 * N);
-  std::vector<double> x(n, 0.0), res(n), z(n), d(n), q(n);
+  std::vector<double> rhs_scaled(static_cast<std::size_t>(3 * N));
   for (int64_t r = 0; r < N; ++r)
     for (int c = 0; c < 3; ++c)
-      res[3 * r + c] = (scale_rhs ? static_cast<double>(A.scale[r]) : 1.0) * static_cast<double>(rhs[3 * r + c]);
+      rhs_scaled[3 * r + c] = (scale_rhs ? static_cast<double>(A.scale[r]) : 1.0) * static_cast<double>(rhs[3 * r + c]);
   auto multiply = [&](const std::vector<double>& p, std::vector<double>& y) {
     for (int64_t r = 0; r < N; ++r) {
       Eigen::Vector3d acc = Eigen::Vector3d::Zero();
@@ -64,28 +64,8 @@ std::vector<double> solve(const BlockSpd<T>& A, const T* rhs, bool scale_rhs) {
       for (int c = 0; c < 3; ++c) to[3 * r + c] = y[c];
     }
   };
-  auto dot = [](const std::vector<double>& a, const std::vector<double>& b) {
-    double s = 0;
-    for (std::size_t k = 0; k < a.size(); ++k) s += a[k] * b[k];
-    return s;
-  };
-  precondition(res, z);
-  d = z;
-  double rz = dot(res, z);
-  const double stop = static_cast<double>(A.tolerance) * static_cast<double>(A.tolerance) * rz;
-  for (int it = 0; it < A.iterations && rz > stop && rz > 0; ++it) {
-    multiply(d, q);
-    const double dq = dot(d, q);
-    if (!(dq > 0)) break;  // not positive definite along d: keep what we have
-    const double alpha = rz / dq;
-    for (std::size_t k = 0; k < n; ++k) x[k] += alpha * d[k], res[k] -= alpha * q[k];
-    precondition(res, z);
-    const double rz_next = dot(res, z);
-    const double beta = rz_next / rz;
-    rz = rz_next;
-    for (std::size_t k = 0; k < n; ++k) d[k] = z[k] + beta * d[k];
-  }
-  return x;
+  const double tolerance = static_cast<double>(A.tolerance);
+  return conjugate_gradients(std::move(rhs_scaled), multiply, precondition, A.iterations, tolerance * tolerance);
 }
 
 }  // namespace

@@ -1,5 +1,6 @@
 #include "losses/physics_step.h"
 
+#include "autodiff/conjugate_gradients.h"
 #include "dataset/neighbours.h"
 #include "autodiff/check.h"
 
@@ -217,33 +218,20 @@ dataset::BlockSystem<float> assemble_system(const PhysicsInput<double>& in, cons
 // Conjugate gradients on H p = −g over the free rows (fixed rows stay 0).
 Vec solve(const PhysicsInput<double>& in, const Hessian& h, const Vec& g, const std::vector<uint8_t>& fixed, int iterations) {
   const std::size_t N = h.diagonal.size();
-  Vec p(3 * N, 0.0), r(3 * N), z(3 * N), d(3 * N), q(3 * N);
+  Vec r(3 * N);
   for (std::size_t k = 0; k < 3 * N; ++k) r[k] = fixed[k / 3] ? 0.0 : -g[k];
+  auto multiply = [&](const Vec& p, Vec& y) {
+    h.multiply(in, p, y);
+    for (std::size_t k = 0; k < 3 * N; ++k)
+      if (fixed[k / 3]) y[k] = 0;
+  };
   auto precondition = [&](const Vec& from, Vec& to) {
     for (std::size_t v = 0; v < N; ++v) {
       const Eigen::Vector3d y = h.preconditioner[v] * Eigen::Vector3d(from[3 * v], from[3 * v + 1], from[3 * v + 2]);
       for (int c = 0; c < 3; ++c) to[3 * v + c] = y[c];
     }
   };
-  precondition(r, z);
-  d = z;
-  double rz = dot(r, z);
-  const double stop = 1e-8 * rz;  // relative residual 1e-4 in the preconditioned norm
-  for (int it = 0; it < iterations && rz > stop && rz > 0; ++it) {
-    h.multiply(in, d, q);
-    for (std::size_t k = 0; k < 3 * N; ++k)
-      if (fixed[k / 3]) q[k] = 0;
-    const double dq = dot(d, q);
-    if (!(dq > 0)) break;
-    const double alpha = rz / dq;
-    for (std::size_t k = 0; k < 3 * N; ++k) p[k] += alpha * d[k], r[k] -= alpha * q[k];
-    precondition(r, z);
-    const double rz_next = dot(r, z);
-    const double beta = rz_next / rz;
-    rz = rz_next;
-    for (std::size_t k = 0; k < 3 * N; ++k) d[k] = z[k] + beta * d[k];
-  }
-  return p;
+  return ad::conjugate_gradients(std::move(r), multiply, precondition, iterations, 1e-8);  // relative residual 1e-4
 }
 
 }  // namespace

@@ -596,20 +596,21 @@ Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
   Predictions<T> out;
   out.vertex = ad::add(tape, pred_rel, ad::gather_rows(tape, pred_patch, in.own_patch));
   out.patch = pred_patch;
-  // The correction is the acceleration column (world axes), which x and v contain once each.
-  if (cfg.output_smoothing > 0) {
+  // The correction is the acceleration column (world axes), which x and v contain once each:
+  // replacing it by f(a) moves all three by f(a) − a.
+  auto transform_correction = [&](auto&& f) {
     const Var<T> a = ad::slice_cols(tape, out.vertex, 6, 9);
-    const Var<T> change = ad::sub(tape, smooth_over_vertex_mesh(tape, in, a, cfg.output_smoothing), a);
+    const Var<T> change = ad::sub(tape, f(a), a);
     out.vertex = ad::add(tape, out.vertex, ad::concat_cols(tape, {change, change, change}));
-  }
+  };
+  if (cfg.output_smoothing > 0)
+    transform_correction([&](const Var<T>& a) { return smooth_over_vertex_mesh(tape, in, a, cfg.output_smoothing); });
   if (cfg.physics_step_correction == "solved") {
     LAYERSNET_CHECK(!in.system_offsets.empty(), "model.physics_step_correction = \"solved\" but the input has no "
                                                 "physics system: build it with model_input_from_sample");
     const ad::BlockSpd<T> system{in.system_offsets, in.system_columns, in.system_blocks, in.system_scale,
                                  cfg.physics_step_cg_iterations, T(1e-6)};
-    const Var<T> a = ad::slice_cols(tape, out.vertex, 6, 9);
-    const Var<T> change = ad::sub(tape, ad::block_spd_solve(tape, system, a), a);
-    out.vertex = ad::add(tape, out.vertex, ad::concat_cols(tape, {change, change, change}));
+    transform_correction([&](const Var<T>& a) { return ad::block_spd_solve(tape, system, a); });
   }
   return out;
 }
