@@ -4,6 +4,7 @@
 #define LAYERSNET_DENSE_OPS(X) \
   X(Linear, linear)            \
   X(LinearRelu, linear_relu)   \
+  X(Mlp, mlp)                  \
   X(Add, add)                  \
   X(Sub, sub)                  \
   X(Mul, mul)                  \

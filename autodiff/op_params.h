@@ -35,15 +35,24 @@ struct ConcatColsParams {
   std::span<const Var<T>> inputs;
 };
 
+// Mlp: the layers' weights (Cout_i, Cin_i) and biases (1, Cout_i) (empty Vars: no bias), and
+// whether the last layer is followed by a ReLU too.
+template <class T>
+struct MlpParams {
+  std::span<const Var<T>> weights, biases;
+  bool final_relu;
+};
+
 // SliceCols: out = x[:, first_col : first_col + out.cols].
 struct SliceColsParams {
   int64_t first_col;
 };
 
-// GatherRows: the source row of each output row. ScatterAddRows: the output row of each
-// input row.
+// GatherRows: the source row of each output row, and the first source column it copies.
+// ScatterAddRows: the output row of each input row (first_col 0).
 struct RowIndexParams {
   std::span<const int32_t> rows;
+  int64_t first_col = 0;
 };
 
 // SegmentSum, SegmentSoftmax: CSR offsets (S+1) over the input rows.
@@ -93,7 +102,7 @@ struct BlockSpd {
 
 template <class T>
 using OpParams = std::variant<std::monostate, ScaleParams<T>, HingeSqParams<T>, ReduceParams<T>, ConcatColsParams<T>,
-                              SliceColsParams, RowIndexParams, SegmentParams, RowNormalizeParams<T>, RotationParams,
+                              MlpParams<T>, SliceColsParams, RowIndexParams, SegmentParams, RowNormalizeParams<T>, RotationParams,
                               RiaParams<T>, BlockSpd<T>>;
 
 }  // namespace layersnet::ad

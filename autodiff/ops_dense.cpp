@@ -20,6 +20,15 @@ bool absent(const Var<T>& v) {
   return v.value == nullptr;
 }
 
+// dst[i] += src[i] for n values, over the threads in blocks.
+template <class T>
+void add_in_place(T* dst, const T* src, int64_t n) {
+  for_row_blocks(n / 256 + 1, 256, [&](int64_t b0, int64_t nb) {
+    const int64_t i0 = b0 * 256, i1 = std::min(n, (b0 + nb) * 256);
+    for (int64_t i = i0; i < i1; ++i) dst[i] += src[i];
+  });
+}
+
 // b broadcast to a's (N, C): b is (N, C), (1, C), (N, 1) or (1, 1).
 template <class T>
 void check_broadcast(const char* op, const Var<T>& a, const Var<T>& b) {
@@ -152,18 +161,41 @@ void for_linear_chunks(int64_t n, int64_t width, F&& f) {
 
 }  // namespace
 
-// out = x Wᵀ + b as one GEMM per chunk accumulating into rows pre-filled with the bias
-// (Eigen's `=` product would zero-fill first anyway, so the bias costs nothing); with
-// `relu`, max(., 0) is applied to each chunk right after its GEMM, while it is in cache.
-// x: (N, Cin); W: (Cout, Cin); b: (Cout) or null; out: (N, Cout).
+// Rows of a block small enough to stay in the L2 cache from the fill through the GEMM to the
+// ReLU, for outputs `width` wide (a narrow x makes the output's passes the main cost).
+int64_t cache_block_rows(int64_t width) { return std::max<int64_t>(64, (int64_t{64} << 10) / std::max<int64_t>(1, width)); }
+
+// out = residual + x Wᵀ + b (then max(., 0) with relu) for one block of n rows, serially: one
+// GEMM accumulating into rows pre-filled with the residual and the bias (Eigen's `=` product
+// would zero-fill first anyway, so both cost no extra pass). x: (n, Cin); W: (Cout, Cin);
+// b: (Cout) or null; residual: (n, Cout) or null; out: (n, Cout).
 template <class T>
-void linear_forward(const ConstMatMap<T>& x, const ConstMatMap<T>& W, const T* b, bool relu, MatMap<T> out) {
-  for_linear_chunks(x.rows(), x.cols() + W.rows(), [&](int64_t, int64_t r0, int64_t n) {
-    auto rows = out.middleRows(r0, n);
-    if (b) rows.rowwise() = ConstRowVecMap<T>(b, out.cols());
-    else rows.setZero();
-    rows.noalias() += x.middleRows(r0, n) * W.transpose();
-    if (relu) rows = rows.cwiseMax(T(0));
+void dense_block(const T* x, int64_t n, const ConstMatMap<T>& W, const T* b, const T* residual, bool relu, T* out) {
+  MatMap<T> rows(out, n, W.rows());
+  if (residual) {
+    const ConstMatMap<T> res(residual, n, W.rows());
+    if (b) rows = res.rowwise() + ConstRowVecMap<T>(b, W.rows());
+    else rows = res;
+  } else if (b) {
+    rows.rowwise() = ConstRowVecMap<T>(b, W.rows());
+  } else {
+    rows.setZero();
+  }
+  rows.noalias() += ConstMatMap<T>(x, n, W.cols()) * W.transpose();
+  if (relu) rows = rows.cwiseMax(T(0));
+}
+
+// out = residual + x Wᵀ + b (then ReLU), chunk by chunk over the threads and block by block
+// within a chunk. x: (N, Cin); W: (Cout, Cin); b: (Cout) or null; residual: (N, Cout) or
+// null; out: (N, Cout).
+template <class T>
+void linear_forward(const ConstMatMap<T>& x, const ConstMatMap<T>& W, const T* b, bool relu, MatMap<T> out,
+                    const T* residual = nullptr) {
+  const int64_t block = cache_block_rows(out.cols()), cin = x.cols(), cout = out.cols();
+  for_linear_chunks(x.rows(), cin + cout, [&](int64_t, int64_t c0, int64_t c_rows) {
+    for (int64_t r0 = c0; r0 < c0 + c_rows; r0 += block)
+      dense_block(x.data() + r0 * cin, std::min(block, c0 + c_rows - r0), W, b, residual ? residual + r0 * cout : nullptr,
+                  relu, out.data() + r0 * cout);
   });
 }
 
@@ -171,9 +203,10 @@ void linear_forward(const ConstMatMap<T>& x, const ConstMatMap<T>& W, const T* b
 // dy: (N, Cout); dx: (N, Cin) or null; dW: (Cout, Cin) or null; db: (Cout) or null.
 // With y (the relu output) and dz (N, Cout scratch) given, dy is first masked per chunk:
 // dz = dy * (y > 0), then used in place of dy.
+// With assign_dx, dx = dy W instead (dx need not be initialised).
 template <class T>
 void linear_backward(const ConstMatMap<T>& x, const ConstMatMap<T>& W, const ConstMatMap<T>& dy, T* dx, T* dW,
-                     T* db, const T* y = nullptr, T* dz = nullptr) {
+                     T* db, const T* y = nullptr, T* dz = nullptr, bool assign_dx = false) {
   const int64_t n = x.rows(), cin = x.cols(), cout = W.rows(), chunks = linear_chunks(n);
   // Per-chunk partials [dW_k (cout*cin) | db_k (cout)]; grows once, then reused.
   static thread_local std::vector<T> partial;
@@ -186,7 +219,8 @@ void linear_backward(const ConstMatMap<T>& x, const ConstMatMap<T>& W, const Con
       dz_k = (ConstMatMap<T>(y + r0 * cout, rows, cout).array() > T(0)).select(dy.middleRows(r0, rows), T(0));
     }
     const ConstMatMap<T> dy_k((y ? dz : dy.data()) + r0 * cout, rows, cout);
-    if (dx) MatMap<T>(dx + r0 * cin, rows, cin).noalias() += dy_k * W;
+    if (dx && assign_dx) MatMap<T>(dx + r0 * cin, rows, cin).noalias() = dy_k * W;
+    else if (dx) MatMap<T>(dx + r0 * cin, rows, cin).noalias() += dy_k * W;
     if (chunks == 1) {  // no partials: straight into the gradients
       if (dW) MatMap<T>(dW, cout, cin).noalias() += dy_k.transpose() * x.middleRows(r0, rows);
       if (db) RowVecMap<T>(db, cout) += dy_k.colwise().sum();
@@ -212,11 +246,15 @@ void linear_backward(const ConstMatMap<T>& x, const ConstMatMap<T>& W, const Con
 namespace {
 
 template <class T>
-Var<T> linear_op(Tape<T>& tape, const Var<T>& x, const Var<T>& W, const Var<T>& b, bool relu) {
+Var<T> linear_op(Tape<T>& tape, const Var<T>& x, const Var<T>& W, const Var<T>& b, bool relu,
+                 const Var<T>& residual = {}) {
   LAYERSNET_CHECK(x.cols == W.cols, "linear: x is (" << x.rows << ", " << x.cols << ") but W is (" << W.rows << ", "
                                                      << W.cols << "); W must be (Cout, Cin) in torch layout");
   LAYERSNET_CHECK(absent(b) || (b.rows == 1 && b.cols == W.rows),
                   "linear: bias is (" << b.rows << ", " << b.cols << "), expected (1, " << W.rows << ") or empty");
+  LAYERSNET_CHECK(absent(residual) || (residual.rows == x.rows && residual.cols == W.rows),
+                  "linear_add: the residual is (" << residual.rows << ", " << residual.cols << "), expected ("
+                                                  << x.rows << ", " << W.rows << ")");
   if (tape.matmul_precision() == MatmulPrecision::kBFloat16) {
     LAYERSNET_CHECK(!tape.recording(), "linear: matmul precision bf16 is for inference only, but the tape is recording; "
                                        "run the forward under ad::NoRecord, or set_matmul_precision(kFloat32) to train");
@@ -225,16 +263,17 @@ Var<T> linear_op(Tape<T>& tape, const Var<T>& x, const Var<T>& W, const Var<T>& 
         Var<T> out = tape.new_var(x.rows, W.rows, false);
         bf16_linear_forward(x.value, x.rows, x.cols, *bf16_cached_weights(W.value, W.rows, W.cols), b.value, relu,
                             out.value);
+        if (residual.value) add_in_place(out.value, residual.value, out.size());
         return out;
       }
     } else {
       LAYERSNET_CHECK(false, "linear: matmul precision bf16 needs a float tape (this one is double)");
     }
   }
-  const bool grad = tape.wants_grad({x, W, b});
+  const bool grad = tape.wants_grad({x, W, b, residual});
   Var<T> out = tape.new_var(x.rows, W.rows, grad);
-  linear_forward<T>({x.value, x.rows, x.cols}, {W.value, W.rows, W.cols}, b.value, relu, out.val());
-  if (grad) tape.record(relu ? OpKind::LinearRelu : OpKind::Linear, out, {x, W, b});
+  linear_forward<T>({x.value, x.rows, x.cols}, {W.value, W.rows, W.cols}, b.value, relu, out.val(), residual.value);
+  if (grad) tape.record(relu ? OpKind::LinearRelu : OpKind::Linear, out, {x, W, b, residual});
   return out;
 }
 
@@ -246,10 +285,17 @@ Var<T> linear(Tape<T>& tape, const Var<T>& x, const Var<T>& W, const Var<T>& b) 
 }
 
 template <class T>
+Var<T> linear_add(Tape<T>& tape, const Var<T>& x, const Var<T>& W, const Var<T>& b, const Var<T>& residual) {
+  LAYERSNET_CHECK(!absent(residual), "linear_add: the residual is empty; use linear");
+  return linear_op(tape, x, W, b, false, residual);
+}
+
+template <class T>
 void backward_linear(const Node<T>& node) {
-  const auto& [x, W, b, unused] = node.in;
+  const auto& [x, W, b, residual] = node.in;
   linear_backward<T>({x.value, x.rows, x.cols}, {W.value, W.rows, W.cols},
                      {node.out.grad, node.out.rows, node.out.cols}, x.grad, W.grad, b.grad);
+  if (residual.grad) add_in_place(residual.grad, node.out.grad, node.out.size());
 }
 
 template <class T>
@@ -263,6 +309,123 @@ void backward_linear_relu(const Node<T>& node) {
   linear_backward<T>({x.value, x.rows, x.cols}, {W.value, W.rows, W.cols},
                      {node.out.grad, node.out.rows, node.out.cols}, x.grad, W.grad, b.grad, node.out.value,
                      backward_scratch<T, kScratchLinearRelu>(static_cast<std::size_t>(node.out.size())));
+}
+
+// ---- mlp --------------------------------------------------------------------------------
+// Node: in[0] = x; MlpParams; saved = [h_1 (N, C_1) | ... | h_{k-1}] when recording.
+
+namespace {
+
+// Two hidden blocks of one thread (the layer's input and output), grown once, then reused.
+template <class T>
+T* mlp_block_scratch(std::size_t count) {
+  static thread_local std::vector<T> buffer;
+  if (buffer.size() < count) buffer.resize(count);
+  return buffer.data();
+}
+
+}  // namespace
+
+template <class T>
+Var<T> mlp(Tape<T>& tape, const Var<T>& x, std::span<const Var<T>> weights, std::span<const Var<T>> biases,
+           bool final_relu) {
+  const auto L = static_cast<int64_t>(weights.size());
+  LAYERSNET_CHECK(L >= 1 && biases.size() == weights.size(),
+                  "mlp: " << weights.size() << " weights and " << biases.size() << " biases; need one of each per layer");
+  bool grad = x.grad != nullptr;
+  int64_t cin = x.cols, hidden_total = 0, widest = 0, width_sum = x.cols;
+  for (int64_t i = 0; i < L; ++i) {
+    const Var<T>& W = weights[i];
+    const Var<T>& b = biases[i];
+    LAYERSNET_CHECK(W.cols == cin, "mlp: layer " << i << "'s weight is (" << W.rows << ", " << W.cols << ") but its input has "
+                                                 << cin << " columns; W must be (Cout, Cin) in torch layout");
+    LAYERSNET_CHECK(absent(b) || (b.rows == 1 && b.cols == W.rows),
+                    "mlp: layer " << i << "'s bias is (" << b.rows << ", " << b.cols << "), expected (1, " << W.rows
+                                  << ") or empty");
+    grad |= W.grad != nullptr || b.grad != nullptr;
+    if (i + 1 < L) hidden_total += W.rows;
+    widest = std::max(widest, W.rows);
+    width_sum += W.rows;
+    cin = W.rows;
+  }
+  grad = tape.recording() ? grad : tape.profiling();
+  const bool save = grad && tape.recording();
+  const int64_t N = x.rows;
+  Var<T> out = tape.new_var(N, cin, grad);
+  T* saved = save ? tape.scratch(static_cast<std::size_t>(N * hidden_total)) : nullptr;
+
+  // Per layer: bf16 packed weights where the matmul precision asks for them (as linear).
+  std::vector<std::shared_ptr<const Bf16PackedWeights>> packed(static_cast<std::size_t>(L));
+  if (tape.matmul_precision() == MatmulPrecision::kBFloat16) {
+    LAYERSNET_CHECK(!tape.recording(), "mlp: matmul precision bf16 is for inference only, but the tape is recording; "
+                                       "run the forward under ad::NoRecord, or set_matmul_precision(kFloat32) to train");
+    if constexpr (std::is_same_v<T, float>) {
+      for (int64_t i = 0; i < L; ++i) {
+        const Var<T>& W = weights[i];
+        if (W.cols >= kBf16MinChannels && W.rows >= kBf16MinChannels)
+          packed[i] = bf16_cached_weights(W.value, W.rows, W.cols);
+      }
+    } else {
+      LAYERSNET_CHECK(false, "mlp: matmul precision bf16 needs a float tape (this one is double)");
+    }
+  }
+
+  const int64_t block = cache_block_rows(widest);
+  for_linear_chunks(N, width_sum, [&](int64_t, int64_t c0, int64_t c_rows) {
+    T* ping = save ? nullptr : mlp_block_scratch<T>(static_cast<std::size_t>(2 * block * widest));
+    for (int64_t r0 = c0; r0 < c0 + c_rows; r0 += block) {
+      const int64_t n = std::min(block, c0 + c_rows - r0);
+      const T* a = x.value + r0 * x.cols;
+      int64_t offset = 0;  // of layer i's output in saved
+      for (int64_t i = 0; i < L; ++i) {
+        const Var<T>& W = weights[i];
+        const bool relu = i + 1 < L || final_relu;
+        T* dst = i + 1 == L ? out.value + r0 * W.rows
+                 : save     ? saved + offset + r0 * W.rows
+                            : ping + (i % 2) * block * widest;
+        if constexpr (std::is_same_v<T, float>) {
+          if (packed[i]) {
+            bf16_linear_forward(a, n, W.cols, *packed[i], biases[i].value, relu, dst);
+            a = dst, offset += N * W.rows;
+            continue;
+          }
+        }
+        dense_block<T>(a, n, {W.value, W.rows, W.cols}, biases[i].value, nullptr, relu, dst);
+        a = dst, offset += N * W.rows;
+      }
+    }
+  });
+  if (grad) {
+    const std::span<const Var<T>> w = tape.copy_to_arena(weights), b = tape.copy_to_arena(biases);
+    tape.record(OpKind::Mlp, out, {x}, MlpParams<T>{w, b, final_relu}).saved = saved;
+  }
+  return out;
+}
+
+template <class T>
+void backward_mlp(const Node<T>& node) {
+  const Var<T>& x = node.in[0];
+  const auto& prm = std::get<MlpParams<T>>(node.params);
+  const auto L = static_cast<int64_t>(prm.weights.size());
+  const int64_t N = x.rows;
+  std::vector<int64_t> offset(static_cast<std::size_t>(L), 0);  // of h_{i+1} in saved
+  for (int64_t i = 1; i < L; ++i) offset[i] = offset[i - 1] + N * prm.weights[i - 1].rows;
+  const T* g = node.out.grad;  // gradient of layer i's output
+  for (int64_t i = L - 1; i >= 0; --i) {
+    const Var<T>& W = prm.weights[i];
+    const Var<T>& b = prm.biases[i];
+    const bool relu = i + 1 < L || prm.final_relu;
+    const T* input = i == 0 ? x.value : node.saved + offset[i - 1];
+    const T* y = !relu ? nullptr : i + 1 == L ? node.out.value : node.saved + offset[i];
+    T* dz = relu ? backward_scratch<T, kScratchLinearRelu>(static_cast<std::size_t>(N * W.rows)) : nullptr;
+    const auto in_size = static_cast<std::size_t>(N * W.cols);
+    T* dx = i == 0 ? x.grad
+            : i % 2 ? backward_scratch<T, kScratchMlpGradA>(in_size)
+                    : backward_scratch<T, kScratchMlpGradB>(in_size);
+    linear_backward<T>({input, N, W.cols}, {W.value, W.rows, W.cols}, {g, N, W.rows}, dx, W.grad, b.grad, y, dz,
+                       /*assign_dx=*/i > 0);
+    g = dx;
+  }
 }
 
 // ---- add, sub, mul, div ---------------------------------------------------------------------
@@ -660,6 +823,8 @@ void backward_squared_error(const Node<T>& node) {
 #define LAYERSNET_INSTANTIATE(T)                                                                   \
   template Var<T> linear<T>(Tape<T>&, const Var<T>&, const Var<T>&, const Var<T>&);                \
   template Var<T> linear_relu<T>(Tape<T>&, const Var<T>&, const Var<T>&, const Var<T>&);           \
+  template Var<T> linear_add<T>(Tape<T>&, const Var<T>&, const Var<T>&, const Var<T>&, const Var<T>&); \
+  template Var<T> mlp<T>(Tape<T>&, const Var<T>&, std::span<const Var<T>>, std::span<const Var<T>>, bool);  \
   template Var<T> add<T>(Tape<T>&, const Var<T>&, const Var<T>&);                                  \
   template Var<T> sub<T>(Tape<T>&, const Var<T>&, const Var<T>&);                                  \
   template Var<T> mul<T>(Tape<T>&, const Var<T>&, const Var<T>&);                                  \

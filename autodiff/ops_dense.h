@@ -41,12 +41,31 @@ namespace layersnet::ad {
 template <class T>
 Var<T> linear(Tape<T>& tape, const Var<T>& x, const Var<T>& W, const Var<T>& b = {});
 
+// out = residual + x Wᵀ + b: a linear layer with a residual connection, in one pass (the
+// residual and the bias fill the output rows the GEMM accumulates into, so the sum costs no
+// separate Add over the output). residual: (N, Cout), not empty; other shapes as linear.
+// Backward as linear, plus d residual += dy. Recorded as a Linear node.
+template <class T>
+Var<T> linear_add(Tape<T>& tape, const Var<T>& x, const Var<T>& W, const Var<T>& b, const Var<T>& residual);
+
 // out = max(x Wᵀ + b, 0): linear followed by ReLU, fused (the FFN/MLP hidden layers).
 // Saves the separate ReLU tensor and its memory passes: the max is taken on each row chunk
 // right after its GEMM, and backward masks dy chunk by chunk just before its GEMMs.
 // Shapes as linear.
 template <class T>
 Var<T> linear_relu(Tape<T>& tape, const Var<T>& x, const Var<T>& W, const Var<T>& b = {});
+
+// A chain of linear layers with a ReLU after each but the last (and after the last too with
+// final_relu): h_0 = x, h_i = ReLU(h_{i-1} W_iᵀ + b_i), out = h_k. x: (N, Cin);
+// weights[i]: (C_{i+1}, C_i) with C_0 = Cin; biases: one per layer, (1, C_{i+1}) or empty;
+// out: (N, C_k). The same function as linear / linear_relu layer by layer, computed a block
+// of rows at a time through every layer, so that the hidden rows of a block stay in cache
+// (an inference forward writes no hidden activation to memory; a recording one saves them
+// for backward). Rows are cut into chunks as in linear, so results do not depend on the
+// thread count. bf16 matmul precision applies per layer as in linear.
+template <class T>
+Var<T> mlp(Tape<T>& tape, const Var<T>& x, std::span<const Var<T>> weights, std::span<const Var<T>> biases,
+           bool final_relu);
 
 // ---- elementwise, with broadcasting of b ---------------------------------------------------
 

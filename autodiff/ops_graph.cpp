@@ -15,28 +15,29 @@ constexpr int64_t kColumnBlock = 32;
 
 // ---- kernels (no tape, no allocation) ---------------------------------------------------
 
-// out[e, :] = x[idx[e], :]            x: (M, C), idx: (E), out: (E, C)
+// out[e, :] = x[idx[e], :cols]       x: (M, ·) rows `x_stride` apart, idx: (E), out: (E, cols)
 template <class T>
-void gather_rows_forward(const T* x, const int32_t* idx, int64_t n_edges, int64_t cols, T* out) {
+void gather_rows_forward(const T* x, int64_t x_stride, const int32_t* idx, int64_t n_edges, int64_t cols, T* out) {
 #pragma omp parallel for schedule(static) if (n_edges * cols > kParallelMin)
   for (int64_t e = 0; e < n_edges; ++e) {
-    const T* src = x + int64_t{idx[e]} * cols;
+    const T* src = x + int64_t{idx[e]} * x_stride;
     std::copy(src, src + cols, out + e * cols);
   }
 }
 
-// out[idx[e], :] += x[e, :]           x: (E, C), idx: (E), out: (M, C)
+// out[idx[e], :cols] += x[e, :]       x: (E, cols), idx: (E), out: (M, ·) rows `out_stride` apart
 // Parallel over column blocks; each block walks the edges in order, so the sum order of
 // every element is the edge order whatever the thread count.
 template <class T>
-void scatter_add_rows_kernel(const T* x, const int32_t* idx, int64_t n_edges, int64_t cols, T* out) {
+void scatter_add_rows_kernel(const T* x, const int32_t* idx, int64_t n_edges, int64_t cols, T* out,
+                             int64_t out_stride) {
   const int64_t n_blocks = (cols + kColumnBlock - 1) / kColumnBlock;
 #pragma omp parallel for schedule(static) if (n_edges * cols > kParallelMin && n_blocks > 1)
   for (int64_t b = 0; b < n_blocks; ++b) {
     const int64_t c0 = b * kColumnBlock, c1 = std::min(cols, c0 + kColumnBlock);
     for (int64_t e = 0; e < n_edges; ++e) {
       const T* src = x + e * cols;
-      T* dst = out + int64_t{idx[e]} * cols;
+      T* dst = out + int64_t{idx[e]} * out_stride;
       for (int64_t c = c0; c < c1; ++c) dst[c] += src[c];
     }
   }
@@ -127,24 +128,32 @@ void check_indices(const char* what, std::span<const int32_t> idx, int64_t bound
 }
 
 // ---- gather_rows ------------------------------------------------------------------------
-// Node: in[0] = x; RowIndexParams::rows = idx (E).
+// Node: in[0] = x; RowIndexParams::rows = idx (E), first_col = c0.
 template <class T>
-Var<T> gather_rows(Tape<T>& tape, const Var<T>& x, std::span<const int32_t> idx) {
+Var<T> gather_rows(Tape<T>& tape, const Var<T>& x, std::span<const int32_t> idx, int64_t c0, int64_t c1) {
   check_indices("gather_rows", idx, x.rows);
+  LAYERSNET_CHECK(0 <= c0 && c0 <= c1 && c1 <= x.cols,
+                  "gather_rows: columns [" << c0 << ", " << c1 << ") are not within the " << x.cols << " of x");
   const auto n = static_cast<int64_t>(idx.size());
   const bool grad = tape.wants_grad({x});
-  Var<T> out = tape.new_var(n, x.cols, grad);
-  gather_rows_forward(x.value, idx.data(), n, x.cols, out.value);
-  if (grad) tape.record(OpKind::GatherRows, out, {x}, RowIndexParams{tape.copy_to_arena(idx)});
+  Var<T> out = tape.new_var(n, c1 - c0, grad);
+  gather_rows_forward(x.value + c0, x.cols, idx.data(), n, c1 - c0, out.value);
+  if (grad) tape.record(OpKind::GatherRows, out, {x}, RowIndexParams{tape.copy_to_arena(idx), c0});
   return out;
+}
+
+template <class T>
+Var<T> gather_rows(Tape<T>& tape, const Var<T>& x, std::span<const int32_t> idx) {
+  return gather_rows(tape, x, idx, 0, x.cols);
 }
 
 template <class T>
 void backward_gather_rows(const Node<T>& node) {
   const Var<T>& x = node.in[0];
+  const auto& params = std::get<RowIndexParams>(node.params);
   if (x.grad)
-    scatter_add_rows_kernel(node.out.grad, std::get<RowIndexParams>(node.params).rows.data(), node.out.rows, x.cols,
-                            x.grad);
+    scatter_add_rows_kernel(node.out.grad, params.rows.data(), node.out.rows, node.out.cols, x.grad + params.first_col,
+                            x.cols);
 }
 
 // ---- scatter_add_rows -------------------------------------------------------------------
@@ -156,7 +165,7 @@ Var<T> scatter_add_rows(Tape<T>& tape, const Var<T>& x, std::span<const int32_t>
   check_indices("scatter_add_rows", idx, n_out);
   const bool grad = tape.wants_grad({x});
   Var<T> out = tape.zeros(n_out, x.cols, grad);
-  scatter_add_rows_kernel(x.value, idx.data(), x.rows, x.cols, out.value);
+  scatter_add_rows_kernel(x.value, idx.data(), x.rows, x.cols, out.value, x.cols);
   if (grad) tape.record(OpKind::ScatterAddRows, out, {x}, RowIndexParams{tape.copy_to_arena(idx)});
   return out;
 }
@@ -244,6 +253,7 @@ void backward_concat_rows(const Node<T>& node) {
 
 #define LAYERSNET_INSTANTIATE(T)                                                                \
   template Var<T> gather_rows<T>(Tape<T>&, const Var<T>&, std::span<const int32_t>);           \
+  template Var<T> gather_rows<T>(Tape<T>&, const Var<T>&, std::span<const int32_t>, int64_t, int64_t); \
   template Var<T> scatter_add_rows<T>(Tape<T>&, const Var<T>&, std::span<const int32_t>, int64_t); \
   template Var<T> segment_sum<T>(Tape<T>&, const Var<T>&, std::span<const int32_t>);           \
   template Var<T> segment_softmax<T>(Tape<T>&, const Var<T>&, std::span<const int32_t>);       \

@@ -24,6 +24,10 @@ namespace layersnet::ad {
 // Backward scatter-adds into x (rows used twice get both contributions).
 template <class T>
 Var<T> gather_rows(Tape<T>& tape, const Var<T>& x, std::span<const int32_t> idx);
+// out[e, :] = x[idx[e], c0:c1]: the gather of a column range, without the full rows' copy.
+// x: (M, C), 0 <= c0 <= c1 <= C -> (E, c1 - c0). Backward scatter-adds into those columns.
+template <class T>
+Var<T> gather_rows(Tape<T>& tape, const Var<T>& x, std::span<const int32_t> idx, int64_t c0, int64_t c1);
 
 // out[k, :] = sum_{e : idx[e] = k} x[e, :].     x: (E, C), idx: (E) in [0, n_out) -> (n_out, C)
 // Rows no edge points to are zero. Sums in edge order.

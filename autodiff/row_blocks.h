@@ -72,6 +72,14 @@ T* backward_scratch(std::size_t count) {
 }
 
 // Slots of backward_scratch (one per buffer an op needs at the same time).
-enum ScratchSlot : int { kScratchLinearRelu, kScratchRiaWeights, kScratchRiaSenders, kScratchRotMapU, kScratchRotMapT };
+enum ScratchSlot : int {
+  kScratchLinearRelu,
+  kScratchRiaWeights,
+  kScratchRiaSenders,
+  kScratchRotMapU,
+  kScratchRotMapT,
+  kScratchMlpGradA,
+  kScratchMlpGradB
+};
 
 }  // namespace layersnet::ad

@@ -6,6 +6,7 @@
 #include "model/params_layout.h"
 #include "model/tape_helpers.h"
 
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <vector>
@@ -197,13 +198,14 @@ Var<T> rotation_map_impl(ad::Tape<T>& tape, const ParamView<T>& p, const ModelCo
 }
 
 // ψ with RET for the inter edges of group g: φ(R)ᵀ ReLU(A_g φ(R) v + c_g), φ(R) = W_g R W_gᵀ (eq. 10–11).
-template <class T>
+// group_input(g) gives v's columns of group g, (E, head_dim).
+template <class T, class GroupInput>
 Var<T> inter_messages(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfig& cfg, const ModelDims& m,
-                      const std::string& prefix, const Var<T>& v, const Var<T>& rot) {
+                      const std::string& prefix, GroupInput&& group_input, const Var<T>& rot) {
   std::vector<Var<T>> parts;
   for (int g = 0; g < m.groups; ++g) {
     const std::string gs = std::to_string(g);
-    Var<T> y = ad::slice_cols(tape, v, g * m.head_dim, (g + 1) * m.head_dim);
+    Var<T> y = group_input(g);
     Var<T> W;
     if (cfg.rotation_equivalent) {
       W = rotation_map_impl(tape, p, cfg, prefix + "rot_mapping." + gs + ".weight");
@@ -229,10 +231,8 @@ Streams<T> encoder_layer(ad::Tape<T>& tape, const ParamView<T>& p, const ModelCo
   StageClock attention_clock(opt.times, &StageTimes::attention_ms);
   // r = W_r x + W_m R + R;  s = W_s x + W_m S + S (every token);  q = W_q x.
   const Var<T> Wm = p(at + "memory_weight.weight");
-  const Var<T> r = ad::add(tape, ad::add(tape, ad::linear(tape, Xp, p(at + "receiver_weight.weight")),
-                                         ad::linear(tape, st.R, Wm)), st.R);
-  const Var<T> s = ad::add(tape, ad::add(tape, ad::linear(tape, st.X, p(at + "sender_weight.weight")),
-                                         ad::linear(tape, st.S, Wm)), st.S);
+  const Var<T> r = ad::linear_add(tape, st.R, Wm, {}, ad::linear_add(tape, Xp, p(at + "receiver_weight.weight"), {}, st.R));
+  const Var<T> s = ad::linear_add(tape, st.S, Wm, {}, ad::linear_add(tape, st.X, p(at + "sender_weight.weight"), {}, st.S));
   const Var<T> q = ad::linear(tape, Xp, p(at + "q_proj.weight"));
   Var<T> out;
   StageClock edges_clock(opt.times, &StageTimes::attention_edges_ms);
@@ -242,10 +242,13 @@ Streams<T> encoder_layer(ad::Tape<T>& tape, const ParamView<T>& p, const ModelCo
     const auto ria = ad::rot_inv_attention(tape, q, r, s, graph, scale, static_cast<T>(kEps));
     out = ria.out;
     if (!gr.fused_inter_pos.empty()) {
-      const Var<T> wi = ad::slice_cols(tape, ad::gather_rows(tape, ria.weights, gr.fused_inter_pos), 0, G);
+      const Var<T> wi = ad::gather_rows(tape, ria.weights, gr.fused_inter_pos, 0, G);
       StageClock inter_clock(opt.times, &StageTimes::attention_inter_ms);
-      const Var<T> fi = ad::slice_cols(
-          tape, ad::add(tape, ad::gather_rows(tape, r, gr.inter_recv), ad::gather_rows(tape, s, gr.inter_send)), 0, half);
+      // The edge vectors r + s of the world heads, gathered group by group.
+      const auto fi = [&](int g) {
+        const int64_t c0 = g * m.head_dim, c1 = c0 + m.head_dim;
+        return ad::add(tape, ad::gather_rows(tape, r, gr.inter_recv, c0, c1), ad::gather_rows(tape, s, gr.inter_send, c0, c1));
+      };
       const Var<T> u = inter_messages(tape, p, cfg, m, at, fi, inter_rot);
       const Var<T> msg_inter = ad::segment_sum(tape, head_scale(tape, wi, u, G), gr.inter_offsets);
       inter_clock.stop();
@@ -266,7 +269,8 @@ Streams<T> encoder_layer(ad::Tape<T>& tape, const ParamView<T>& p, const ModelCo
       StageClock inter_clock(opt.times, &StageTimes::attention_inter_ms);
       const Var<T> fi = ad::gather_rows(tape, tw.f, gr.inter_pos);
       const Var<T> ai = ad::gather_rows(tape, aw, gr.inter_pos);
-      const Var<T> u = inter_messages(tape, p, cfg, m, at, fi, inter_rot);
+      const auto fi_group = [&](int g) { return ad::slice_cols(tape, fi, g * m.head_dim, (g + 1) * m.head_dim); };
+      const Var<T> u = inter_messages(tape, p, cfg, m, at, fi_group, inter_rot);
       msg_inter = ad::segment_sum(tape, head_scale(tape, ai, u, G), gr.inter_offsets);
     }
     // Mesh heads: mesh-adjacent patches and the garment's attribute token.
@@ -278,13 +282,11 @@ Streams<T> encoder_layer(ad::Tape<T>& tape, const ParamView<T>& p, const ModelCo
   }
   edges_clock.stop();
   out = ad::add(tape, ad::mul(tape, out, p(at + "n_weight")), p(at + "n_bias"));
-  const Var<T> x_attn = ad::linear(tape, out, p(at + "proj.weight"), p(at + "proj.bias"));
-  attention_clock.stop();
-  StageClock ffn_clock(opt.times, &StageTimes::ffn_ms);
-
   // Post-LN: patches LN0(x + attn); other tokens get no attention: LN0(2x). Then LN1(y + FFN(y)).
   // The other tokens' update is dead after the last layer (only patch tokens are decoded).
-  Var<T> y0 = ad::add(tape, Xp, x_attn);
+  Var<T> y0 = ad::linear_add(tape, out, p(at + "proj.weight"), p(at + "proj.bias"), Xp);
+  attention_clock.stop();
+  StageClock ffn_clock(opt.times, &StageTimes::ffn_ms);
   if (!last) y0 = ad::concat_rows(tape, y0, ad::scale(tape, rows_of(st.X, P, st.X.rows), T(2)));
   const Var<T> y = norm(tape, p, pre + "norms.0", y0);
   Streams<T> next;
@@ -520,9 +522,9 @@ Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
 
   // The decoder MLP decoder.proj with its first-layer weight given (factored and/or with local columns).
   auto decode = [&](const Var<T>& f, const Var<T>& W_first) {
-    const Var<T> h = ad::linear_relu(tape, f, W_first, p("decoder.proj.0.bias"));
-    const Var<T> h2 = ad::linear_relu(tape, h, p("decoder.proj.1.weight"), p("decoder.proj.1.bias"));
-    return ad::linear(tape, h2, p("decoder.proj.2.weight"), p("decoder.proj.2.bias"));
+    const std::array<Var<T>, 3> weights{W_first, p("decoder.proj.1.weight"), p("decoder.proj.2.weight")};
+    const std::array<Var<T>, 3> biases{p("decoder.proj.0.bias"), p("decoder.proj.1.bias"), p("decoder.proj.2.bias")};
+    return ad::mlp(tape, f, std::span<const Var<T>>(weights), std::span<const Var<T>>(biases), false);
   };
 
   Var<T> a_p, a_e;  // decoder outputs (local frame): per patch (P, 3), per candidate (Ec, 3)

@@ -79,15 +79,17 @@ struct ParamView {
 };
 
 // MLP "prefix.{i}.{weight,bias}" of n linears, ReLU between them and, if final_relu, after the last.
+// One fused op (ad::mlp): the hidden rows stay in cache.
 template <class T>
-Var<T> mlp(ad::Tape<T>& tape, const ParamView<T>& p, const std::string& prefix, int n, bool final_relu, Var<T> x,
+Var<T> mlp(ad::Tape<T>& tape, const ParamView<T>& p, const std::string& prefix, int n, bool final_relu, const Var<T>& x,
            bool bias = true) {
+  std::vector<Var<T>> weights, biases;
   for (int i = 0; i < n; ++i) {
     const std::string k = prefix + "." + std::to_string(i);
-    const Var<T> W = p(k + ".weight"), b = bias ? p(k + ".bias") : Var<T>{};
-    x = (i + 1 < n || final_relu) ? ad::linear_relu(tape, x, W, b) : ad::linear(tape, x, W, b);
+    weights.push_back(p(k + ".weight"));
+    biases.push_back(bias ? p(k + ".bias") : Var<T>{});
   }
-  return x;
+  return ad::mlp(tape, x, std::span<const Var<T>>(weights), std::span<const Var<T>>(biases), final_relu);
 }
 
 template <class T>

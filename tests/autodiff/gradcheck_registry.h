@@ -6,6 +6,7 @@
 #include "autodiff/gradcheck.h"
 
 #include <gtest/gtest.h>
+#include <omp.h>
 
 #include <random>
 #include <set>
@@ -36,6 +37,31 @@ inline RowMat<double> random_matrix(int64_t rows, int64_t cols, unsigned seed, d
   RowMat<double> m(rows, cols);
   for (int64_t k = 0; k < m.size(); ++k) m.data()[k] = u(rng);
   return m;
+}
+
+// Runs f once with 1 thread and once with 2 threads; the outputs and gradients must be
+// bit-identical (the reductions sum in a fixed order).
+inline void expect_thread_count_invariant(const GradcheckFn& f, const std::vector<GradcheckInput>& inputs) {
+  const int saved = omp_get_max_threads();
+  GradcheckOptions opt;
+  opt.max_coords = 1;  // only the analytic gradients matter here
+  omp_set_num_threads(1);
+  const GradcheckReport one = gradcheck(f, inputs, opt);
+  omp_set_num_threads(2);
+  const GradcheckReport two = gradcheck(f, inputs, opt);
+  omp_set_num_threads(saved);
+  EXPECT_TRUE((one.output.array() == two.output.array()).all());
+  ASSERT_EQ(one.gradients.size(), two.gradients.size());
+  for (std::size_t i = 0; i < one.gradients.size(); ++i)
+    EXPECT_TRUE((one.gradients[i].array() == two.gradients[i].array()).all()) << "input " << i;
+}
+
+// Large inputs: a sample of coordinates is enough (each one costs two threaded forwards,
+// which are slow when the machine is oversubscribed).
+inline GradcheckOptions large_options() {
+  GradcheckOptions opt;
+  opt.max_coords = 12;
+  return opt;
 }
 
 }  // namespace layersnet::ad::testing

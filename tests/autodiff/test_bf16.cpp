@@ -12,6 +12,7 @@
 #include <gtest/gtest.h>
 #include <omp.h>
 
+#include <array>
 #include <bit>
 #include <cmath>
 #include <cstdlib>
@@ -258,6 +259,40 @@ TEST(Bf16Linear, UsesTheKernelWithoutRecordingAndRepacksChangedWeights) {
     std::memcpy(fl.data(), y.value, sizeof(float) * fl.size());
   }
   EXPECT_NE(std::memcmp(fl.data(), direct.data(), sizeof(float) * fl.size()), 0);
+}
+
+TEST(Bf16Linear, MlpRunsItsWideLayersOnTheKernel) {
+  // 40 -> 300 -> 300 -> 3 over 1,000 rows: several cache blocks and chunks; the last layer is
+  // narrow and stays float, as in linear.
+  const int64_t n = 1000, c0 = 40, c1 = 300, c2 = 3;
+  const auto x = random_floats(n * c0, 81), W0 = random_floats(c1 * c0, 82, 0.3f), W1 = random_floats(c1 * c1, 83, 0.1f),
+             W2 = random_floats(c2 * c1, 84, 0.1f), b0 = random_floats(c1, 85), b1 = random_floats(c1, 86),
+             b2 = random_floats(c2, 87);
+  Tape<float> tape;
+  NoRecord<float> off(tape);
+  MatmulPrecisionScope<float> bf16(tape, MatmulPrecision::kBFloat16);
+  const Var<float> xv = tape.constant(x.data(), n, c0);
+  const std::array<Var<float>, 3> w{tape.constant(W0.data(), c1, c0), tape.constant(W1.data(), c1, c1),
+                                    tape.constant(W2.data(), c2, c1)};
+  const std::array<Var<float>, 3> b{tape.constant(b0.data(), 1, c1), tape.constant(b1.data(), 1, c1),
+                                    tape.constant(b2.data(), 1, c2)};
+  const Var<float> fused = mlp(tape, xv, std::span<const Var<float>>(w), std::span<const Var<float>>(b), false);
+  const Var<float> layered = linear(tape, linear_relu(tape, linear_relu(tape, xv, w[0], b[0]), w[1], b[1]), w[2], b[2]);
+  float worst = 0, largest = 0;
+  for (int64_t k = 0; k < fused.size(); ++k) {
+    worst = std::max(worst, std::abs(fused.value[k] - layered.value[k]));
+    largest = std::max(largest, std::abs(layered.value[k]));
+  }
+  EXPECT_GT(largest, 0.1f);
+  EXPECT_LE(worst, 1e-5f * largest);
+  // And it is not the float result: the kernel ran.
+  MatmulPrecisionScope<float> f32(tape, MatmulPrecision::kFloat32);
+  const Var<float> exact = mlp(tape, xv, std::span<const Var<float>>(w), std::span<const Var<float>>(b), false);
+  EXPECT_NE(std::memcmp(exact.value, fused.value, sizeof(float) * fused.size()), 0);
+  // bf16 on a recording tape throws, as in linear.
+  tape.set_recording(true);
+  tape.set_matmul_precision(MatmulPrecision::kBFloat16);
+  EXPECT_THROW(mlp(tape, xv, std::span<const Var<float>>(w), std::span<const Var<float>>(b), false), CheckError);
 }
 
 TEST(Bf16Linear, NarrowProductsStayFloat) {

@@ -86,6 +86,108 @@ GRADCHECK_TEST(Linear, LargeMagnitudes) {
                    opt);
 }
 
+GRADCHECK_TEST(Linear, WithResidual) {
+  const auto f = [](Tape<double>& t, const Vars& v) { return linear_add(t, v[0], v[1], v[2], v[3]); };
+  const RowMat<double> x = random_matrix(6, 5, 93), w = random_matrix(3, 5, 94), b = random_matrix(1, 3, 95),
+                       r = random_matrix(6, 3, 96);
+  const GradcheckReport rep = expect_gradcheck(OpKind::Linear, f, {{x}, {w}, {b}, {r}});
+  const RowMat<double> expected = ((x * w.transpose()).rowwise() + b.row(0)) + r;
+  EXPECT_TRUE(rep.output.isApprox(expected, 1e-12));
+}
+
+GRADCHECK_TEST(Linear, WithResidualWithoutBiasOverThreads) {
+  // Enough rows for several chunks on the threads; the residual is also the GEMM's input, as
+  // in the model's memory streams (r = R + x W_rᵀ + R W_mᵀ).
+  const auto f = [](Tape<double>& t, const Vars& v) { return linear_add(t, v[0], v[1], {}, v[0]); };
+  const std::vector<GradcheckInput> in = {{random_matrix(700, 8, 97)}, {random_matrix(8, 8, 98)}};
+  const GradcheckReport rep = expect_gradcheck(OpKind::Linear, f, in, large_options());
+  const RowMat<double> x = random_matrix(700, 8, 97);
+  EXPECT_TRUE(rep.output.isApprox(x * random_matrix(8, 8, 98).transpose() + x, 1e-12));
+  expect_thread_count_invariant(f, in);
+}
+
+TEST(Linear, RejectsAResidualOfAnotherShape) {
+  Tape<double> tape;
+  const RowMat<double> x = random_matrix(4, 3, 99), w = random_matrix(2, 3, 100), r = random_matrix(4, 3, 101);
+  const Var<double> xv = tape.leaf(x.data(), 4, 3), wv = tape.leaf(w.data(), 2, 3), rv = tape.leaf(r.data(), 4, 3);
+  EXPECT_THROW(linear_add(tape, xv, wv, {}, rv), CheckError);
+  EXPECT_THROW(linear_add(tape, xv, wv, {}, Var<double>{}), CheckError);
+}
+
+// ---- mlp ----------------------------------------------------------------------------------
+
+namespace {
+
+// The same layers as separate linear / linear_relu ops: the reference of the fused op.
+Var<double> mlp_by_layers(Tape<double>& t, Var<double> x, const Vars& w, const Vars& b, bool final_relu) {
+  for (std::size_t i = 0; i < w.size(); ++i)
+    x = (i + 1 < w.size() || final_relu) ? linear_relu(t, x, w[i], b[i]) : linear(t, x, w[i], b[i]);
+  return x;
+}
+
+}  // namespace
+
+GRADCHECK_TEST(Mlp, ThreeLayersMatchTheLayersOneByOne) {
+  // Pre-activations kept off the ReLU's kink: biases of 0.3 in magnitude, small weights.
+  const auto f = [](Tape<double>& t, const Vars& v) {
+    const Vars w{v[1], v[2], v[3]}, b{v[4], Var<double>{}, v[5]};
+    return mlp(t, v[0], std::span<const Var<double>>(w), std::span<const Var<double>>(b), false);
+  };
+  const std::vector<GradcheckInput> in = {{random_matrix(7, 4, 110)},    {random_matrix(6, 4, 111)},
+                                          {random_matrix(5, 6, 112)},    {random_matrix(2, 5, 113)},
+                                          {random_matrix(1, 6, 114)},    {random_matrix(1, 2, 115)}};
+  const GradcheckReport rep = expect_gradcheck(OpKind::Mlp, f, in);
+  const auto g = [](Tape<double>& t, const Vars& v) {
+    return mlp_by_layers(t, v[0], {v[1], v[2], v[3]}, {v[4], Var<double>{}, v[5]}, false);
+  };
+  const GradcheckReport ref = gradcheck(g, in, {});
+  EXPECT_TRUE(rep.output.isApprox(ref.output, 1e-12));
+  ASSERT_EQ(rep.gradients.size(), ref.gradients.size());
+  for (std::size_t i = 0; i < ref.gradients.size(); ++i)
+    EXPECT_TRUE(rep.gradients[i].isApprox(ref.gradients[i], 1e-12)) << "input " << i;
+}
+
+GRADCHECK_TEST(Mlp, OneLayerWithFinalReluAndConstantInput) {
+  const auto f = [](Tape<double>& t, const Vars& v) {
+    const Vars w{v[1]}, b{v[2]};
+    return mlp(t, v[0], std::span<const Var<double>>(w), std::span<const Var<double>>(b), true);
+  };
+  const RowMat<double> x = random_matrix(5, 3, 116), w = random_matrix(4, 3, 117), b = random_matrix(1, 4, 118);
+  const GradcheckReport rep = expect_gradcheck(OpKind::Mlp, f, {{x, false}, {w}, {b}});
+  EXPECT_TRUE(rep.output.isApprox(((x * w.transpose()).rowwise() + b.row(0)).cwiseMax(0.0), 1e-12));
+}
+
+GRADCHECK_TEST(Mlp, ManyBlocksOverThreads) {
+  // More rows than one cache block and one chunk, so blocks, chunks and threads all split.
+  const auto f = [](Tape<double>& t, const Vars& v) {
+    const Vars w{v[1], v[2]}, b{v[3], v[4]};
+    return mlp(t, v[0], std::span<const Var<double>>(w), std::span<const Var<double>>(b), false);
+  };
+  const std::vector<GradcheckInput> in = {{random_matrix(5000, 6, 119)},
+                                          {random_matrix(300, 6, 120)},
+                                          {random_matrix(3, 300, 121, -0.1, 0.1)},
+                                          {random_matrix(1, 300, 122)},
+                                          {random_matrix(1, 3, 123)}};
+  const GradcheckReport rep = expect_gradcheck(OpKind::Mlp, f, in, large_options());
+  const auto g = [](Tape<double>& t, const Vars& v) { return mlp_by_layers(t, v[0], {v[1], v[2]}, {v[3], v[4]}, false); };
+  GradcheckOptions one;
+  one.max_coords = 1;
+  const GradcheckReport ref = gradcheck(g, in, one);
+  EXPECT_TRUE(rep.output.isApprox(ref.output, 1e-12));
+  for (std::size_t i = 0; i < ref.gradients.size(); ++i)
+    EXPECT_TRUE(rep.gradients[i].isApprox(ref.gradients[i], 1e-12)) << "input " << i;
+  expect_thread_count_invariant(f, in);
+}
+
+TEST(Mlp, RejectsMismatchedLayers) {
+  Tape<double> tape;
+  const RowMat<double> x = random_matrix(4, 3, 124), w0 = random_matrix(5, 3, 125), w1 = random_matrix(2, 4, 126);
+  const Var<double> xv = tape.leaf(x.data(), 4, 3), w0v = tape.leaf(w0.data(), 5, 3), w1v = tape.leaf(w1.data(), 2, 4);
+  const Vars w{w0v, w1v}, b{Var<double>{}, Var<double>{}}, one_bias{Var<double>{}};
+  EXPECT_THROW(mlp(tape, xv, std::span<const Var<double>>(w), std::span<const Var<double>>(b), false), CheckError);
+  EXPECT_THROW(mlp(tape, xv, std::span<const Var<double>>(w), std::span<const Var<double>>(one_bias), false), CheckError);
+}
+
 GRADCHECK_TEST(LinearRelu, MatchesLinearThenRelu) {
   const auto f = [](Tape<double>& t, const Vars& v) { return linear_relu(t, v[0], v[1], v[2]); };
   // Inputs chosen so no pre-activation is within the finite-difference step of 0.

@@ -16,31 +16,6 @@ namespace {
 
 using Idx = std::vector<int32_t>;
 
-// Runs f once with 1 thread and once with 2 threads; the outputs and gradients must be
-// bit-identical (the reductions sum in a fixed order).
-void expect_thread_count_invariant(const GradcheckFn& f, const std::vector<GradcheckInput>& inputs) {
-  const int saved = omp_get_max_threads();
-  GradcheckOptions opt;
-  opt.max_coords = 1;  // only the analytic gradients matter here
-  omp_set_num_threads(1);
-  const GradcheckReport one = gradcheck(f, inputs, opt);
-  omp_set_num_threads(2);
-  const GradcheckReport two = gradcheck(f, inputs, opt);
-  omp_set_num_threads(saved);
-  EXPECT_TRUE((one.output.array() == two.output.array()).all());
-  ASSERT_EQ(one.gradients.size(), two.gradients.size());
-  for (std::size_t i = 0; i < one.gradients.size(); ++i)
-    EXPECT_TRUE((one.gradients[i].array() == two.gradients[i].array()).all()) << "input " << i;
-}
-
-// Large inputs: a sample of coordinates is enough (each one costs two threaded forwards,
-// which are slow when the machine is oversubscribed).
-GradcheckOptions large_options() {
-  GradcheckOptions opt;
-  opt.max_coords = 12;
-  return opt;
-}
-
 }  // namespace
 
 // ---- gather_rows ------------------------------------------------------------------------
@@ -71,6 +46,38 @@ GRADCHECK_TEST(GatherRows, LargeEnoughForThreadsAndDeterministic) {
   const std::vector<GradcheckInput> in = {{random_matrix(50, 70, 14)}};
   expect_gradcheck(OpKind::GatherRows, f, in, large_options());
   expect_thread_count_invariant(f, in);
+}
+
+GRADCHECK_TEST(GatherRows, AColumnRange) {
+  const Idx idx = {2, 0, 2, 1};
+  const RowMat<double> x = random_matrix(3, 6, 16);
+  const auto f = [&](Tape<double>& t, const std::vector<Var<double>>& v) { return gather_rows(t, v[0], idx, 1, 4); };
+  const GradcheckReport rep = expect_gradcheck(OpKind::GatherRows, f, {{x}});
+  ASSERT_EQ(rep.output.rows(), 4);
+  ASSERT_EQ(rep.output.cols(), 3);
+  for (int e = 0; e < 4; ++e)
+    for (int c = 0; c < 3; ++c) EXPECT_EQ(rep.output(e, c), x(idx[e], 1 + c));
+  // Columns outside the range get no gradient.
+  EXPECT_TRUE(rep.gradients[0].col(0).isZero());
+  EXPECT_TRUE(rep.gradients[0].rightCols(2).isZero());
+}
+
+GRADCHECK_TEST(GatherRows, AColumnRangeOverThreads) {
+  Idx idx(900);
+  for (std::size_t e = 0; e < idx.size(); ++e) idx[e] = static_cast<int32_t>((e * 37) % 50);
+  const auto f = [&](Tape<double>& t, const std::vector<Var<double>>& v) { return gather_rows(t, v[0], idx, 20, 60); };
+  const std::vector<GradcheckInput> in = {{random_matrix(50, 70, 17)}};
+  expect_gradcheck(OpKind::GatherRows, f, in, large_options());
+  expect_thread_count_invariant(f, in);
+}
+
+TEST(GatherRows, RejectsAColumnRangeOutsideX) {
+  Tape<double> tape;
+  const RowMat<double> x = random_matrix(3, 2, 18);
+  Var<double> v = tape.leaf(x.data(), 3, 2);
+  const Idx idx = {0, 1};
+  EXPECT_THROW(gather_rows(tape, v, idx, 1, 3), CheckError);
+  EXPECT_THROW(gather_rows(tape, v, idx, 2, 1), CheckError);
 }
 
 TEST(GatherRows, RejectsOutOfRangeIndex) {
