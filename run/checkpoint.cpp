@@ -140,6 +140,10 @@ std::string content_checksum(const ad::ParamStore<float>& params, const Checkpoi
     tensors(params.moment1());
     tensors(params.moment2());
   }
+  if (!cp.ema.empty()) {
+    h.text("ema");
+    tensors(cp.ema);
+  }
   const TrainingState& s = cp.state;
   for (const int64_t v : {s.epoch, s.position, s.global_step, s.nonfinite_in_row}) h.value(v);
   h.value(s.best_val_error);
@@ -167,6 +171,9 @@ void check_plausible(const std::string& path, const ad::ParamStore<float>& param
   const auto non_finite = [](float v) { return !std::isfinite(v); };
   if (const std::string n = first_bad(params.values(), non_finite); !n.empty())
     fail(path, "/weights/" + n + " holds non-finite values; use an earlier checkpoint");
+  if (!cp.ema.empty())
+    if (const std::string n = first_bad(cp.ema, non_finite); !n.empty())
+      fail(path, "/ema/" + n + " holds non-finite values; use an earlier checkpoint");
   if (cp.has_optimizer) {
     if (const std::string n = first_bad(params.moment1(), non_finite); !n.empty())
       fail(path, "/adam/m/" + n + " holds non-finite values; use an earlier checkpoint");
@@ -203,6 +210,12 @@ void write_checkpoint(const std::string& path, const ad::ParamStore<float>& para
       h5::write_int_attr(adam.get(), "step", cp.state.global_step);
       write_tensor_group(adam.get(), "m", params, params.moment1());
       write_tensor_group(adam.get(), "v", params, params.moment2());
+    }
+    if (!cp.ema.empty()) {
+      if (cp.ema.size() != params.values().size())
+        fail(path, "not written: the weights' average has " + std::to_string(cp.ema.size()) + " values for " +
+                       std::to_string(params.values().size()) + " parameters");
+      write_tensor_group(f, "ema", params, cp.ema);
     }
     {
       h5::Handle st = h5::create_group(f, "state", {path, "/state"});
@@ -273,6 +286,10 @@ Checkpoint read_checkpoint(const std::string& path, ad::ParamStore<float>& param
       cp.state.global_step = h5::read_int_attr(adam.get(), "step", aw);
       read_tensor_group(adam.get(), path, "m", params, params.moment1());
       read_tensor_group(adam.get(), path, "v", params, params.moment2());
+    }
+    if (h5::has_link(f, "ema")) {
+      cp.ema.resize(params.values().size());
+      read_tensor_group(f, path, "ema", params, cp.ema);
     }
     {
       const h5::Where sw{path, "/state"};

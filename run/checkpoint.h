@@ -10,6 +10,9 @@
 //   /adam/m/<name>, /adam/v/<name>   float32 (rows, cols): Adam's moments; attr step. Absent
 //                     in a packed model (weights only: what `layersnet pack` ships), which
 //                     runs, evaluates and fine-tunes but cannot resume a run
+//   /ema/<name>       float32 (rows, cols): the moving average of the weights
+//                     (train.ema_decay > 0), beside the weights the updates change; absent
+//                     otherwise and in best.h5, whose /weights are then the average
 //   /state            attrs epoch, position (next sample index in the epoch's order),
 //                     global_step, best_val_error, nonfinite_in_row
 //   /state/rng/<name> uint8 (bytes,): the raw state of each named GSL generator
@@ -50,6 +53,7 @@ struct Checkpoint {
   std::string config_toml;
   TrainingState state;
   std::map<std::string, std::vector<double>> stats;
+  std::vector<float> ema;  // the weights' moving average, laid out as the parameters; empty: none
 };
 
 // Writes params (values, and Adam moments when checkpoint.has_optimizer) and `checkpoint`

@@ -231,6 +231,7 @@ const Schema& schema() {
     k.add("train.adam_beta1", [](Config& c) -> double& { return c.train.adam_beta1; }, "Adam beta1", {0, 0.999999, {}});
     k.add("train.adam_beta2", [](Config& c) -> double& { return c.train.adam_beta2; }, "Adam beta2", {0, 0.999999999, {}});
     k.add("train.adam_eps", [](Config& c) -> double& { return c.train.adam_eps; }, "Adam epsilon", {0, 1, {}});
+    k.add("train.ema_decay", [](Config& c) -> double& { return c.train.ema_decay; }, "keep a moving average of the weights, a = d a + (1 - d) w after every update; validation and best.h5 use it (0 = off)", {0, 0.9999, {}});
     k.add("train.grad_clip", [](Config& c) -> double& { return c.train.grad_clip; }, "global gradient norm clip (0 = off)", {0, 1e9, {}});
     k.add("train.rollout_steps", [](Config& c) -> std::vector<int>& { return c.train.rollout_steps; }, "max self-fed steps T_n per epoch", {0, 1000, {}});
     k.add("train.rollout_constraints", [](Config& c) -> bool& { return c.train.rollout_constraints; }, "project self-fed frames (curriculum and validation rollouts) onto the cloth constraints (eval.strain_limit, eval.collision_shell, ...)");

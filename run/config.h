@@ -53,6 +53,10 @@ struct TrainConfig {
                                         // eval.* limits, as eval.constraints does at rollout time:
                                         // the network then learns from the inputs it will see.
                                         // Off (official)
+  double ema_decay = 0.0;               // > 0: keep an exponential moving average of the weights,
+                                        // a ← d·a + (1 − d)·θ after every update (starting from the
+                                        // run's first weights); validation and best.h5 use the
+                                        // average, the updates the weights. 0 = off (official)
   std::string init_from;                // checkpoint or packed model whose weights start a new run
                                         // (fine-tuning); its normalisation statistics replace the
                                         // data set's, Adam starts fresh. Empty = random init

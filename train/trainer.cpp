@@ -20,6 +20,7 @@
 #include <omp.h>
 
 #include <algorithm>
+#include <span>
 #include <chrono>
 #include <cmath>
 #include <concepts>
@@ -248,7 +249,10 @@ class Run {
   }
   double validate();
   double validate_rollouts();  // train.val_rollout_frames > 0
-  void save(const std::string& path);
+  // `averaged`: the moving average of the weights as the file's weights (best.h5), without /ema.
+  void save(const std::string& path, bool averaged = false);
+  // Moves the weights' average in after an update (train.ema_decay > 0).
+  void update_average();
   void save_step_checkpoint();
   void log_progress(int epoch);
   // One writer: only rank 0 prints, logs metrics and writes files.
@@ -268,6 +272,7 @@ class Run {
   std::unique_ptr<TrainData> train_, val_;
   ad::ParamStore<float> params_;
   std::unique_ptr<ad::Adam<float>> adam_;
+  std::vector<float> ema_;  // the weights' moving average (train.ema_decay > 0), else empty
   std::vector<std::unique_ptr<ad::ParamStore<float>>> slots_;  // one gradient buffer per local batch slot
   std::vector<std::unique_ptr<ad::Tape<float>>> tapes_;        // one per thread
   GslRandom shuffle_rng_, rollout_rng_;
@@ -318,6 +323,10 @@ void Run::restore(const std::string& path) {
          << options_.run_dir << "/config.toml; continuing with config.toml\n";
   state_ = cp.state;
   adam_->set_step_count(cp.state.global_step);
+  ema_ = cp.ema;
+  if (config_.train.ema_decay > 0 && ema_.empty())
+    out_ << "warning: " << path << " holds no average of the weights (train.ema_decay was 0 when it was written); "
+         << "the average starts from its weights\n";
   for (const auto& [name, rng] : {std::pair<std::string, GslRandom*>{"shuffle", &shuffle_rng_}, {"rollout", &rollout_rng_}}) {
     const auto it = cp.state.rng.find(name);
     if (it == cp.state.rng.end()) throw CheckpointError(path + ": /state/rng/" + name + " is missing");
@@ -347,7 +356,31 @@ void Run::start_from(const std::string& path) {
   metric({{"event", "init_from"}, {"checkpoint", path}, {"updates", cp.state.global_step}});
 }
 
-void Run::save(const std::string& path) {
+// Swaps `other` into the parameter values for the scope (validating or writing the average).
+class SwappedWeights {
+ public:
+  SwappedWeights(std::span<float> values, std::vector<float>& other) : values_(values), other_(other) {
+    if (!other_.empty()) std::swap_ranges(values_.begin(), values_.end(), other_.begin());
+  }
+  ~SwappedWeights() {
+    if (!other_.empty()) std::swap_ranges(values_.begin(), values_.end(), other_.begin());
+  }
+  SwappedWeights(const SwappedWeights&) = delete;
+  SwappedWeights& operator=(const SwappedWeights&) = delete;
+
+ private:
+  std::span<float> values_;
+  std::vector<float>& other_;
+};
+
+void Run::update_average() {
+  if (ema_.empty()) return;
+  const float d = static_cast<float>(config_.train.ema_decay);
+  const std::span<const float> w = params_.values();
+  for (std::size_t i = 0; i < ema_.size(); ++i) ema_[i] = d * ema_[i] + (1.0f - d) * w[i];
+}
+
+void Run::save(const std::string& path, bool averaged) {
   if (!all_finite(params_.values()) || !all_finite(params_.moment1()) || !all_finite(params_.moment2()))
     throw TrainingStopped(path + ": not written: the parameters or Adam moments hold non-finite values (the updates "
                           "diverged); stopped. " + divergence_advice(options_.run_dir));
@@ -360,7 +393,13 @@ void Run::save(const std::string& path) {
   cp.state.rng["shuffle"] = state_.position == 0 ? shuffle_rng_.state() : shuffle_at_epoch_start_;
   cp.state.rng["rollout"] = rollout_rng_.state();
   cp.stats = stats_to_arrays(stats_);
-  if (writer()) write_checkpoint(path, params_, cp);
+  if (averaged && !ema_.empty()) {
+    SwappedWeights swap(params_.values(), ema_);
+    if (writer()) write_checkpoint(path, params_, cp);
+  } else {
+    cp.ema = ema_;
+    if (writer()) write_checkpoint(path, params_, cp);
+  }
   summary_.last_checkpoint = path;
 }
 
@@ -438,6 +477,8 @@ TrainSummary Run::execute() {
     }
     ranks_.broadcast(resumed_from);
   }
+  if (tc.ema_decay > 0 && ema_.empty()) ema_.assign(params_.values().begin(), params_.values().end());
+  if (tc.ema_decay == 0) ema_.clear();
   open_data();  // after restore: samples are built with the run's own statistics
   epoch_samples_ = tc.epoch_samples > 0 ? std::min<int64_t>(tc.epoch_samples, train_->num_samples()) : train_->num_samples();
   batches_per_epoch_ = (epoch_samples_ + tc.batch_size - 1) / tc.batch_size;
@@ -526,14 +567,15 @@ void Run::record_validation(double val, const std::string& when) {
   if (best) state_.best_val_error = val;
   summary_.best_val_error = state_.best_val_error;
   const bool by_rollout = config_.train.val_rollout_frames > 0;
-  out_ << when << " validation: " << (by_rollout ? "rollout" : "one-step") << " error " << val << " (best "
+  out_ << when << " validation" << (ema_.empty() ? "" : " of the weights' average") << ": "
+       << (by_rollout ? "rollout" : "one-step") << " error " << val << " (best "
        << state_.best_val_error << ")\n";
   metric({{"event", "val"},
           {"epoch", state_.epoch},
           {"step", adam_->step_count()},
           {by_rollout ? "rollout_error" : "one_step_error", json_number(val)},
           {"best", best}});
-  if (best) save(best_checkpoint_path(options_.run_dir));
+  if (best) save(best_checkpoint_path(options_.run_dir), /*averaged=*/true);
 }
 
 // One update, as its steps: draw the batch, read this rank's frames, train its samples, reduce
@@ -650,6 +692,7 @@ void Run::apply_update(const BatchLoss& loss) {
     for (float& x : params_.grads()) x *= s;
   }
   adam_->step();
+  update_average();
   if (summary_.first_loss < 0) summary_.first_loss = loss.mean.total;
   summary_.last_loss = loss.mean.total;
   window_.loss += loss.mean;
@@ -773,6 +816,7 @@ double sum_in_parallel(double sum, int m, const Ranks& ranks, const std::vector<
 
 double Run::validate() {
   if (!val_ || val_->num_samples() == 0) return -1;
+  SwappedWeights averaged(params_.values(), ema_);  // validates the average when there is one
   if (config_.train.val_rollout_frames > 0) return validate_rollouts();
   const auto start = Clock::now();
   // Evenly spaced subset when val_samples limits it (deterministic, no generator).

@@ -694,6 +694,64 @@ TEST_F(TrainerTest, MaxStepsStopInsideAnEpochLeavesAResumableCheckpoint) {
   EXPECT_EQ(std::memcmp(a.data(), b.data(), a.size() * sizeof(float)), 0);
 }
 
+// train.ema_decay: the updates are those of the run without it, bit for bit; every checkpoint
+// holds the average a_k = d a_(k-1) + (1 - d) w_k from the run's first weights; validation and
+// best.h5 use the average; a run stopped inside an epoch resumes its average exactly.
+TEST_F(TrainerTest, TheWeightsAverageIsValidatedKeptInBestH5AndResumed) {
+  const std::string data = make_dataset(3, 1, 8);
+  const std::vector<std::string> common = {"train.epochs=2", "train.rollout_steps=[0, 1]", "train.threads=2",
+                                           "train.checkpoint_every=1", "train.keep_checkpoints=100"};
+  auto with = [&](const std::vector<std::string>& extra) { return tiny_config(data, common, extra); };
+  const Config plain = with({});
+  const Config averaged = with({"train.ema_decay=0.75"});
+  (void)train(plain, options("plain"));
+  const TrainSummary run = train(averaged, options("ema"));
+  ASSERT_GE(run.updates, 3);
+  EXPECT_EQ(final_weights(dir_ / "plain", plain), final_weights(dir_ / "ema", averaged));
+
+  auto read = [&](const std::string& path, std::vector<float>* weights) {
+    ad::ParamStore<float> p;
+    model::register_params(p, averaged.model);
+    Checkpoint cp = read_checkpoint(path, p);
+    if (weights) weights->assign(p.values().begin(), p.values().end());
+    return cp;
+  };
+  ad::ParamStore<float> first;  // the run's first weights
+  model::register_params(first, averaged.model);
+  model::init_params(first, averaged.model, static_cast<uint64_t>(averaged.train.seed));
+  std::vector<float> average(first.values().begin(), first.values().end());
+  std::vector<std::vector<float>> averages{average};  // after 0, 1, 2, ... updates
+  const auto checkpoints = list_checkpoints((dir_ / "ema").string());
+  ASSERT_EQ(static_cast<int64_t>(checkpoints.size()), run.updates);
+  for (const auto& path : checkpoints) {
+    std::vector<float> w;
+    const Checkpoint cp = read(path, &w);
+    ASSERT_EQ(cp.ema.size(), w.size()) << path;
+    for (std::size_t i = 0; i < w.size(); ++i) average[i] = 0.75f * average[i] + 0.25f * w[i];
+    EXPECT_EQ(cp.ema, average) << path;
+    EXPECT_NE(cp.ema, w) << path;
+    averages.push_back(average);
+  }
+  // best.h5: one of the averages as its weights, no /ema.
+  std::vector<float> best;
+  EXPECT_TRUE(read((dir_ / "ema" / "best.h5").string(), &best).ema.empty());
+  EXPECT_NE(std::find(averages.begin(), averages.end(), best), averages.end());
+  EXPECT_NE(log_.str().find("validation of the weights' average"), std::string::npos) << log_.str();
+
+  // Stopped after 2 updates and resumed: the same weights and the same average at the end.
+  const TrainSummary part = train(with({"train.ema_decay=0.75", "train.max_steps=2"}), options("part"));
+  EXPECT_EQ(part.updates, 2);
+  TrainOptions resume = options("part");
+  resume.resume = true;
+  (void)train(averaged, resume);
+  std::vector<float> wa, wb;
+  const Checkpoint a = read(list_checkpoints((dir_ / "ema").string()).back(), &wa);
+  const Checkpoint b = read(list_checkpoints((dir_ / "part").string()).back(), &wb);
+  EXPECT_EQ(a.state.global_step, b.state.global_step);
+  EXPECT_EQ(wa, wb);
+  EXPECT_EQ(a.ema, b.ema);
+}
+
 // train.epoch_samples: an epoch is the first k samples of its shuffled order, so its first
 // updates are those of the run without the cap; a run stopped inside a capped epoch resumes to
 // the same bits; k at or above the split's size is no cap at all.
