@@ -245,6 +245,22 @@ void linear_backward(const ConstMatMap<T>& x, const ConstMatMap<T>& W, const Con
 
 namespace {
 
+// The bf16 weights a product by W runs on: packed when the tape's matmul precision is bf16
+// and W is at least kBf16MinChannels wide both ways (narrower products, the model's transposes
+// by an identity and its 3-D maps, stay float: bf16 would make them lossy and gains nothing);
+// null otherwise. bf16 on a recording tape or a double tape throws, naming `op`.
+template <class T>
+std::shared_ptr<const Bf16PackedWeights> bf16_weights_of(const Tape<T>& tape, const Var<T>& W, const char* op) {
+  if (tape.matmul_precision() != MatmulPrecision::kBFloat16) return nullptr;
+  LAYERSNET_CHECK(!tape.recording(), op << ": matmul precision bf16 is for inference only, but the tape is recording; "
+                                           "run the forward under ad::NoRecord, or set_matmul_precision(kFloat32) to train");
+  LAYERSNET_CHECK((std::is_same_v<T, float>), op << ": matmul precision bf16 needs a float tape (this one is double)");
+  if constexpr (std::is_same_v<T, float>) {
+    if (W.cols >= kBf16MinChannels && W.rows >= kBf16MinChannels) return bf16_cached_weights(W.value, W.rows, W.cols);
+  }
+  return nullptr;
+}
+
 template <class T>
 Var<T> linear_op(Tape<T>& tape, const Var<T>& x, const Var<T>& W, const Var<T>& b, bool relu,
                  const Var<T>& residual = {}) {
@@ -255,19 +271,13 @@ Var<T> linear_op(Tape<T>& tape, const Var<T>& x, const Var<T>& W, const Var<T>& 
   LAYERSNET_CHECK(absent(residual) || (residual.rows == x.rows && residual.cols == W.rows),
                   "linear_add: the residual is (" << residual.rows << ", " << residual.cols << "), expected ("
                                                   << x.rows << ", " << W.rows << ")");
-  if (tape.matmul_precision() == MatmulPrecision::kBFloat16) {
-    LAYERSNET_CHECK(!tape.recording(), "linear: matmul precision bf16 is for inference only, but the tape is recording; "
-                                       "run the forward under ad::NoRecord, or set_matmul_precision(kFloat32) to train");
-    if constexpr (std::is_same_v<T, float>) {
-      if (x.cols >= kBf16MinChannels && W.rows >= kBf16MinChannels) {
-        Var<T> out = tape.new_var(x.rows, W.rows, false);
-        bf16_linear_forward(x.value, x.rows, x.cols, *bf16_cached_weights(W.value, W.rows, W.cols), b.value, relu,
-                            out.value);
-        if (residual.value) add_in_place(out.value, residual.value, out.size());
-        return out;
-      }
-    } else {
-      LAYERSNET_CHECK(false, "linear: matmul precision bf16 needs a float tape (this one is double)");
+  const auto packed = bf16_weights_of(tape, W, "linear");
+  if constexpr (std::is_same_v<T, float>) {
+    if (packed) {
+      Var<T> out = tape.new_var(x.rows, W.rows, false);
+      bf16_linear_forward(x.value, x.rows, x.cols, *packed, b.value, relu, out.value);
+      if (residual.value) add_in_place(out.value, residual.value, out.size());
+      return out;
     }
   }
   const bool grad = tape.wants_grad({x, W, b, residual});
@@ -356,19 +366,7 @@ Var<T> mlp(Tape<T>& tape, const Var<T>& x, std::span<const Var<T>> weights, std:
 
   // Per layer: bf16 packed weights where the matmul precision asks for them (as linear).
   std::vector<std::shared_ptr<const Bf16PackedWeights>> packed(static_cast<std::size_t>(L));
-  if (tape.matmul_precision() == MatmulPrecision::kBFloat16) {
-    LAYERSNET_CHECK(!tape.recording(), "mlp: matmul precision bf16 is for inference only, but the tape is recording; "
-                                       "run the forward under ad::NoRecord, or set_matmul_precision(kFloat32) to train");
-    if constexpr (std::is_same_v<T, float>) {
-      for (int64_t i = 0; i < L; ++i) {
-        const Var<T>& W = weights[i];
-        if (W.cols >= kBf16MinChannels && W.rows >= kBf16MinChannels)
-          packed[i] = bf16_cached_weights(W.value, W.rows, W.cols);
-      }
-    } else {
-      LAYERSNET_CHECK(false, "mlp: matmul precision bf16 needs a float tape (this one is double)");
-    }
-  }
+  for (int64_t i = 0; i < L; ++i) packed[i] = bf16_weights_of(tape, weights[i], "mlp");
 
   const int64_t block = cache_block_rows(widest);
   for_linear_chunks(N, width_sum, [&](int64_t, int64_t c0, int64_t c_rows) {

@@ -323,7 +323,7 @@ void Run::restore(const std::string& path) {
          << options_.run_dir << "/config.toml; continuing with config.toml\n";
   state_ = cp.state;
   adam_->set_step_count(cp.state.global_step);
-  ema_ = cp.ema;
+  ema_ = config_.train.ema_decay > 0 ? cp.ema : std::vector<float>{};
   if (config_.train.ema_decay > 0 && ema_.empty())
     out_ << "warning: " << path << " holds no average of the weights (train.ema_decay was 0 when it was written); "
          << "the average starts from its weights\n";
@@ -393,13 +393,10 @@ void Run::save(const std::string& path, bool averaged) {
   cp.state.rng["shuffle"] = state_.position == 0 ? shuffle_rng_.state() : shuffle_at_epoch_start_;
   cp.state.rng["rollout"] = rollout_rng_.state();
   cp.stats = stats_to_arrays(stats_);
-  if (averaged && !ema_.empty()) {
-    SwappedWeights swap(params_.values(), ema_);
-    if (writer()) write_checkpoint(path, params_, cp);
-  } else {
-    cp.ema = ema_;
-    if (writer()) write_checkpoint(path, params_, cp);
-  }
+  std::optional<SwappedWeights> average_as_weights;
+  if (averaged) average_as_weights.emplace(params_.values(), ema_);  // a no-op without an average
+  else cp.ema = ema_;
+  if (writer()) write_checkpoint(path, params_, cp);
   summary_.last_checkpoint = path;
 }
 
@@ -478,7 +475,6 @@ TrainSummary Run::execute() {
     ranks_.broadcast(resumed_from);
   }
   if (tc.ema_decay > 0 && ema_.empty()) ema_.assign(params_.values().begin(), params_.values().end());
-  if (tc.ema_decay == 0) ema_.clear();
   open_data();  // after restore: samples are built with the run's own statistics
   epoch_samples_ = tc.epoch_samples > 0 ? std::min<int64_t>(tc.epoch_samples, train_->num_samples()) : train_->num_samples();
   batches_per_epoch_ = (epoch_samples_ + tc.batch_size - 1) / tc.batch_size;
