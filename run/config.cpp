@@ -228,6 +228,7 @@ const Schema& schema() {
     k.add("train.learning_rate", [](Config& c) -> double& { return c.train.learning_rate; }, "Adam learning rate", {0, 10, {}});
     k.add("train.lr_decay_epochs", [](Config& c) -> std::vector<int>& { return c.train.lr_decay_epochs; }, "epochs after which lr *= lr_gamma", {1, 1e6, {}});
     k.add("train.lr_gamma", [](Config& c) -> double& { return c.train.lr_gamma; }, "step decay factor", {0, 1, {}});
+    k.add("train.lr_warmup_updates", [](Config& c) -> int& { return c.train.lr_warmup_updates; }, "the run's first this many updates ramp the learning rate linearly up to its value (0 = off)", {0, 1e9, {}});
     k.add("train.adam_beta1", [](Config& c) -> double& { return c.train.adam_beta1; }, "Adam beta1", {0, 0.999999, {}});
     k.add("train.adam_beta2", [](Config& c) -> double& { return c.train.adam_beta2; }, "Adam beta2", {0, 0.999999999, {}});
     k.add("train.adam_eps", [](Config& c) -> double& { return c.train.adam_eps; }, "Adam epsilon", {0, 1, {}});

@@ -36,6 +36,8 @@ struct TrainConfig {
   double learning_rate = 1e-3;
   std::vector<int> lr_decay_epochs = {2, 4, 6, 8};  // lr ×= lr_gamma after each of these epochs
   double lr_gamma = 0.5;
+  int lr_warmup_updates = 0;            // the run's first updates ramp the rate linearly up to it
+                                        // (update k at (k + 1) / this); 0 = off (official)
   double adam_beta1 = 0.9;
   double adam_beta2 = 0.999;
   double adam_eps = 1e-8;

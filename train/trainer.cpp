@@ -38,11 +38,14 @@ namespace layersnet {
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
 
-double learning_rate_at(const TrainConfig& train, int epoch) {
+double learning_rate_at(const TrainConfig& train, int epoch, int64_t updates_done) {
   // lr_decay_epochs are 1-based epochs after which the rate drops (official step policy).
   double lr = train.learning_rate;
   for (int d : train.lr_decay_epochs)
     if (d <= epoch) lr *= train.lr_gamma;
+  // Adam's first steps move every weight by about lr whatever its gradient: ramp them.
+  if (train.lr_warmup_updates > 0 && updates_done < train.lr_warmup_updates)
+    lr *= static_cast<double>(updates_done + 1) / static_cast<double>(train.lr_warmup_updates);
   return lr;
 }
 
@@ -532,7 +535,6 @@ TrainSummary Run::execute() {
 
 void Run::run_epoch(int epoch) {
   const TrainConfig& tc = config_.train;
-  adam_->set_lr(learning_rate_at(tc, epoch));
   const int ngs = rollout_steps_at(tc, epoch);
   // The order of the epoch: regenerated from the saved generator state on resume.
   shuffle_at_epoch_start_ = shuffle_rng_.state();
@@ -687,6 +689,7 @@ void Run::apply_update(const BatchLoss& loss) {
     const float s = static_cast<float>(tc.grad_clip / loss.grad_norm);
     for (float& x : params_.grads()) x *= s;
   }
+  adam_->set_lr(learning_rate_at(tc, state_.epoch, adam_->step_count()));
   adam_->step();
   update_average();
   if (summary_.first_loss < 0) summary_.first_loss = loss.mean.total;
@@ -762,7 +765,7 @@ void Run::log_progress(int epoch) {
                 "(vertex %.4g patch %.4g normal %.4g body %.4g layer %.4g orth excess %.4g strain %.4g)  outside model %.0f%%",
                 epoch + 1, tc.epochs, static_cast<long long>(adam_->step_count()), static_cast<long long>(state_.position),
                 static_cast<long long>(epoch_samples_), rate, duration_text(eta).c_str(),
-                learning_rate_at(tc, epoch), loss.total - config_.loss.orthogonality * orth_floor, loss.vertex, loss.patch, loss.normal, loss.collision_body,
+                learning_rate_at(tc, epoch, adam_->step_count() - 1), loss.total - config_.loss.orthogonality * orth_floor, loss.vertex, loss.patch, loss.normal, loss.collision_body,
                 loss.collision_layer, orth_excess, loss.edge_strain, 100 * share);
   out_ << line;
   if (config_.physics.weight > 0) out_ << "  physics " << loss.physics << " (weighted " << loss.physics_weighted << ")";
@@ -772,7 +775,7 @@ void Run::log_progress(int epoch) {
           {"step", adam_->step_count()},
           {"batch", summary_.batches},
           {"position", state_.position},
-          {"lr", json_number(learning_rate_at(tc, epoch))},
+          {"lr", json_number(learning_rate_at(tc, epoch, adam_->step_count() - 1))},
           {"rollout_max", rollout_steps_at(tc, epoch)},
           {"loss", json_parts(loss, orth_excess)},
           {"loss_weighted", json_parts(weighted, config_.loss.orthogonality * orth_excess)},

@@ -14,7 +14,8 @@
 // generator; clipped so the rollout starts no earlier than the sequence's first sample frame),
 // spread over OpenMP threads. Each sample has its own gradient buffer; the mean is summed in
 // sample order, so the update does not depend on which thread ran which sample. Adam with
-// lr = learning_rate · lr_gamma^(number of lr_decay_epochs ≤ finished epochs), optional global
+// lr = learning_rate · lr_gamma^(number of lr_decay_epochs ≤ finished epochs), times
+// (k + 1) / lr_warmup_updates for the run's update k < lr_warmup_updates; optional global
 // norm clipping. A non-finite loss or gradient skips the update (logged with its samples);
 // max_nonfinite_in_row skips in a row stop the run with TrainingStopped.
 //
@@ -81,7 +82,8 @@ TrainSummary train(const Config& config, const TrainOptions& options);
 Config run_config(const std::string& run_dir, const std::vector<std::string>& overrides);
 
 // Learning rate and maximum self-fed steps of a 0-based epoch.
-double learning_rate_at(const TrainConfig& train, int epoch);
+// The rate of the update after updates_done updates, in 0-based epoch `epoch`.
+double learning_rate_at(const TrainConfig& train, int epoch, int64_t updates_done);
 int rollout_steps_at(const TrainConfig& train, int epoch);
 
 }  // namespace layersnet

@@ -140,10 +140,22 @@ TEST(TrainSchedule, OfficialStepDecayAndCurriculum) {
   const double expected[] = {1e-3, 1e-3, 5e-4, 5e-4, 2.5e-4, 2.5e-4, 1.25e-4, 1.25e-4, 6.25e-5, 6.25e-5};
   const int steps[] = {0, 1, 2, 3, 4, 5, 7, 7, 8, 9};
   for (int e = 0; e < 10; ++e) {
-    EXPECT_DOUBLE_EQ(learning_rate_at(t, e), expected[e]) << "epoch " << e + 1;
+    EXPECT_DOUBLE_EQ(learning_rate_at(t, e, 100 * e), expected[e]) << "epoch " << e + 1;
     EXPECT_EQ(rollout_steps_at(t, e), steps[e]) << "epoch " << e + 1;
   }
   EXPECT_EQ(rollout_steps_at(t, 25), 9);  // the last value repeats
+}
+
+TEST(TrainSchedule, WarmupRampsTheFirstUpdatesThenTheStepPolicyHolds) {
+  TrainConfig t;
+  t.lr_warmup_updates = 4;
+  EXPECT_DOUBLE_EQ(learning_rate_at(t, 0, 0), 0.25e-3);
+  EXPECT_DOUBLE_EQ(learning_rate_at(t, 0, 2), 0.75e-3);
+  EXPECT_DOUBLE_EQ(learning_rate_at(t, 0, 3), 1e-3);
+  EXPECT_DOUBLE_EQ(learning_rate_at(t, 0, 400), 1e-3);
+  // Within a decayed epoch the ramp scales the decayed rate.
+  EXPECT_DOUBLE_EQ(learning_rate_at(t, 2, 1), 0.5 * 5e-4);
+  EXPECT_DOUBLE_EQ(learning_rate_at(t, 2, 50), 5e-4);
 }
 
 TEST_F(TrainerTest, RefusesToStartWithoutStatistics) {
@@ -913,7 +925,8 @@ TEST_F(TrainerTest, KilledRunResumesToBitIdenticalParameters) {
   const std::string data = make_dataset(3, 1, 8);
   const std::vector<std::string> sets = {"data.dataset=" + data, "data.first_frame=2", "data.max_frames=0",
                                          "train.epochs=4", "train.rollout_steps=[0, 1, 2]", "train.threads=2",
-                                         "train.checkpoint_every=2", "train.keep_checkpoints=2"};
+                                         "train.checkpoint_every=2", "train.keep_checkpoints=2",
+                                         "train.lr_warmup_updates=6"};  // the kill may land in the ramp
   auto command = [&](const std::string& run) {
     std::vector<std::string> a = {LAYERSNET_BINARY, "train", "--config",
                                   std::string(LAYERSNET_SOURCE_DIR) + "/configs/tiny.toml", "--run", (dir_ / run).string()};
