@@ -765,7 +765,7 @@ void Run::log_progress(int epoch) {
                 "(vertex %.4g patch %.4g normal %.4g body %.4g layer %.4g orth excess %.4g strain %.4g)  outside model %.0f%%",
                 epoch + 1, tc.epochs, static_cast<long long>(adam_->step_count()), static_cast<long long>(state_.position),
                 static_cast<long long>(epoch_samples_), rate, duration_text(eta).c_str(),
-                learning_rate_at(tc, epoch, adam_->step_count() - 1), loss.total - config_.loss.orthogonality * orth_floor, loss.vertex, loss.patch, loss.normal, loss.collision_body,
+                adam_->options().lr, loss.total - config_.loss.orthogonality * orth_floor, loss.vertex, loss.patch, loss.normal, loss.collision_body,
                 loss.collision_layer, orth_excess, loss.edge_strain, 100 * share);
   out_ << line;
   if (config_.physics.weight > 0) out_ << "  physics " << loss.physics << " (weighted " << loss.physics_weighted << ")";
@@ -775,7 +775,7 @@ void Run::log_progress(int epoch) {
           {"step", adam_->step_count()},
           {"batch", summary_.batches},
           {"position", state_.position},
-          {"lr", json_number(learning_rate_at(tc, epoch, adam_->step_count() - 1))},
+          {"lr", json_number(adam_->options().lr)},  // the last update's
           {"rollout_max", rollout_steps_at(tc, epoch)},
           {"loss", json_parts(loss, orth_excess)},
           {"loss_weighted", json_parts(weighted, config_.loss.orthogonality * orth_excess)},

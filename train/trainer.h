@@ -81,9 +81,9 @@ TrainSummary train(const Config& config, const TrainOptions& options);
 // ConfigError when the run has no config.toml.
 Config run_config(const std::string& run_dir, const std::vector<std::string>& overrides);
 
-// Learning rate and maximum self-fed steps of a 0-based epoch.
-// The rate of the update after updates_done updates, in 0-based epoch `epoch`.
+// The learning rate of the update that follows updates_done updates, in 0-based epoch `epoch`.
 double learning_rate_at(const TrainConfig& train, int epoch, int64_t updates_done);
+// The maximum self-fed steps of a 0-based epoch.
 int rollout_steps_at(const TrainConfig& train, int epoch);
 
 }  // namespace layersnet
