@@ -3,8 +3,9 @@
 generate` is still adding sequences to it.
 
 Writes OUT/dataset.json: the manifest of DATA as it is now, its training split cut to the
-sequences whose files exist (validation and test are kept whole and must be complete; a test
-split of which no file exists yet, as while scripts/make_data.sh makes it last, is emptied), and links
+sequences whose files exist (validation is kept whole and must be complete; the test split is
+kept whole when all its files exist and emptied otherwise, since training never reads it and it
+is evaluated on DATA itself once complete), and links
 every kept sequence file (and scene.json, if present) into OUT. The training split's statistics then come
 from `layersnet prepare OUT`; a run trained on OUT keeps the same data when DATA grows. With
 --max-train N only the first N of them (in the manifest's order) are kept, so that a frozen set
@@ -48,7 +49,7 @@ def main(argv):
         if name == "train":
             continue  # may be incomplete: cut below
         missing = [sid for sid in ids if not present(sid)]
-        if name == "test" and missing and len(missing) == len(ids):
+        if name == "test" and missing:
             dropped.append(name)
             splits[name] = []
             continue
@@ -75,7 +76,7 @@ def main(argv):
         json.dump(manifest, f, indent=2)
     print(f"freeze_train_split: {out}: {len(kept_train)} of the {listed} listed training sequences, "
           + ", ".join(f"{n} {len(ids)}" for n, ids in manifest["splits"].items() if n != "train")
-          + "".join(f"; {n}: none of its files exist yet, emptied" for n in dropped)
+          + "".join(f"; {n}: not all of its files exist yet, emptied" for n in dropped)
           + f"; next: layersnet prepare {out}")
 
 

@@ -26,7 +26,7 @@ int freeze(const fs::path& data, const fs::path& out, const std::string& options
 TEST(FreezeTrainSplit, KeepsTheTrainingSequencesThatExistAndTheWholeOtherSplits) {
   const auto tmp = testing::temp_dir("freeze");
   const fs::path dir = tmp;
-  DatasetManifest growing = write_synthetic_dataset((dir / "growing").string(), 4, 1, 1);
+  DatasetManifest growing = write_synthetic_dataset((dir / "growing").string(), 4, 1, 2);
   growing.extra["tags"] = {{"s0000", {{"wind", "calm"}}}};
   write_manifest(growing);
   fs::remove(growing.sequence_path("s0001"));
@@ -54,7 +54,7 @@ TEST(FreezeTrainSplit, KeepsTheTrainingSequencesThatExistAndTheWholeOtherSplits)
   EXPECT_EQ(read_manifest((dir / "first").string()).train, (std::vector<std::string>{"s0000"}));
   EXPECT_NE(freeze(dir / "growing", dir / "three", "--max-train 3"), 0);
 
-  // A test split not begun yet is emptied (the data generation makes it last); a begun one must be whole.
+  // A test split still being made (one of its two files missing) is emptied: training never reads it.
   fs::remove(growing.sequence_path(growing.test.front()));
   ASSERT_EQ(freeze(dir / "growing", dir / "no_test"), 0);
   EXPECT_TRUE(read_manifest((dir / "no_test").string()).test.empty());
