@@ -47,6 +47,9 @@ LAYERSNET_COMMAND(generate, "Simulate D-LAYERS-like sequences with Blender's clo
                  "simulate only these splits (e.g. val,test); other splits' existing sequences are kept")
       ->delimiter(',')
       ->check(CLI::IsMember({"train", "val", "test"}));
+  sub.add_option("--train-limit", opt->train_limit,
+                 "simulate only the first N training sequences (by index); the others are left for a later run")
+      ->check(CLI::NonNegativeNumber);
   sub.add_option("--checker", opt->checker, "validator run on each accepted file (default: dataset/check_dlayers_h5.py)");
   return [opt] { return run_generate(*opt); };  // errors: reported by cli/main.cpp
 });

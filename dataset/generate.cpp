@@ -267,10 +267,12 @@ GenerateSummary generate_dataset(const GenerateOptions& opt) {
     std::snprintf(idbuf, sizeof(idbuf), "%05d", i);
     return std::string(idbuf);
   };
+  int train_index = -1;
   for (int i = 0; i < count; ++i) {
     const std::string id = id_of(i);
     const fs::path h5 = out / (id + ".h5");
     const fs::path final_report = out / "reports" / (id + ".json");
+    if (splits[i] == "train") ++train_index;
     if (fs::exists(h5) && fs::exists(final_report)) {
       json kept = read_json(final_report);
       // Keep it only if it was made for the same data set seed, split and scene settings.
@@ -286,6 +288,7 @@ GenerateSummary generate_dataset(const GenerateOptions& opt) {
     if (!opt.only_splits.empty() &&
         std::find(opt.only_splits.begin(), opt.only_splits.end(), splits[i]) == opt.only_splits.end())
       continue;
+    if (opt.train_limit >= 0 && splits[i] == "train" && train_index >= opt.train_limit) continue;
     todo.push_back(i);
   }
   std::printf("generate: %d of %d sequences kept (resume), %d to simulate with %d Blender process%s of %d thread%s\n",

@@ -40,6 +40,9 @@ struct GenerateOptions {
   // Simulate only the sequences of these splits (empty: all). Sequences of other splits that
   // already exist are kept; the others are left out of the manifest until a later run makes them.
   std::vector<std::string> only_splits;
+  // Simulate only the training sequences among the first this many of the training split (by
+  // index; -1: all), so that a model trained on a split's first part can be made again without the rest.
+  int train_limit = -1;
 };
 
 // Quality thresholds; why these values: generate/README.md ("Quality gates").

@@ -136,6 +136,17 @@ TEST(GenerateDriver, WholeRunWithAStandInBlender) {
   EXPECT_EQ(m3.train, (std::vector<std::string>{"00000", "00003"}));
   EXPECT_EQ(m3.val, m.val);
   EXPECT_EQ(m3.test, m.test);
+
+  // A train limit makes only the training split's first N (by index); without it the rest follows.
+  std::ofstream(recipe) << R"({"count": 6, "seed": 4, "split_ranges": {"val": [[1, 2]], "test": [[2, 3]]},
+                               "scene": {"frames": 6}})";
+  o.train_limit = 3;
+  EXPECT_EQ(generate_dataset(o).accepted, 5);
+  EXPECT_EQ(read_manifest(o.out).train, (std::vector<std::string>{"00000", "00003", "00004"}));
+  EXPECT_FALSE(fs::exists(fs::path(o.out) / "00005.h5"));
+  o.train_limit = -1;
+  EXPECT_EQ(generate_dataset(o).accepted, 6);
+  EXPECT_EQ(read_manifest(o.out).train, (std::vector<std::string>{"00000", "00003", "00004", "00005"}));
   std::ofstream(recipe) << R"({"count": 4, "seed": 4, "test_fraction": 0.25, "split_ranges": {"test": [[3, 4]]}})";
   EXPECT_THROW(generate_dataset(o), GenerateError);
   fs::remove_all(dir);
