@@ -163,11 +163,13 @@ Points predict_positions(ad::Tape<T>& tape, ad::ParamStore<T>& params, const Con
   model::ModelInput<float> input = model::model_input_from_sample(sample, stats, config.model);
   tape.reset();
   ad::NoRecord<T> off(tape);
+  model::ForwardOptions options;
+  options.correction_scale = config.eval.correction_scale;
   model::Predictions<T> pred;
   if constexpr (std::is_same_v<T, float>)
-    pred = model::forward(tape, params, config.model, input);  // no copy on the float rollout path
+    pred = model::forward(tape, params, config.model, input, options);  // no copy on the float rollout path
   else
-    pred = model::forward(tape, params, config.model, model::cast_input<T>(input));
+    pred = model::forward(tape, params, config.model, model::cast_input<T>(input), options);
   Points x = model::next_positions(pred).template cast<float>();
   x.rowwise() += sample.root_translation_next.transpose();
   return x;

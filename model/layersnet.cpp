@@ -564,6 +564,10 @@ Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
     }
     a_e = decode(with_extra_input(rel_v, He_v, Hh_v, true), with_extra_weight(W1, true));
   }
+  if (opt.correction_scale != 1.0) {  // carried bases: the prediction is affine in a, so this scales the correction
+    a_p = ad::scale(tape, a_p, static_cast<T>(opt.correction_scale));
+    a_e = ad::scale(tape, a_e, static_cast<T>(opt.correction_scale));
+  }
   // Velocity bases: the cloth's own velocity (inertia), or in.body_carry (c, or c + v_t − c_t).
   // The vertex base is then c_v − c̄_p (c̄_p the patch mean), so x_v = x_t + c_v + a_p + a_v. c and
   // c_t are held constant under StateDelta (their dependence on the state is the body's rotation),

@@ -103,6 +103,9 @@ struct EvalConfig {
   double friction_distance = 0.3;  // scene units
   // Pinned vertices (the file's pin weights) move rigidly with the body under them.
   bool pins = true;
+  // Factor on the network's correction of its velocity base in rollouts (1 = as trained, 0 = the
+  // base alone, e.g. the physics step): a rollout's own frames drift from what training showed it.
+  double correction_scale = 1.0;
 };
 
 // The physics energy of losses/physics.h on the self-fed steps of the curriculum (not in the

@@ -17,6 +17,7 @@
 #include <filesystem>
 #include <limits>
 #include <memory>
+#include <random>
 
 namespace layersnet::eval {
 namespace {
@@ -449,6 +450,31 @@ TEST(Rollout, PhysicsStepBaselineIsTheZeroOutputPhysicsModel) {
     EXPECT_GT((b.frames[f] - sk.frames[f]).cwiseAbs().maxCoeff(), 1e-3f) << "frame " << f;
     EXPECT_TRUE(b.frames[f].allFinite());
   }
+}
+
+// eval.correction_scale scales the network's correction of the physics step: 0 rolls out the step
+// itself, and one frame from the same input at 0.5 lies halfway between the frames at 0 and 1.
+TEST(Rollout, CorrectionScaleScalesTheNetworksCorrectionOfTheStep) {
+  const dataset::Sequence seq = sequence(2);
+  auto predictor = [&](const std::string& scale) {
+    Config c = load_config({std::string(LAYERSNET_SOURCE_DIR) + "/configs/tiny.toml"},
+                           {"model.velocity_base=physics", "eval.correction_scale=" + scale});
+    ad::ParamStore<float> ps;
+    model::register_params(ps, c.model);
+    model::init_params(ps, c.model, 3);
+    std::mt19937_64 rng(5);
+    std::normal_distribution<float> normal(0, 0.3f);
+    for (auto& x : ps.value(ps.index_of("decoder.proj.2.weight"))) x = normal(rng);  // a non-zero correction
+    return std::make_unique<ModelPredictor>("scaled " + scale, c, std::move(ps), dataset::NormalisationStats{});
+  };
+  PhysicsStep physics;
+  const Rollout step = rollout(physics, seq, 2, 3);
+  const Rollout r0 = rollout(*predictor("0"), seq, 2, 3), r1 = rollout(*predictor("1"), seq, 2, 1),
+                half = rollout(*predictor("0.5"), seq, 2, 1);
+  for (size_t f = 0; f < 3; ++f) EXPECT_LT((r0.frames[f] - step.frames[f]).cwiseAbs().maxCoeff(), 1e-4f) << f;
+  const float moved = (r1.frames[0] - r0.frames[0]).cwiseAbs().maxCoeff();
+  EXPECT_GT(moved, 1e-3f);
+  EXPECT_LT((half.frames[0] - 0.5f * (r0.frames[0] + r1.frames[0])).cwiseAbs().maxCoeff(), 1e-4f * std::max(1.0f, moved));
 }
 
 }  // namespace
