@@ -74,7 +74,8 @@ def column(header):
         name = m.group(1)
 
         def get(report, method):
-            subsets = method["summary"].get("by_subset_mm", {})
+            # Headers are compared in lower case; subset names keep theirs (D-LAYERS' "T+W").
+            subsets = {k.lower(): v for k, v in method["summary"].get("by_subset_mm", {}).items()}
             if name not in subsets:
                 raise KeyError(f"no subset '{name}' in the summary of '{method['name']}'")
             return subsets[name]["mean"]
