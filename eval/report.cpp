@@ -8,6 +8,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -308,7 +309,24 @@ std::string report_json(const std::vector<MethodResult>& methods, const ReportCo
                                 {"worst_ratio", k.worst_ratio}, {"worst_sequence", k.worst_id},
                                 {"skipped_sequences", k.skipped}});
   }
-  return j.dump(1);
+  return report_text(j);
+}
+
+namespace {
+void round_numbers(json& j) {
+  if (j.is_number_float()) {
+    const double x = j.get<double>();
+    if (std::isfinite(x)) j = std::stod(fmt("%.7g", x));
+  } else if (j.is_structured()) {
+    for (auto& element : j) round_numbers(element);
+  }
+}
+}  // namespace
+
+std::string report_text(const json& report) {
+  json rounded = report;
+  round_numbers(rounded);
+  return rounded.dump();
 }
 
 std::string report_markdown(const std::vector<MethodResult>& methods, const ReportContext& c) {

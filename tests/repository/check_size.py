@@ -1,11 +1,9 @@
 #!/usr/bin/env python3
 """The repository carries the product, not the experiments: every tracked file larger than the
-file limit must be a shipped model's weights (models/<name>/model.h5, each within the weights
-limit), and all other tracked files together must stay within the total limit: shipped weights
-are the product and are bounded one by one, so a second shipped model does not crowd out the
-docs and reports. Sizes are the files' bytes in the work tree (what
+file limit must be a shipped model's weights (models/<name>/model.h5), and all tracked files
+together must stay within the total limit. Sizes are the files' bytes in the work tree (what
 `git ls-files | xargs du -cb` adds up). Prints the largest files and exits 1 on a breach.
-Usage: check_size.py REPOSITORY_ROOT [--max-file-mb 5] [--max-weights-mb 10] [--max-total-mb 20]"""
+Usage: check_size.py REPOSITORY_ROOT [--max-file-mb 5] [--max-total-mb 20]"""
 import argparse
 import fnmatch
 import os
@@ -15,7 +13,6 @@ import sys
 parser = argparse.ArgumentParser()
 parser.add_argument("root")
 parser.add_argument("--max-file-mb", type=float, default=5.0)
-parser.add_argument("--max-weights-mb", type=float, default=10.0)
 parser.add_argument("--max-total-mb", type=float, default=20.0)
 args = parser.parse_args()
 root = os.path.realpath(args.root)
@@ -29,18 +26,16 @@ except (OSError, subprocess.CalledProcessError) as e:
     sys.exit(1)
 files = [f for f in out.decode().split("\0") if f]
 sizes = {f: os.path.getsize(os.path.join(root, f)) for f in files if os.path.isfile(os.path.join(root, f))}
-total = sum(size for f, size in sizes.items() if not fnmatch.fnmatch(f, SHIPPED_WEIGHTS))
+total = sum(sizes.values())
 findings = []
 for f, size in sorted(sizes.items(), key=lambda kv: -kv[1]):
-    if fnmatch.fnmatch(f, SHIPPED_WEIGHTS) and size > args.max_weights_mb * MB:
-        findings.append(f"{f}: {size / MB:.1f} MB, over the {args.max_weights_mb:g} MB of a shipped model's weights")
     if size > args.max_file_mb * MB and not fnmatch.fnmatch(f, SHIPPED_WEIGHTS):
         findings.append(f"{f}: {size / MB:.1f} MB, over {args.max_file_mb:g} MB and not a shipped model "
                         f"({SHIPPED_WEIGHTS}); keep its figures in docs/decisions.md with the command and untrack it")
 if total > args.max_total_mb * MB:
-    findings.append(f"the tracked files besides shipped weights hold {total / MB:.1f} MB, over {args.max_total_mb:g} MB; "
+    findings.append(f"the tracked tree holds {total / MB:.1f} MB, over {args.max_total_mb:g} MB; "
                     "experiment weights, logs and data belong outside the repository")
-print(f"check_size: {len(sizes)} tracked files, {total / MB:.2f} MB besides shipped weights; largest:")
+print(f"check_size: {len(sizes)} tracked files, {total / MB:.2f} MB; largest:")
 for f, size in sorted(sizes.items(), key=lambda kv: -kv[1])[:5]:
     print(f"  {size / MB:7.2f} MB  {f}")
 for f in findings:
