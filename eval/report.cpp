@@ -309,7 +309,7 @@ std::string report_json(const std::vector<MethodResult>& methods, const ReportCo
                                 {"worst_ratio", k.worst_ratio}, {"worst_sequence", k.worst_id},
                                 {"skipped_sequences", k.skipped}});
   }
-  return report_text(j);
+  return report_text(std::move(j));
 }
 
 namespace {
@@ -323,10 +323,9 @@ void round_numbers(json& j) {
 }
 }  // namespace
 
-std::string report_text(const json& report) {
-  json rounded = report;
-  round_numbers(rounded);
-  return rounded.dump();
+std::string report_text(json report) {
+  round_numbers(report);
+  return report.dump();
 }
 
 std::string report_markdown(const std::vector<MethodResult>& methods, const ReportContext& c) {

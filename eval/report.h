@@ -38,7 +38,7 @@ std::string report_json(const std::vector<MethodResult>& methods, const ReportCo
 // The text of a JSON report: one line, every floating-point number to 7 significant digits (what
 // float32 results hold; the tables print at most 4), so that reports committed beside a model
 // stay small.
-std::string report_text(const nlohmann::json& report);
+std::string report_text(nlohmann::json report);
 std::string report_markdown(const std::vector<MethodResult>& methods, const ReportContext& context);
 
 // Writes eval.json, eval.md and (when gnuplot runs) curve.png, speed.png, strain.png into `dir`

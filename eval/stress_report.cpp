@@ -200,7 +200,7 @@ bool run_stress(const StressOptions& o) {
   j["first_frame"] = first;
   j["passed"] = ok;
   if (!o.json_path.empty()) {
-    io::write_file_atomic(o.json_path, report_text(j) + "\n");
+    io::write_file_atomic(o.json_path, report_text(std::move(j)) + "\n");
     std::printf("wrote %s\n", o.json_path.c_str());
   }
   std::printf("stress: %s (distance bound, strain p99 <= %.3f)\n",

@@ -70,7 +70,7 @@ else
   "$bin" train "${config[@]}" --run "$run" 2>&1 | tee -a "$run.log"
 fi
 mkdir -p "$out"
-[ -f "$out/model.h5" ] || "$bin" pack --checkpoint "$run/best.h5" --out "$out/model.h5"
+"$bin" pack --checkpoint "$run/best.h5" --out "$out/model.h5"   # again each time: the run may be newer
 cp "$run/config.toml" "$out/config.toml"
 cp "$recipe" "$out/recipe.json"
 cp "$run/metrics.jsonl" "$out/metrics.jsonl"
