@@ -74,7 +74,6 @@ mkdir -p "$out"
 cp "$run/config.toml" "$out/config.toml"
 cp "$recipe" "$out/recipe.json"
 cp "$run/metrics.jsonl" "$out/metrics.jsonl"
-cp "$run.log" "$out/train.log"
 
 if [ "$name" = medium ]; then
   evaluate eval --dataset data/medium --split test
