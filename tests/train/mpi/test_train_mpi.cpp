@@ -38,10 +38,16 @@ std::string read_text(const fs::path& p) {
   return s.str();
 }
 
-// The launcher with the flags a root CI container needs (oversubscribing its cores).
+// The launcher with the flags a root CI container needs (oversubscribing its cores), and a
+// session folder of this test process's own: two launchers started at once (ctest -j2) race to
+// create the shared default /tmp/ompi.HOST.UID and one fails in orte_init.
+fs::path mpi_session_dir() { return fs::temp_directory_path() / ("layersnet_ompi_" + std::to_string(::getpid())); }
+
 std::vector<std::string> mpirun(int ranks) {
+  const fs::path session = mpi_session_dir();
+  fs::create_directories(session);
   return {LAYERSNET_MPIEXEC, "-np", std::to_string(ranks), "--oversubscribe", "--allow-run-as-root",
-          "--mca", "btl_vader_single_copy_mechanism", "none"};
+          "--mca", "btl_vader_single_copy_mechanism", "none", "--mca", "orte_tmpdir_base", session.string()};
 }
 
 using testing::spawn;
@@ -99,7 +105,10 @@ class TrainMpiTest : public ::testing::Test {
     const auto manifest = dataset::write_synthetic_dataset(data_, 3, 2, 1, o);
     dataset::write_stats(manifest.stats_path(), dataset::compute_stats(manifest));
   }
-  void TearDown() override { fs::remove_all(dir_); }
+  void TearDown() override {
+    fs::remove_all(dir_);
+    fs::remove_all(mpi_session_dir());
+  }
 
   // `layersnet train` on configs/tiny.toml, one thread per process; batch 3 splits unevenly
   // over 2 ranks (2 + 1 samples) and the epoch's last batch is short.
