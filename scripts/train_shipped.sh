@@ -1,21 +1,18 @@
 #!/usr/bin/env bash
 # Reproduces a shipped model from scratch: set-up, its data, training, packing (weights +
 # statistics + config, no optimizer state) and its evaluations. Idempotent and resumable: the data
-# sets resume, an interrupted run resumes exactly, a finished one is kept, a report that exists is
-# kept (delete it to measure again).
+# sets resume, an interrupted run resumes exactly, a finished one is kept; scripts/evaluate_shipped.sh
+# then makes its reports (one that exists is kept: delete it to measure again).
 #
 #   bash scripts/train_shipped.sh [medium|large]     (default: medium)
 #
 # medium: models/medium/. The medium data set and its statistics, the medium_plus data set grown
-#   from it, configs/medium_plus.toml (which normalises with data/medium's statistics), evaluated on
-#   the medium test split.
+#   from it, configs/medium_plus.toml (which normalises with data/medium's statistics).
 # large:  models/large/. The large recipe's validation and test splits and the first LARGE_TRAIN
 #   (250) sequences of its training split, frozen so that the run's data and statistics do not
 #   change while the split grows; configs/large.toml with LARGE_SEED (1) on one thread (the figures
-#   are those of one thread: results depend on the thread count). Evaluated on the large
-#   validation split (where it was chosen), the large test split (every subset) and the medium
-#   test split. The whole large recipe takes about 15 hours of Blender on 2 cores; the first 250
-#   training sequences about a third of that.
+#   are those of one thread: results depend on the thread count). The whole large recipe takes
+#   about 15 hours of Blender on 2 cores; the first 250 training sequences about a third of that.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 name=${1:-medium}
@@ -23,14 +20,6 @@ case "$name" in medium|large) ;; *) echo "train_shipped: unknown model '$name' (
 bash scripts/setup.sh
 bin=build/bin/layersnet
 out=models/$name
-evaluate() {  # report folder, then eval's options
-  if [ -f "$out/$1/eval.json" ]; then echo "train_shipped: $out/$1 exists (kept)"; return; fi
-  local folder=$1
-  shift
-  "$bin" eval --checkpoint "$out/model.h5" --name "shipped ($name)" --constraints off,on --tether 0 \
-    --out "$out/$folder" "$@"
-}
-
 if [ "$name" = medium ]; then
   medium=data/medium
   data=data/medium_plus
@@ -73,13 +62,6 @@ mkdir -p "$out"
 "$bin" pack --checkpoint "$run/best.h5" --out "$out/model.h5"   # again each time: the run may be newer
 cp "$run/config.toml" "$out/config.toml"
 cp "$recipe" "$out/recipe.json"
-cp "$run/metrics.jsonl" "$out/metrics.jsonl"
+gzip -9 -n -c "$run/metrics.jsonl" > "$out/metrics.jsonl.gz"   # the training record, a fifth the size
 
-if [ "$name" = medium ]; then
-  evaluate eval --dataset data/medium --split test
-else
-  "$bin" generate --recipe generate/recipes/medium_choice.json --out data/medium_choice --splits test --jobs 2 --threads 1
-  evaluate eval-val --dataset data/large --split val --frames 36
-  evaluate eval --dataset data/large --split test --frames 36
-  evaluate eval-medium --dataset data/medium_choice --split test
-fi
+bash scripts/evaluate_shipped.sh "$name" all
