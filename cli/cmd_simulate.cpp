@@ -36,7 +36,7 @@ struct SimulateCliOptions {
   int threads = 0;                    // OpenMP threads of the rollout (0 = all)
 };
 
-constexpr const char* kShippedModel = "models/medium/model.h5";
+constexpr const char* kShippedModel = "models/large/model.h5";
 
 // "frame 40/199, 0.21 s/frame, ETA 33 s" on stderr: in place on a terminal, else every 10 %.
 eval::ProgressFn progress_reporter() {

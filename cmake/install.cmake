@@ -1,6 +1,6 @@
 # Where the program finds its files, and what `cmake --install` puts where:
 #   bin/layersnet                      the program
-#   share/layersnet/...                its scripts, recipes, configs and the shipped model
+#   share/layersnet/...                its scripts, recipes, configs and the shipped models
 #                                      (cli/program_files.h looks in <program>/../share/layersnet)
 #   include/layersnet/<folder>/*.h     the libraries' headers, lib/*.a the libraries
 #   lib/cmake/layersnet/               layersnetConfig.cmake: find_package(layersnet) gives
@@ -11,7 +11,7 @@ include(CMakePackageConfigHelpers)
 # --- Program files --------------------------------------------------------------------------
 # Paths relative to the source root; folders whole, except what only the repository needs.
 set(LAYERSNET_PROGRAM_FILES generate configs dataset/check_dlayers_h5.py scripts/outfit_from_h5.py
-    models/medium/model.h5)
+    models/medium/model.h5 models/large/model.h5)
 
 # The build tree mirrors the install layout with links to the sources, so a build directory
 # anywhere (not only build/ inside the sources) finds the files the way an install does, and
@@ -33,6 +33,7 @@ install(DIRECTORY configs/ DESTINATION share/layersnet/configs)
 install(FILES dataset/check_dlayers_h5.py DESTINATION share/layersnet/dataset)
 install(PROGRAMS scripts/outfit_from_h5.py DESTINATION share/layersnet/scripts)
 install(FILES models/medium/model.h5 DESTINATION share/layersnet/models/medium)
+install(FILES models/large/model.h5 DESTINATION share/layersnet/models/large)
 
 # --- Libraries and their package config -----------------------------------------------------
 set(LAYERSNET_LIBRARIES)

@@ -17,7 +17,7 @@
 #   eval-medium   the medium test split
 #   eval-wind0    the ten windy motion-capture test sequences with the input wind at 0 (network only)
 #   eval-long     the large test split over every moving frame, crumple at frame 36 and at the end
-#   stress        600-frame stress runs on test sequences 00744 (seen outfit) and 00761 (unseen)
+#   stress        600-frame stress runs on test sequences 00744 (seen outfit), 00745 and 00761 (unseen)
 # Every baseline runs bare and with the model's post-processing; stress runs post-processed and
 # network only. Missing data sets are generated first (Blender). Idempotent: a report that exists
 # is kept (delete it to measure again).
@@ -96,5 +96,5 @@ else
     --sequences 00747,00754,00757,00759,00762,00768,00771,00773,00783,00791 --wind-scale 0
   want eval-long && run_eval eval-long --constraints off,on --dataset data/large --split test \
     --frames 1000 --mark 36 --speed-frames 2
-  if want stress; then run_stress data/large 00744 00761; fi
+  if want stress; then run_stress data/large 00744 00745 00761; fi
 fi

@@ -26,7 +26,7 @@ garments=$(sed -n 's/^outfit: \(.*\) (inner to outer).*/\1/p' outfit.log | tr -d
 args=()
 for g in $garments; do args+=(--garment "outfit/$g.obj"); done
 "$bin" simulate "${args[@]}" --body-frames outfit/body --out sim > simulate.log 2>&1 || { cat simulate.log; fail "simulate"; }
-grep -q "model $prefix/share/layersnet/models/medium/model.h5" simulate.log || { cat simulate.log; fail "simulate: not the installed model"; }
+grep -q "model $prefix/share/layersnet/models/large/model.h5" simulate.log || { cat simulate.log; fail "simulate: not the installed model"; }
 inner=${garments%% *}
 frames=$(ls outfit/body | wc -l)
 [ "$(ls "sim/$inner" | wc -l)" -eq "$frames" ] || fail "simulate: $(ls "sim/$inner" | wc -l) $inner frames for $frames body frames"
