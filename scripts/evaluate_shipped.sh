@@ -19,8 +19,9 @@
 #   eval-long     the large test split over every moving frame, crumple at frame 36 and at the end
 #   stress        600-frame stress runs on test sequences 00744 (seen outfit), 00745 and 00761 (unseen)
 # Every baseline runs bare and with the model's post-processing; stress runs post-processed and
-# network only. Missing data sets are generated first (Blender). Idempotent: a report that exists
-# is kept (delete it to measure again).
+# network only. Reports are kept gzipped (eval.json.gz, stress/*.json.gz: a third of the size).
+# Missing data sets are generated first (Blender). Idempotent: a report that exists is kept
+# (delete it to measure again).
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 name=${1:-medium}
@@ -42,8 +43,9 @@ want() { [ "$only" = all ] || [ "$only" = "$1" ]; }
 run_eval() {  # report folder, then eval's options
   local report=$out/$1
   shift
-  if [ -f "$report/eval.json" ]; then echo "evaluate_shipped: $report exists (kept)"; return; fi
+  if [ -f "$report/eval.json.gz" ]; then echo "evaluate_shipped: $report exists (kept)"; return; fi
   "$bin" eval --checkpoint "$model" --name "$label" --tether 0 --out "$report" "$@"
+  gzip -9 -n -f "$report/eval.json"
 }
 run_stress() {  # data set, then test sequence ids
   local data=$1
@@ -52,11 +54,12 @@ run_stress() {  # data set, then test sequence ids
   for id in "$@"; do
     for mode in post network; do
       local json=$out/stress/${id}_${mode}.json
-      [ -f "$json" ] && continue
+      [ -f "$json.gz" ] && continue
       local set_args=()
       [ "$mode" = network ] && set_args=(--set eval.constraints=false)
       "$bin" stress --checkpoint "$model" --dataset "$data" --sequence "$id" --tether 0 "${set_args[@]}" \
         --json "$json" > "$out/stress/${id}_${mode}.log" 2>&1 || true  # a broken bound is a result
+      gzip -9 -n -f "$json"
     done
   done
 }

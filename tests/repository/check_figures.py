@@ -4,18 +4,20 @@ the repository.
 
 A checked table follows a marker line naming the report it was read from:
 
-    <!-- figures: models/medium/eval/eval.json -->
+    <!-- figures: models/medium/eval/eval.json.gz -->
     | method | error mm | free cloth mm | x best baseline |
     |---|---|---|---|
     | [constrained] LayersNet | 60.5 ± 26.5 | 112.0 | 0.80 |
 
-The first column is the method's name in eval.json (markdown emphasis is ignored; a name in
+A report may be stored gzipped (a name ending in .gz). The first column is the method's name in
+the report (markdown emphasis is ignored; a name in
 backticks inside the cell is used when present, so a row may read "shipped (`[constrained] X`)").
 Every other column must be one this script knows (COLUMNS); each number must equal the report's
 within half a unit of its last printed digit; a cell "–" states nothing. A table whose column is unknown, a method missing
 from the report, a report that does not exist or a README without any checked table fails.
 Usage: check_figures.py REPOSITORY_ROOT
 """
+import gzip
 import json
 import pathlib
 import re
@@ -98,7 +100,8 @@ def check_table(doc, lines, start, report_path, root, problems):
     if not path.is_file():
         problems.append(f"{where}: the table names {report_path}, which is not in the repository")
         return
-    report = json.loads(path.read_text())
+    text = gzip.decompress(path.read_bytes()).decode() if path.suffix == ".gz" else path.read_text()
+    report = json.loads(text)
     methods = {m["name"]: m for m in report["methods"]}
     i = start + 1
     while i < len(lines) and not lines[i].strip():

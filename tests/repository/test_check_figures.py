@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
 """check_figures.py passes a README whose figures match its report and fails one that does not."""
+import gzip
 import json
 import pathlib
 import subprocess
@@ -24,6 +25,7 @@ def run(readme):
         (root / "docs").mkdir()
         (root / "models").mkdir()
         (root / "models" / "eval.json").write_text(json.dumps(REPORT))
+        (root / "models" / "eval.json.gz").write_bytes(gzip.compress(json.dumps(REPORT).encode()))
         (root / "README.md").write_text(readme)
         r = subprocess.run([sys.executable, str(HERE / "check_figures.py"), str(root)], capture_output=True, text=True)
         return r.returncode, r.stdout
@@ -56,6 +58,13 @@ def main():
     code, out = run(TABLE.format(err="60.5").replace("models/eval.json", "models/missing.json"))
     if code == 0:
         failures.append("a missing report passed")
+    gz = TABLE.replace("models/eval.json", "models/eval.json.gz")
+    code, out = run(gz.format(err="60.5"))
+    if code != 0:
+        failures.append("matching figures of a gzipped report were refused:\n" + out)
+    code, out = run(gz.format(err="59.9"))
+    if code == 0 or "reads 59.9" not in out:
+        failures.append("a wrong figure passed against a gzipped report:\n" + out)
     subset = TABLE.format(err="60.5").replace("free cloth mm", "subset test_windy mm").replace("| 112.0 |", "| {w} |").replace("| 150 |", "| – |")
     code, out = run(subset.replace("{w}", "70.3"))
     if code != 0:
@@ -68,7 +77,7 @@ def main():
         failures.append("a subset the report lacks passed:\n" + out)
     for f in failures:
         print(f)
-    print(f"test_check_figures: {8 - len(failures)} of 8 cases as expected")
+    print(f"test_check_figures: {10 - len(failures)} of 10 cases as expected")
     return 1 if failures else 0
 
 
