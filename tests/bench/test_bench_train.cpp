@@ -28,7 +28,7 @@ TEST(BenchTrain, MeasuresOnAGivenDataSet) {
   const auto m = dataset::write_synthetic_dataset((root / "data").string(), 2, 1, 0, so);
   dataset::write_stats(m.stats_path(), dataset::compute_stats(m));
   int code = 0;
-  const std::string text = cli_test::run_cli("bench train --config " + std::string(LAYERSNET_SOURCE_DIR) +
+  const std::string text = eval::cli_test::run_cli("bench train --config " + std::string(LAYERSNET_SOURCE_DIR) +
                                                  "/configs/tiny.toml --set data.first_frame=2 --dataset " +
                                                  (root / "data").string() + " --threads 1 --steps 2 --rollout 1",
                                              &code);
@@ -36,7 +36,7 @@ TEST(BenchTrain, MeasuresOnAGivenDataSet) {
   EXPECT_NE(text.find("on " + (root / "data").string()), std::string::npos) << text;
   EXPECT_NE(text.find("samples/s"), std::string::npos) << text;
   int missing = 0;
-  EXPECT_NE(cli_test::run_cli("bench train --dataset " + (root / "absent").string(), &missing).find("absent"),
+  EXPECT_NE(eval::cli_test::run_cli("bench train --dataset " + (root / "absent").string(), &missing).find("absent"),
             std::string::npos);
   EXPECT_NE(missing, 0);
   fs::remove_all(root);
