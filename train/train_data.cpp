@@ -59,24 +59,21 @@ TrainData::TrainData(const dataset::DatasetManifest& manifest, const std::string
       structures_(static_cast<float>(config.model.patch_size), static_cast<std::size_t>(std::max(config.data.cache_sequences, 1))) {
   const dataset::FrameSelection selection = frame_selection_for(config.data);
   for (int s = 0; s < static_cast<int>(ids_.size()); ++s) {
-    const dataset::SequenceFile f(manifest_.sequence_path(ids_[static_cast<std::size_t>(s)]));
-    std::vector<int> ts = dataset::sample_frames(f.info().num_frames, selection);
-    const int after_ramp = f.info().settled_frame() - 1;
+    auto f = std::make_shared<dataset::SequenceFile>(manifest_.sequence_path(ids_[static_cast<std::size_t>(s)]));
+    std::vector<int> ts = dataset::sample_frames(f->info().num_frames, selection);
+    const int after_ramp = f->info().settled_frame() - 1;
     if (config.data.after_ramp && after_ramp >= 2) std::erase_if(ts, [&](int t) { return t < after_ramp; });
     first_t_.push_back(ts.empty() ? 0 : ts.front());
     rollout_start_.push_back(std::find(ts.begin(), ts.end(), after_ramp) != ts.end() ? after_ramp : first_t_.back());
-    garment_vertices_.push_back(static_cast<int>(f.info().total_garment_vertices()));
+    garment_vertices_.push_back(static_cast<int>(f->info().total_garment_vertices()));
     for (int t : ts) samples_.push_back({s, t});
+    // The first cache_sequences files stay open with their structures: a cache as large as the
+    // split then never reopens a file or rebuilds a structure during training.
+    if (s < max_open_files_) keep_open(s, std::move(f));
   }
 }
 
-TrainData::OpenFile& TrainData::open(int sequence) {
-  for (auto it = files_.begin(); it != files_.end(); ++it)
-    if (it->sequence == sequence) {
-      files_.splice(files_.begin(), files_, it);
-      return files_.front();
-    }
-  auto file = std::make_shared<dataset::SequenceFile>(manifest_.sequence_path(ids_.at(static_cast<std::size_t>(sequence))));
+TrainData::OpenFile& TrainData::keep_open(int sequence, std::shared_ptr<dataset::SequenceFile> file) {
   ++reads_.files_opened;
   auto info = std::make_shared<const dataset::SequenceInfo>(file->info());
   std::shared_ptr<const ClothConstraints> constraints;
@@ -86,9 +83,20 @@ TrainData::OpenFile& TrainData::open(int sequence) {
     constraints = std::make_shared<const ClothConstraints>(*info, dataset::rest_shapes(*info, first),
                                                            frame0.body_at(0, info->num_body_vertices), first, *constraint_settings_);
   }
-  files_.push_front({sequence, std::move(file), std::move(info), std::move(constraints)});
+  auto structure = structures_.get(ids_.at(static_cast<std::size_t>(sequence)), *info);
+  files_.push_front({sequence, std::move(file), std::move(info), std::move(constraints), std::move(structure)});
   while (static_cast<int>(files_.size()) > max_open_files_) files_.pop_back();
   return files_.front();
+}
+
+TrainData::OpenFile& TrainData::open(int sequence) {
+  for (auto it = files_.begin(); it != files_.end(); ++it)
+    if (it->sequence == sequence) {
+      files_.splice(files_.begin(), files_, it);
+      return files_.front();
+    }
+  return keep_open(sequence,
+                   std::make_shared<dataset::SequenceFile>(manifest_.sequence_path(ids_.at(static_cast<std::size_t>(sequence)))));
 }
 
 Window TrainData::read_window(int sequence, int t_first, int t_last) {
@@ -97,7 +105,7 @@ Window TrainData::read_window(int sequence, int t_first, int t_last) {
   w.sequence_id = ids_.at(static_cast<std::size_t>(sequence));
   w.info = f.info;
   w.constraints = f.constraints;
-  w.structure = structures_.get(w.sequence_id, *f.info);
+  w.structure = f.structure;
   w.frames = f.file->read_frames(t_first - 2, t_last - t_first + 4);
   ++reads_.windows;
   reads_.bytes += w.frames.bytes();

@@ -53,7 +53,8 @@ struct Window {
 
 class TrainData {
  public:
-  // Opens each sequence of `split` once for its frame count. Sample frames follow
+  // Opens each sequence of `split` once for its frame count, and keeps the first
+  // data.cache_sequences of them open with their structures. Sample frames follow
   // config.data (first_frame .. first_frame + max_frames - 2).
   TrainData(const dataset::DatasetManifest& manifest, const std::string& split, const dataset::NormalisationStats& stats,
             const Config& config);
@@ -82,7 +83,7 @@ class TrainData {
   struct Reads {
     int64_t windows = 0;
     int64_t bytes = 0;  // positions, as float32 in memory
-    int64_t files_opened = 0;
+    int64_t files_opened = 0;  // kept open: the constructor's first data.cache_sequences, then reopens
   };
   const Reads& reads() const { return reads_; }
 
@@ -92,8 +93,11 @@ class TrainData {
     std::shared_ptr<dataset::SequenceFile> file;
     std::shared_ptr<const dataset::SequenceInfo> info;
     std::shared_ptr<const ClothConstraints> constraints;  // train.rollout_constraints only
+    std::shared_ptr<const dataset::SequenceStructure> structure;
   };
   OpenFile& open(int sequence);
+  // Puts an opened file at the front of the LRU with what a window needs of it besides frames.
+  OpenFile& keep_open(int sequence, std::shared_ptr<dataset::SequenceFile> file);
 
   dataset::DatasetManifest manifest_;
   std::string split_;
