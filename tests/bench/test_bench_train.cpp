@@ -1,8 +1,5 @@
 // `layersnet bench train --dataset DIR`: the training throughput of a config measured on a given
 // data set (through `train` itself), so that the cost of reading real files is in the figure.
-#include "dataset/stats.h"
-#include "dataset/synthetic.h"
-
 #include "tests/eval/cli_test_util.h"
 
 #include <gtest/gtest.h>
@@ -18,15 +15,7 @@ namespace fs = std::filesystem;
 TEST(BenchTrain, MeasuresOnAGivenDataSet) {
   const fs::path root = fs::temp_directory_path() / ("layersnet_bench_train_test_" + std::to_string(::getpid()));
   fs::remove_all(root);
-  dataset::SyntheticOptions so;
-  so.garments = 2;
-  so.frames = 8;
-  so.rings = 4;
-  so.segments = 8;
-  so.body_rings = 4;
-  so.body_segments = 8;
-  const auto m = dataset::write_synthetic_dataset((root / "data").string(), 2, 1, 0, so);
-  dataset::write_stats(m.stats_path(), dataset::compute_stats(m));
+  eval::cli_test::write_tiny_data_and_checkpoint(root, 2, 1, 0, /*wind=*/false);
   int code = 0;
   const std::string text = eval::cli_test::run_cli("bench train --config " + std::string(LAYERSNET_SOURCE_DIR) +
                                                  "/configs/tiny.toml --set data.first_frame=2 --dataset " +
