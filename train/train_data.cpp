@@ -56,7 +56,7 @@ TrainData::TrainData(const dataset::DatasetManifest& manifest, const std::string
       max_open_files_(std::max(config.data.cache_sequences, 1)),
       constraint_settings_(config.train.rollout_constraints ? std::optional<EvalConfig>(config.eval) : std::nullopt),
       ids_(manifest.split(split)),
-      structures_(static_cast<float>(config.model.patch_size), static_cast<std::size_t>(std::max(config.data.cache_sequences, 1))) {
+      patch_size_(static_cast<float>(config.model.patch_size)) {
   const dataset::FrameSelection selection = frame_selection_for(config.data);
   for (int s = 0; s < static_cast<int>(ids_.size()); ++s) {
     auto f = std::make_shared<dataset::SequenceFile>(manifest_.sequence_path(ids_[static_cast<std::size_t>(s)]));
@@ -83,7 +83,7 @@ TrainData::OpenFile& TrainData::keep_open(int sequence, std::shared_ptr<dataset:
     constraints = std::make_shared<const ClothConstraints>(*info, dataset::rest_shapes(*info, first),
                                                            frame0.body_at(0, info->num_body_vertices), first, *constraint_settings_);
   }
-  auto structure = structures_.get(ids_.at(static_cast<std::size_t>(sequence)), *info);
+  auto structure = dataset::build_structure(*info, patch_size_);
   files_.push_front({sequence, std::move(file), std::move(info), std::move(constraints), std::move(structure)});
   while (static_cast<int>(files_.size()) > max_open_files_) files_.pop_back();
   return files_.front();

@@ -111,8 +111,8 @@ class TrainData {
   std::vector<int> rollout_start_;
   std::vector<int> garment_vertices_;
   std::vector<SampleRef> samples_;
-  std::list<OpenFile> files_;  // LRU, front = most recent
-  dataset::StructureCache structures_;
+  std::list<OpenFile> files_;  // LRU, front = most recent; each holds its sequence's structure
+  float patch_size_;
   Reads reads_;
 };
 
