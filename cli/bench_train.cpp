@@ -35,17 +35,17 @@ int run_bench_train(const BenchTrainOptions& o) {
   namespace fs = std::filesystem;
   const fs::path dir = fs::temp_directory_path() / ("layersnet_bench_train_" + std::to_string(::getpid()));
   fs::remove_all(dir);
-  layersnet::dataset::SyntheticOptions so;
-  so.frames = 12;
-  so.garments = 2;
-  so.rings = o.rings;
-  so.segments = o.segments;
-  so.body_rings = o.rings;
-  so.body_segments = o.segments;
-  so.uv_per_unit = 0.1f;
-  so.wind = true;
   std::vector<std::string> data_sets;  // what the data set is: the synthetic scene or the config's own frames
   if (o.dataset.empty()) {
+    layersnet::dataset::SyntheticOptions so;
+    so.frames = 12;
+    so.garments = 2;
+    so.rings = o.rings;
+    so.segments = o.segments;
+    so.body_rings = o.rings;
+    so.body_segments = o.segments;
+    so.uv_per_unit = 0.1f;
+    so.wind = true;
     const auto manifest = layersnet::dataset::write_synthetic_dataset((dir / "data").string(), 2, 0, 0, so);
     layersnet::dataset::write_stats(manifest.stats_path(), layersnet::dataset::compute_stats(manifest));
     data_sets = {"data.dataset=" + (dir / "data").string(), "data.first_frame=2", "data.max_frames=0"};
