@@ -53,6 +53,9 @@ struct ModelConfig {
   std::string physics_step_inertia = "world";
   double physics_step_collision_stiffness = 1e4;
   bool physics_step_layer_collision = false;
+  // Distance the layer term keeps the outer layer from the inner one (scene units); the default
+  // is the physics loss's (physics.layer_margin).
+  double physics_step_layer_margin = 2 * 0.06 * 8.0 / 9.0;
   // Contact friction of the step: a vertex within physics_step_friction_distance (scene units) of
   // the body along its normal is held to the body's tangential motion with stiffness friction × its
   // mass (losses/physics_step.h); 0 = frictionless contact. Chosen on the validation splits
