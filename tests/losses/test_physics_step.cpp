@@ -272,6 +272,22 @@ TEST(PhysicsStep, TakesTheModelsConjugateGradientIterations) {
   EXPECT_EQ((physics_step_displacement(short_solve, seq.info, settings) - short_solve.physics_step).cwiseAbs().maxCoeff(), 0.f);
 }
 
+// The layer term's margin reaches the step: a wider one pushes the outer layer further out.
+TEST(PhysicsStep, TakesTheModelsLayerMargin) {
+  const dataset::Sequence seq = two_layers_with_wind();
+  ModelConfig m;
+  m.velocity_base = "physics";
+  m.physics_step_layer_collision = true;
+  m.physics_step_layer_margin = 0;
+  auto touching = sample_for(seq, 5, m);
+  add_physics_step(touching, seq.info, m);
+  m.physics_step_layer_margin = 0.3;
+  auto apart = sample_for(seq, 5, m);
+  add_physics_step(apart, seq.info, m);
+  EXPECT_EQ(physics_step_settings(m).energy.layer_margin, 0.3);
+  EXPECT_GT((apart.physics_step - touching.physics_step).cwiseAbs().maxCoeff(), 1e-4f);
+}
+
 // The step's linear system (model.physics_step_correction = "solved") is its answer to a moved
 // inertia target: moving v_t by a small a moves the step's result by about A⁻¹ (s ⊙ a). The
 // system is symmetric and positive definite along a (pinned rows: tests/autodiff/test_gradcheck_solve.cpp).
