@@ -29,7 +29,7 @@ double dot(const Vec& a, const Vec& b) {
 // once for both.
 class EnergyAt {
  public:
-  // differentiable: record the tape for gradient(); costs little more than the value alone.
+  // differentiable: record what gradient() needs (a trial that may become the next iterate).
   double evaluate(const PhysicsInput<double>& in, const Vec& x, const PhysicsSettings& s, bool differentiable) {
     N_ = static_cast<int64_t>(x.size() / 3);
     tape().reset();
