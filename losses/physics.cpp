@@ -194,12 +194,13 @@ Var<T> work_energy(ad::Tape<T>& tape, const Var<T>& x, const PhysicsInput<T>& in
 
 template <class T>
 Var<T> body_collision_energy(ad::Tape<T>& tape, const Var<T>& x, const PhysicsInput<T>& in, double margin,
-                             double stiffness, int64_t* contacts) {
+                             double stiffness, int64_t* contacts, std::vector<int32_t>* nearest_out) {
   const int64_t B = static_cast<int64_t>(in.body_pos.size() / 3);
   const auto idx = in.body_index ? in.body_index->query(rows_as_points(x.value, 0, x.rows)).index
                                  : nearest(x.value, 0, x.rows, in.body_pos.data(), 0, B);
   const Var<T> h = ad::gather_rows(tape, column(tape, in.body_pos, 3), idx);
   const Var<T> n = ad::gather_rows(tape, column(tape, in.body_normals, 3), idx);
+  if (nearest_out) *nearest_out = idx;
   return collision(tape, x, h, n, margin, stiffness, contacts);
 }
 
@@ -288,7 +289,10 @@ PhysicsTerms<T> physics_energy(ad::Tape<T>& tape, const Var<T>& x, const Physics
   add(ps.wind, out.wind, [&] { return work_energy(tape, x, in, in.wind_force); });
   if (!in.body_pos.empty())
     add(ps.collision_body, out.collision_body,
-        [&] { return body_collision_energy(tape, x, in, ps.body_margin, ps.collision_stiffness, &out.body_contacts); });
+        [&] {
+          return body_collision_energy(tape, x, in, ps.body_margin, ps.collision_stiffness, &out.body_contacts,
+                                       &out.body_nearest);
+        });
   if (in.garment_offsets.size() >= 3)
     add(ps.collision_layer, out.collision_layer,
         [&] { return layer_collision_energy(tape, x, in, ps.layer_margin, ps.collision_stiffness, &out.layer_contacts); });
@@ -305,7 +309,8 @@ PhysicsTerms<T> physics_energy(ad::Tape<T>& tape, const Var<T>& x, const Physics
   template Var<T> stretch_energy(ad::Tape<T>&, const Var<T>&, const PhysicsInput<T>&);                                \
   template Var<T> bending_energy(ad::Tape<T>&, const Var<T>&, const PhysicsInput<T>&);                                \
   template Var<T> work_energy(ad::Tape<T>&, const Var<T>&, const PhysicsInput<T>&, const std::vector<T>&);            \
-  template Var<T> body_collision_energy(ad::Tape<T>&, const Var<T>&, const PhysicsInput<T>&, double, double, int64_t*); \
+  template Var<T> body_collision_energy(ad::Tape<T>&, const Var<T>&, const PhysicsInput<T>&, double, double, int64_t*,    \
+                                        std::vector<int32_t>*);                                                      \
   template Var<T> layer_collision_energy(ad::Tape<T>&, const Var<T>&, const PhysicsInput<T>&, double, double, int64_t*); \
   template Var<T> friction_energy(ad::Tape<T>&, const Var<T>&, const PhysicsInput<T>&);                               \
   template void add_contact_friction(PhysicsInput<T>&, const dataset::Points&, double, double);                      \

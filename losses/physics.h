@@ -168,6 +168,9 @@ struct PhysicsTerms {
   double inertia = 0, drag = 0, stretch = 0, bending = 0, gravity = 0, wind = 0, collision_body = 0,
          collision_layer = 0, friction = 0;
   int64_t body_contacts = 0, layer_contacts = 0;  // vertices inside a margin
+  // (N) each row's nearest body vertex at x, as the body term found it (empty without that term):
+  // the physics step's Hessian at the same x reuses it instead of querying again.
+  std::vector<int32_t> body_nearest;
 };
 
 // x: (N, 3) predicted positions at t+1 (root-relative, on the tape).
@@ -187,9 +190,10 @@ ad::Var<T> bending_energy(ad::Tape<T>& tape, const ad::Var<T>& x, const PhysicsI
 // −f·(x − x_t) summed, for the per-vertex force f (N, 3): gravity (external_force) or wind.
 template <class T>
 ad::Var<T> work_energy(ad::Tape<T>& tape, const ad::Var<T>& x, const PhysicsInput<T>& in, const std::vector<T>& force);
+// `nearest`, when given, receives each row's nearest body vertex (N).
 template <class T>
 ad::Var<T> body_collision_energy(ad::Tape<T>& tape, const ad::Var<T>& x, const PhysicsInput<T>& in, double margin,
-                                 double stiffness, int64_t* contacts = nullptr);
+                                 double stiffness, int64_t* contacts = nullptr, std::vector<int32_t>* nearest = nullptr);
 template <class T>
 ad::Var<T> layer_collision_energy(ad::Tape<T>& tape, const ad::Var<T>& x, const PhysicsInput<T>& in, double margin,
                                   double stiffness, int64_t* contacts = nullptr);

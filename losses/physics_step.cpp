@@ -23,23 +23,46 @@ double dot(const Vec& a, const Vec& b) {
   return s;
 }
 
-// N · physics_energy (the energy itself, not per vertex) and, when `grad` is given, its gradient.
-double energy(const PhysicsInput<double>& in, const Vec& x, const PhysicsSettings& s, Vec* grad) {
-  const int64_t N = static_cast<int64_t>(x.size() / 3);
+// N · physics_energy (the energy itself, not per vertex) at one point, on this thread's tape: the
+// value, the body vertex nearest each row (what the Hessian at that point needs), and the gradient
+// on demand after a differentiable evaluation, so the line search's accepted point is evaluated
+// once for both.
+class EnergyAt {
+ public:
+  // differentiable: record what gradient() needs (a trial that may become the next iterate).
+  double evaluate(const PhysicsInput<double>& in, const Vec& x, const PhysicsSettings& s, bool differentiable) {
+    N_ = static_cast<int64_t>(x.size() / 3);
+    tape().reset();
+    X_ = differentiable ? tape().leaf(x.data(), N_, 3) : tape().constant(x.data(), N_, 3);
+    differentiable_ = differentiable;
+    PhysicsTerms<double> terms = physics_energy(tape(), X_, in, s);
+    total_ = terms.total;
+    nearest_ = std::move(terms.body_nearest);
+    return total_.scalar() * scale();
+  }
+  // The gradient of N · E at the point last evaluated (differentiable).
+  void gradient(Vec& g) {
+    LAYERSNET_CHECK(differentiable_, "physics step: the gradient of an energy evaluated without one");
+    tape().backward(total_);
+    g.assign(X_.grad, X_.grad + 3 * N_);
+    for (double& v : g) v *= scale();
+  }
+  // Hands over the nearest body vertices (N) of the point last evaluated (empty without the body term).
+  std::vector<int32_t> take_nearest() { return std::move(nearest_); }
+
+ private:
   // One tape per thread, reset for each evaluation: its arena keeps its pages from one evaluation
   // and one frame to the next instead of the kernel zeroing fresh ones.
-  thread_local ad::Tape<double> tape;
-  tape.reset();
-  const ad::Var<double> X = grad ? tape.leaf(x.data(), N, 3) : tape.constant(x.data(), N, 3);
-  const PhysicsTerms<double> terms = physics_energy(tape, X, in, s);
-  const double scale = static_cast<double>(std::max<int64_t>(N, 1));
-  if (grad) {
-    tape.backward(terms.total);
-    grad->assign(X.grad, X.grad + 3 * N);
-    for (double& g : *grad) g *= scale;
+  static ad::Tape<double>& tape() {
+    thread_local ad::Tape<double> t;
+    return t;
   }
-  return terms.total.scalar() * scale;
-}
+  double scale() const { return static_cast<double>(std::max<int64_t>(N_, 1)); }
+  int64_t N_ = 0;
+  bool differentiable_ = false;
+  ad::Var<double> X_, total_;
+  std::vector<int32_t> nearest_;
+};
 
 // The approximate Hessian of N · E at x (see the header): per-vertex scalars, spring blocks,
 // body-contact blocks and the friction's tangential blocks.
@@ -87,8 +110,9 @@ struct Hessian {
   }
 };
 
+// `nearest`: each row's nearest body vertex at x (EnergyAt's, from the energy at the same x).
 Hessian approximate_hessian(const PhysicsInput<double>& in, const Vec& x, const PhysicsSettings& s,
-                            const std::vector<uint8_t>& fixed) {
+                            const std::vector<uint8_t>& fixed, const std::vector<int32_t>& nearest) {
   const int64_t N = static_cast<int64_t>(x.size() / 3);
   Hessian h;
   h.friction = s.friction;
@@ -149,8 +173,8 @@ Hessian approximate_hessian(const PhysicsInput<double>& in, const Vec& x, const 
   }
   const int64_t B = static_cast<int64_t>(in.body_pos.size() / 3);
   if (B > 0 && s.collision_body != 0) {
-    LAYERSNET_CHECK(in.body_index, "physics step: the body is not indexed (losses::index_body)");
-    const auto nearest = in.body_index->query(rows_as_points(x.data(), 0, N)).index;
+    LAYERSNET_CHECK(static_cast<int64_t>(nearest.size()) == N,
+                    "physics step: " << nearest.size() << " nearest body vertices for " << N << " rows");
     const double root_k = std::sqrt(s.collision_stiffness * s.collision_body);
     for (int64_t v = 0; v < N; ++v) {
       const auto [n, r] = offset_from_body(in, nearest[v], Eigen::Vector3d(x[3 * v], x[3 * v + 1], x[3 * v + 2]));
@@ -251,22 +275,27 @@ dataset::Points minimise_step_energy(PhysicsInput<double> in, dataset::Points x0
     for (int c = 0; c < 3; ++c) x[3 * v + c] = x0(v, c);
   const PhysicsSettings& s = settings.energy;
   add_contact_friction(in, x0, settings.friction, settings.friction_distance);
+  EnergyAt at;
   Vec g;
-  double e = energy(in, x, s, &g);
+  double e = at.evaluate(in, x, s, settings.newton_iterations > 0);
+  if (settings.newton_iterations > 0) at.gradient(g);
+  std::vector<int32_t> nearest = at.take_nearest();  // at x, for its Hessian
   if (report) report->energy_start = e / std::max<int64_t>(N, 1), report->line_search_halvings = 0;
   for (int it = 0; it < settings.newton_iterations; ++it) {
-    const Hessian h = approximate_hessian(in, x, s, fixed);
+    const Hessian h = approximate_hessian(in, x, s, fixed, nearest);
     const Vec p = solve(in, h, g, fixed, settings.cg_iterations);
     const double slope = dot(g, p);
     if (!(slope < 0)) break;  // at a minimum, or no descent direction
     // Backtracking (Armijo): the energy is piecewise (nearest contacts), so a full step may overshoot.
+    // A trial is recorded for its gradient unless it is the last iteration's (which needs none).
+    const bool next_needs_gradient = it + 1 < settings.newton_iterations;
     double alpha = 1;
     Vec trial(3 * N);
     double e_trial = 0;
     bool accepted = false;
     for (int halving = 0; halving < 12; ++halving, alpha *= 0.5) {
       for (int64_t k = 0; k < 3 * N; ++k) trial[k] = x[k] + alpha * p[k];
-      e_trial = energy(in, trial, s, nullptr);
+      e_trial = at.evaluate(in, trial, s, next_needs_gradient);
       if (e_trial <= e + 1e-4 * alpha * slope) {
         accepted = true;
         break;
@@ -275,10 +304,12 @@ dataset::Points minimise_step_energy(PhysicsInput<double> in, dataset::Points x0
     }
     if (!accepted) break;
     x.swap(trial);
-    e = it + 1 < settings.newton_iterations ? energy(in, x, s, &g) : e_trial;  // the last needs no gradient
+    e = e_trial;
+    if (next_needs_gradient) at.gradient(g);
+    nearest = at.take_nearest();
   }
   if (report) report->energy_end = e / std::max<int64_t>(N, 1);
-  if (system) *system = assemble_system(in, approximate_hessian(in, x, s, fixed), s, fixed);
+  if (system) *system = assemble_system(in, approximate_hessian(in, x, s, fixed, nearest), s, fixed);
   for (int64_t v = 0; v < N; ++v)
     for (int c = 0; c < 3; ++c) x0(v, c) = static_cast<float>(x[3 * v + c]);
   return x0;

@@ -85,8 +85,21 @@ TEST_F(PhysicsGradcheck, Wind) {
 TEST_F(PhysicsGradcheck, BodyCollision) {
   int64_t contacts = 0;
   {
+    // The nearest body vertices it hands out (the physics step's Hessian reuses them) are the
+    // query's, here and through physics_energy.
     ad::Tape<double> tape;
-    body_collision_energy(tape, tape.constant(x_.data(), x_.rows(), 3), input_, 0.5, 1e3, &contacts);
+    std::vector<int32_t> nearest;
+    const ad::Var<double> X = tape.constant(x_.data(), x_.rows(), 3);
+    body_collision_energy(tape, X, input_, 0.5, 1e3, &contacts, &nearest);
+    const std::vector<int32_t> expected =
+        dataset::nearest_body(rows_as_points(x_.data(), 0, x_.rows()),
+                              rows_as_points(input_.body_pos.data(), 0, static_cast<int64_t>(input_.body_pos.size() / 3)))
+            .index;
+    EXPECT_EQ(nearest, expected);
+    EXPECT_EQ(physics_energy(tape, X, input_, PhysicsSettings{}).body_nearest, expected);
+    PhysicsSettings no_body;
+    no_body.collision_body = 0;
+    EXPECT_TRUE(physics_energy(tape, X, input_, no_body).body_nearest.empty());
   }
   ASSERT_GT(contacts, 0) << "the check must cross the margin somewhere";
   check([](auto& t, const auto& x, const auto& in) { return body_collision_energy(t, x, in, 0.5, 1e3); });
