@@ -70,7 +70,7 @@ struct Hessian {
   Vec diagonal;                                 // (N) mass and drag
   std::vector<Block> spring;                    // (E)
   std::vector<int32_t> contact_row;             // vertices in contact
-  std::vector<Eigen::Vector3d> contact_normal;  // their body normals, scaled by sqrt(k_c)
+  std::vector<Eigen::Vector3d> contact_normal;  // their body (or inner layer) normals, scaled by sqrt(k_c)
   std::vector<Block> diagonal_block;            // (N) each vertex's diagonal block
   std::vector<Block> preconditioner;            // (N) inverse of each vertex's diagonal block
   // Bending, Gauss–Newton: k_h u uᵀ with u = ∂θ/∂(x_i, x_j, x_a, x_b), stored as sqrt(k_h) u.
@@ -109,6 +109,37 @@ struct Hessian {
     }
   }
 };
+
+// The layer contacts' blocks k n nᵀ on the outer garment's vertices inside the layer margin, with
+// the nearest inner vertex and its normal held still (as the body contacts hold the body still):
+// without them the Newton step meets the layer term through its gradient alone.
+void add_layer_contacts(const PhysicsInput<double>& in, const Vec& x, const PhysicsSettings& s, Hessian& h,
+                        std::vector<Block>& block) {
+  const int64_t G = static_cast<int64_t>(in.garment_offsets.size()) - 1;
+  if (G < 2 || s.collision_layer == 0) return;
+  const int32_t o0 = in.garment_offsets[G - 1], o1 = in.garment_offsets[G];
+  auto at = [&](int32_t v) { return Eigen::Vector3d(x[3 * v], x[3 * v + 1], x[3 * v + 2]); };
+  // Unit vertex normals of the inner garments: the normalised sum of their unit face normals.
+  std::vector<Eigen::Vector3d> normal(o0, Eigen::Vector3d::Zero());
+  for (std::size_t f = 0; f < in.faces.size() / 3; ++f) {
+    const int32_t a = in.faces[3 * f], b = in.faces[3 * f + 1], c = in.faces[3 * f + 2];
+    if (a >= o0) continue;
+    const Eigen::Vector3d n = (at(c) - at(b)).cross(at(a) - at(b));
+    if (!(n.norm() > 0)) continue;
+    for (const int32_t v : {a, b, c}) normal[v] += n.normalized();
+  }
+  for (auto& n : normal)
+    if (n.norm() > 0) n.normalize();
+  const auto inner = dataset::nearest_body(rows_as_points(x.data(), o0, o1), rows_as_points(x.data(), 0, o0)).index;
+  const double root_k = std::sqrt(s.collision_stiffness * s.collision_layer);
+  for (int32_t v = o0; v < o1; ++v) {
+    const int32_t a = inner[v - o0];
+    if ((at(v) - at(a)).dot(normal[a]) >= s.layer_margin) continue;
+    h.contact_row.push_back(v);
+    h.contact_normal.push_back(root_k * normal[a]);
+    block[v] += h.contact_normal.back() * h.contact_normal.back().transpose();
+  }
+}
 
 // `nearest`: each row's nearest body vertex at x (EnergyAt's, from the energy at the same x).
 Hessian approximate_hessian(const PhysicsInput<double>& in, const Vec& x, const PhysicsSettings& s,
@@ -184,6 +215,7 @@ Hessian approximate_hessian(const PhysicsInput<double>& in, const Vec& x, const 
       block[v] += h.contact_normal.back() * h.contact_normal.back().transpose();
     }
   }
+  add_layer_contacts(in, x, s, h, block);
   for (std::size_t k = 0; k < in.friction_rows.size(); ++k) {
     const Eigen::Vector3d n(&in.friction_normal[3 * k]);
     block[in.friction_rows[k]] += 2 * s.friction * in.friction_half_weight[k] * (Block::Identity() - n * n.transpose());

@@ -80,6 +80,38 @@ TEST(PhysicsStep, QuadraticEnergyIsSolvedExactly) {
   EXPECT_EQ(report.line_search_halvings, 0);
 }
 
+// Inertia and the layer term are quadratic where the outer vertex lies inside the margin of a
+// flat inner layer held still: m (z − z̃) + k (z − d) = 0, one Newton iteration with no halving,
+// which the Hessian's layer block makes possible (a step from the gradient alone overshoots by k/m).
+TEST(PhysicsStep, LayerContactIsSolvedExactlyWithItsHessianBlock) {
+  PhysicsInput<double> in;
+  in.x_t = {-1, -1, 0, 2, -1, 0, -1, 2, 0, 0.1, 0.2, -0.05};  // inner triangle in z = 0, outer vertex below it
+  in.x_tm1 = in.x_t;
+  in.faces = {0, 1, 2};  // counter-clockwise seen from +z: normal +z
+  in.garment_offsets = {0, 3, 4};
+  const double m = 0.4;
+  in.inertia_weight.assign(4, m / 2);
+  in.drag_weight.assign(4, 0.0);
+  in.external_force.assign(12, 0.0);
+  in.wind_force.assign(12, 0.0);
+  PhysicsStepSettings settings;
+  settings.energy = only(1, 0, 0);
+  settings.energy.collision_layer = 1;
+  settings.energy.collision_stiffness = 1e4;
+  settings.energy.layer_margin = 0.02;
+  settings.newton_iterations = 1;
+  dataset::Points guess(4, 3);
+  for (int v = 0; v < 4; ++v)
+    for (int k = 0; k < 3; ++k) guess(v, k) = static_cast<float>(in.x_t[3 * v + k]);
+  PhysicsStepReport report;
+  const dataset::Points x = minimise_step_energy(in, guess, {1, 1, 1, 0}, settings, &report);
+  const double k = settings.energy.collision_stiffness, d = settings.energy.layer_margin, z0 = in.x_t[11];
+  EXPECT_NEAR(x(3, 2), (m * z0 + k * d) / (m + k), 1e-6);
+  EXPECT_NEAR(x(3, 0), in.x_t[9], 1e-6);
+  EXPECT_NEAR(x(3, 1), in.x_t[10], 1e-6);
+  EXPECT_EQ(report.line_search_halvings, 0);
+}
+
 // Contact friction with inertia alone is quadratic too: a vertex within friction_distance of a
 // flat body keeps 1/(1 + μ) of its tangential slip from the carried start (its normal motion is
 // free), a vertex beyond it takes its inertia target, and μ = 0 is the frictionless step.
