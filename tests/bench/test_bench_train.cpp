@@ -1,20 +1,15 @@
 // `layersnet bench train --dataset DIR`: the training throughput of a config measured on a given
 // data set (through `train` itself), so that the cost of reading real files is in the figure.
+#include "tests/dataset/test_util.h"
 #include "tests/eval/cli_test_util.h"
 
 #include <gtest/gtest.h>
-#include <unistd.h>
-
-#include <filesystem>
 
 namespace layersnet {
 namespace {
 
-namespace fs = std::filesystem;
-
 TEST(BenchTrain, MeasuresOnAGivenDataSet) {
-  const fs::path root = fs::temp_directory_path() / ("layersnet_bench_train_test_" + std::to_string(::getpid()));
-  fs::remove_all(root);
+  const auto root = dataset::testing::temp_dir("bench_train");
   eval::cli_test::write_tiny_data_and_checkpoint(root, 2, 1, 0, /*wind=*/false);
   int code = 0;
   const std::string text = eval::cli_test::run_cli("bench train --config " + std::string(LAYERSNET_SOURCE_DIR) +
@@ -28,7 +23,6 @@ TEST(BenchTrain, MeasuresOnAGivenDataSet) {
   EXPECT_NE(eval::cli_test::run_cli("bench train --dataset " + (root / "absent").string(), &missing).find("absent"),
             std::string::npos);
   EXPECT_NE(missing, 0);
-  fs::remove_all(root);
 }
 
 }  // namespace
