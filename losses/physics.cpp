@@ -206,7 +206,8 @@ Var<T> body_collision_energy(ad::Tape<T>& tape, const Var<T>& x, const PhysicsIn
 
 template <class T>
 Var<T> layer_collision_energy(ad::Tape<T>& tape, const Var<T>& x, const PhysicsInput<T>& in, double margin,
-                              double stiffness, int64_t* contacts) {
+                              double stiffness, int64_t* contacts, std::vector<int32_t>* nearest_out,
+                              std::vector<T>* normal_out) {
   const int64_t G = static_cast<int64_t>(in.garment_offsets.size()) - 1;
   LAYERSNET_CHECK(G >= 2, "layer_collision_energy needs two garments or more (has " << G << ")");
   const int64_t o0 = in.garment_offsets[G - 1], o1 = in.garment_offsets[G];
@@ -230,8 +231,10 @@ Var<T> layer_collision_energy(ad::Tape<T>& tape, const Var<T>& x, const PhysicsI
   all.insert(all.end(), corner[2].begin(), corner[2].end());
   const Var<T> normals =
       ad::row_normalize(tape, ad::scatter_add_rows(tape, ad::concat_rows(tape, ad::concat_rows(tape, fn, fn), fn), all, o0));
-  return collision(tape, model::rows_of(x, o0, o1), ad::gather_rows(tape, inner, idx), ad::gather_rows(tape, normals, idx),
-                   margin, stiffness, contacts);
+  const Var<T> normal = ad::gather_rows(tape, normals, idx);
+  if (nearest_out) *nearest_out = idx;
+  if (normal_out) normal_out->assign(normal.value, normal.value + 3 * normal.rows);
+  return collision(tape, model::rows_of(x, o0, o1), ad::gather_rows(tape, inner, idx), normal, margin, stiffness, contacts);
 }
 
 template <class T>
@@ -295,7 +298,10 @@ PhysicsTerms<T> physics_energy(ad::Tape<T>& tape, const Var<T>& x, const Physics
         });
   if (in.garment_offsets.size() >= 3)
     add(ps.collision_layer, out.collision_layer,
-        [&] { return layer_collision_energy(tape, x, in, ps.layer_margin, ps.collision_stiffness, &out.layer_contacts); });
+        [&] {
+          return layer_collision_energy(tape, x, in, ps.layer_margin, ps.collision_stiffness, &out.layer_contacts,
+                                        &out.layer_nearest, &out.layer_normal);
+        });
   if (!in.friction_rows.empty()) add(ps.friction, out.friction, [&] { return friction_energy(tape, x, in); });
   LAYERSNET_CHECK(!weighted.empty(), "physics_energy: every term's weight is 0");
   out.total = weighted[0];
@@ -311,7 +317,8 @@ PhysicsTerms<T> physics_energy(ad::Tape<T>& tape, const Var<T>& x, const Physics
   template Var<T> work_energy(ad::Tape<T>&, const Var<T>&, const PhysicsInput<T>&, const std::vector<T>&);            \
   template Var<T> body_collision_energy(ad::Tape<T>&, const Var<T>&, const PhysicsInput<T>&, double, double, int64_t*,    \
                                         std::vector<int32_t>*);                                                      \
-  template Var<T> layer_collision_energy(ad::Tape<T>&, const Var<T>&, const PhysicsInput<T>&, double, double, int64_t*); \
+  template Var<T> layer_collision_energy(ad::Tape<T>&, const Var<T>&, const PhysicsInput<T>&, double, double, int64_t*,   \
+                                         std::vector<int32_t>*, std::vector<T>*);                                    \
   template Var<T> friction_energy(ad::Tape<T>&, const Var<T>&, const PhysicsInput<T>&);                               \
   template void add_contact_friction(PhysicsInput<T>&, const dataset::Points&, double, double);                      \
   template PhysicsTerms<T> physics_energy(ad::Tape<T>&, const Var<T>&, const PhysicsInput<T>&, const PhysicsSettings&);

@@ -171,6 +171,10 @@ struct PhysicsTerms {
   // (N) each row's nearest body vertex at x, as the body term found it (empty without that term):
   // the physics step's Hessian at the same x reuses it instead of querying again.
   std::vector<int32_t> body_nearest;
+  // (N_outer) each outer vertex's nearest inner vertex at x and (N_outer · 3) that vertex's unit
+  // normal, as the layer term found them (empty without that term): the step's Hessian reuses them.
+  std::vector<int32_t> layer_nearest;
+  std::vector<T> layer_normal;
 };
 
 // x: (N, 3) predicted positions at t+1 (root-relative, on the tape).
@@ -194,9 +198,11 @@ ad::Var<T> work_energy(ad::Tape<T>& tape, const ad::Var<T>& x, const PhysicsInpu
 template <class T>
 ad::Var<T> body_collision_energy(ad::Tape<T>& tape, const ad::Var<T>& x, const PhysicsInput<T>& in, double margin,
                                  double stiffness, int64_t* contacts = nullptr, std::vector<int32_t>* nearest = nullptr);
+// `nearest` and `normal`, when given, receive each outer vertex's nearest inner vertex and its unit normal.
 template <class T>
 ad::Var<T> layer_collision_energy(ad::Tape<T>& tape, const ad::Var<T>& x, const PhysicsInput<T>& in, double margin,
-                                  double stiffness, int64_t* contacts = nullptr);
+                                  double stiffness, int64_t* contacts = nullptr, std::vector<int32_t>* nearest = nullptr,
+                                  std::vector<T>* normal = nullptr);
 template <class T>
 ad::Var<T> friction_energy(ad::Tape<T>& tape, const ad::Var<T>& x, const PhysicsInput<T>& in);
 

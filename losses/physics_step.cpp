@@ -23,8 +23,15 @@ double dot(const Vec& a, const Vec& b) {
   return s;
 }
 
+// What the energy's contact terms found at a point, for the Hessian at the same point.
+struct ContactsAt {
+  std::vector<int32_t> body_nearest;   // (N) each row's nearest body vertex; empty without the body term
+  std::vector<int32_t> layer_nearest;  // (N_outer) each outer vertex's nearest inner vertex; empty without the layer term
+  std::vector<double> layer_normal;    // (N_outer · 3) that inner vertex's unit normal
+};
+
 // N · physics_energy (the energy itself, not per vertex) at one point, on this thread's tape: the
-// value, the body vertex nearest each row (what the Hessian at that point needs), and the gradient
+// value, the contacts (what the Hessian at that point needs), and the gradient
 // on demand after a differentiable evaluation, so the line search's accepted point is evaluated
 // once for both.
 class EnergyAt {
@@ -37,7 +44,7 @@ class EnergyAt {
     differentiable_ = differentiable;
     PhysicsTerms<double> terms = physics_energy(tape(), X_, in, s);
     total_ = terms.total;
-    nearest_ = std::move(terms.body_nearest);
+    contacts_ = {std::move(terms.body_nearest), std::move(terms.layer_nearest), std::move(terms.layer_normal)};
     return total_.scalar() * scale();
   }
   // The gradient of N · E at the point last evaluated (differentiable).
@@ -47,8 +54,8 @@ class EnergyAt {
     g.assign(X_.grad, X_.grad + 3 * N_);
     for (double& v : g) v *= scale();
   }
-  // Hands over the nearest body vertices (N) of the point last evaluated (empty without the body term).
-  std::vector<int32_t> take_nearest() { return std::move(nearest_); }
+  // Hands over the contacts found at the point last evaluated.
+  ContactsAt take_contacts() { return std::move(contacts_); }
 
  private:
   // One tape per thread, reset for each evaluation: its arena keeps its pages from one evaluation
@@ -61,7 +68,7 @@ class EnergyAt {
   int64_t N_ = 0;
   bool differentiable_ = false;
   ad::Var<double> X_, total_;
-  std::vector<int32_t> nearest_;
+  ContactsAt contacts_;
 };
 
 // The approximate Hessian of N · E at x (see the header): per-vertex scalars, spring blocks,
@@ -113,37 +120,28 @@ struct Hessian {
 // The layer contacts' blocks k n nᵀ on the outer garment's vertices inside the layer margin, with
 // the nearest inner vertex and its normal held still (as the body contacts hold the body still):
 // without them the Newton step meets the layer term through its gradient alone.
-void add_layer_contacts(const PhysicsInput<double>& in, const Vec& x, const PhysicsSettings& s, Hessian& h,
-                        std::vector<Block>& block) {
+void add_layer_contacts(const PhysicsInput<double>& in, const Vec& x, const PhysicsSettings& s, const ContactsAt& at_x,
+                        Hessian& h, std::vector<Block>& block) {
   const int64_t G = static_cast<int64_t>(in.garment_offsets.size()) - 1;
   if (G < 2 || s.collision_layer == 0) return;
   const int32_t o0 = in.garment_offsets[G - 1], o1 = in.garment_offsets[G];
+  LAYERSNET_CHECK(static_cast<int64_t>(at_x.layer_nearest.size()) == o1 - o0 &&
+                      at_x.layer_normal.size() == 3 * at_x.layer_nearest.size(),
+                  "physics step: " << at_x.layer_nearest.size() << " layer contacts for " << o1 - o0 << " outer vertices");
   auto at = [&](int32_t v) { return Eigen::Vector3d(x[3 * v], x[3 * v + 1], x[3 * v + 2]); };
-  // Unit vertex normals of the inner garments: the normalised sum of their unit face normals.
-  std::vector<Eigen::Vector3d> normal(o0, Eigen::Vector3d::Zero());
-  for (std::size_t f = 0; f < in.faces.size() / 3; ++f) {
-    const int32_t a = in.faces[3 * f], b = in.faces[3 * f + 1], c = in.faces[3 * f + 2];
-    if (a >= o0) continue;
-    const Eigen::Vector3d n = (at(c) - at(b)).cross(at(a) - at(b));
-    if (!(n.norm() > 0)) continue;
-    for (const int32_t v : {a, b, c}) normal[v] += n.normalized();
-  }
-  for (auto& n : normal)
-    if (n.norm() > 0) n.normalize();
-  const auto inner = dataset::nearest_body(rows_as_points(x.data(), o0, o1), rows_as_points(x.data(), 0, o0)).index;
   const double root_k = std::sqrt(s.collision_stiffness * s.collision_layer);
   for (int32_t v = o0; v < o1; ++v) {
-    const int32_t a = inner[v - o0];
-    if ((at(v) - at(a)).dot(normal[a]) >= s.layer_margin) continue;
+    const Eigen::Vector3d n(&at_x.layer_normal[3 * static_cast<std::size_t>(v - o0)]);
+    if ((at(v) - at(at_x.layer_nearest[v - o0])).dot(n) >= s.layer_margin) continue;
     h.contact_row.push_back(v);
-    h.contact_normal.push_back(root_k * normal[a]);
+    h.contact_normal.push_back(root_k * n);
     block[v] += h.contact_normal.back() * h.contact_normal.back().transpose();
   }
 }
 
-// `nearest`: each row's nearest body vertex at x (EnergyAt's, from the energy at the same x).
+// `at_x`: the contacts the energy found at x (EnergyAt's).
 Hessian approximate_hessian(const PhysicsInput<double>& in, const Vec& x, const PhysicsSettings& s,
-                            const std::vector<uint8_t>& fixed, const std::vector<int32_t>& nearest) {
+                            const std::vector<uint8_t>& fixed, const ContactsAt& at_x) {
   const int64_t N = static_cast<int64_t>(x.size() / 3);
   Hessian h;
   h.friction = s.friction;
@@ -204,6 +202,7 @@ Hessian approximate_hessian(const PhysicsInput<double>& in, const Vec& x, const 
   }
   const int64_t B = static_cast<int64_t>(in.body_pos.size() / 3);
   if (B > 0 && s.collision_body != 0) {
+    const std::vector<int32_t>& nearest = at_x.body_nearest;
     LAYERSNET_CHECK(static_cast<int64_t>(nearest.size()) == N,
                     "physics step: " << nearest.size() << " nearest body vertices for " << N << " rows");
     const double root_k = std::sqrt(s.collision_stiffness * s.collision_body);
@@ -215,7 +214,7 @@ Hessian approximate_hessian(const PhysicsInput<double>& in, const Vec& x, const 
       block[v] += h.contact_normal.back() * h.contact_normal.back().transpose();
     }
   }
-  add_layer_contacts(in, x, s, h, block);
+  add_layer_contacts(in, x, s, at_x, h, block);
   for (std::size_t k = 0; k < in.friction_rows.size(); ++k) {
     const Eigen::Vector3d n(&in.friction_normal[3 * k]);
     block[in.friction_rows[k]] += 2 * s.friction * in.friction_half_weight[k] * (Block::Identity() - n * n.transpose());
@@ -311,10 +310,10 @@ dataset::Points minimise_step_energy(PhysicsInput<double> in, dataset::Points x0
   Vec g;
   double e = at.evaluate(in, x, s, settings.newton_iterations > 0);
   if (settings.newton_iterations > 0) at.gradient(g);
-  std::vector<int32_t> nearest = at.take_nearest();  // at x, for its Hessian
+  ContactsAt contacts = at.take_contacts();  // at x, for its Hessian
   if (report) report->energy_start = e / std::max<int64_t>(N, 1), report->line_search_halvings = 0;
   for (int it = 0; it < settings.newton_iterations; ++it) {
-    const Hessian h = approximate_hessian(in, x, s, fixed, nearest);
+    const Hessian h = approximate_hessian(in, x, s, fixed, contacts);
     const Vec p = solve(in, h, g, fixed, settings.cg_iterations);
     const double slope = dot(g, p);
     if (!(slope < 0)) break;  // at a minimum, or no descent direction
@@ -338,10 +337,10 @@ dataset::Points minimise_step_energy(PhysicsInput<double> in, dataset::Points x0
     x.swap(trial);
     e = e_trial;
     if (next_needs_gradient) at.gradient(g);
-    nearest = at.take_nearest();
+    contacts = at.take_contacts();
   }
   if (report) report->energy_end = e / std::max<int64_t>(N, 1);
-  if (system) *system = assemble_system(in, approximate_hessian(in, x, s, fixed, nearest), s, fixed);
+  if (system) *system = assemble_system(in, approximate_hessian(in, x, s, fixed, contacts), s, fixed);
   for (int64_t v = 0; v < N; ++v)
     for (int c = 0; c < 3; ++c) x0(v, c) = static_cast<float>(x[3 * v + c]);
   return x0;
