@@ -52,6 +52,7 @@
 #include "dataset/neighbours.h"
 #include "dataset/sample.h"
 #include "dataset/sequence.h"
+#include "model/model_config.h"
 
 #include <Eigen/Core>
 
@@ -66,11 +67,9 @@ struct PhysicsSettings {
   double inertia = 1, drag = 1, stretch = 1, bending = 1, gravity = 1, wind = 1, collision_body = 1,
          collision_layer = 1, friction = 1;
   double air_damping = 1.0;  // Blender's air_damping (Cvi), default 1; the generator keeps it
-  // Collision target distances (scene units): Blender pushes to 8/9 of its detection distance,
-  // (distance_min + the body's thickness_outer) for the body and 2 × self_distance_min for cloth;
-  // the generator sets 0.1 (+ 0.02 default thickness) and 0.06.
-  double body_margin = (0.1 + 0.02) * 8.0 / 9.0;
-  double layer_margin = 2 * 0.06 * 8.0 / 9.0;
+  // Collision target distances (scene units).
+  double body_margin = kBlenderBodyMargin;
+  double layer_margin = kBlenderLayerMargin;
   double collision_stiffness = 1e3;  // k_c (mass / frame²), the ramp's current value
 };
 

@@ -8,10 +8,11 @@
 //
 // Newton: the gradient comes from the tape; the Hessian is approximated by its mass and drag,
 // the springs' PSD part k (d̂d̂ᵀ + max(0, 1 − L/l)(I − d̂d̂ᵀ)), bending's Gauss–Newton part
-// k_h ∇θ ∇θᵀ and the body and layer contacts' k_c n nᵀ; conjugate gradients with a 3×3 block-Jacobi
-// preconditioner solve it, and a backtracking line search keeps the energy decreasing. Contact friction holds cloth that touches the
-// body to the body's motion, tangentially, as Blender's body friction does (off in these
-// settings; ModelConfig turns it on for the "physics" base). Pinned vertices (no inertia weight) stay at
+// k_h ∇θ ∇θᵀ and the body and layer contacts' k_c n nᵀ; conjugate gradients with a 3×3
+// block-Jacobi preconditioner solve it, and a backtracking line search keeps the energy
+// decreasing. Contact friction holds cloth that touches the body to the body's motion,
+// tangentially, as Blender's body friction does (off in these settings; ModelConfig turns it on
+// for the "physics" base). Pinned vertices (no inertia weight) stay at
 // the carried guess: Blender moves them with the body. One frame is one step by default (Blender takes
 // `quality` substeps, 30 in the generator; two or three here come no closer to it). Blender's frames are not minima of this energy (`layersnet inspect
 // --physics`): a few iterations, not the minimum, are what comes closest to them.

@@ -6,6 +6,12 @@
 
 namespace layersnet {
 
+// Where Blender's collisions leave cloth (scene units): it pushes to 8/9 of its detection distance,
+// (distance_min + the body's thickness_outer) for the body and 2 × self_distance_min for cloth;
+// the generator sets 0.1 (+ 0.02 default thickness) and 0.06.
+inline constexpr double kBlenderBodyMargin = (0.1 + 0.02) * 8.0 / 9.0;
+inline constexpr double kBlenderLayerMargin = 2 * 0.06 * 8.0 / 9.0;
+
 struct ModelConfig {
   int width = 128;                  // d: token channels
   int heads = 8;                    // H: attention heads (half world, half mesh)
@@ -53,9 +59,8 @@ struct ModelConfig {
   std::string physics_step_inertia = "world";
   double physics_step_collision_stiffness = 1e4;
   bool physics_step_layer_collision = false;
-  // Distance the layer term keeps the outer layer from the inner one (scene units); the default
-  // is the physics loss's (physics.layer_margin).
-  double physics_step_layer_margin = 2 * 0.06 * 8.0 / 9.0;
+  // Distance the layer term keeps the outer layer from the inner one (scene units).
+  double physics_step_layer_margin = kBlenderLayerMargin;
   // Contact friction of the step: a vertex within physics_step_friction_distance (scene units) of
   // the body along its normal is held to the body's tangential motion with stiffness friction × its
   // mass (losses/physics_step.h); 0 = frictionless contact. Chosen on the validation splits

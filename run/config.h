@@ -120,8 +120,8 @@ struct PhysicsConfig {
   // the energy, so the loss holds touching cloth as the step does; 0 = none (needs the physics base).
   double friction = 0;
   double air_damping = 1.0;      // Blender's air_damping the data was made with (its default)
-  double body_margin = (0.1 + 0.02) * 8.0 / 9.0;   // scene units: Blender's push-out distance (generator's settings)
-  double layer_margin = 2 * 0.06 * 8.0 / 9.0;      // scene units, cloth-cloth
+  double body_margin = kBlenderBodyMargin;    // scene units: Blender's push-out distance (generator's settings)
+  double layer_margin = kBlenderLayerMargin;  // scene units, cloth-cloth
   // Collision stiffness k_c ramped as HOOD ramps its collision weight: start, then linear to max.
   double collision_stiffness_start = 1e2;
   double collision_stiffness_max = 1e4;
