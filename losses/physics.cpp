@@ -130,12 +130,12 @@ PhysicsInput<float> physics_input_from_sample(const dataset::TrainingSample& s, 
   }
   in.faces = s.structure->faces;
   // Face wind at x_t: the effector gives each vertex w = field strength (stored strength × the
-  // file's wind_field_factor) × the field's z axis / fps, and each face 0.02 |e1 × e2| / 3 =
-  // 0.04 area / 3 times (w·n) n to each corner.
+  // file's wind_field_factor) × the field's z axis / fps, and each face face_wind × area / 3 times
+  // (w·n) n to each corner.
   in.wind_force.assign(N * 3, 0.f);
   if (info.has_wind && info.wind_strength[t + 1] != 0.f) {
     const Eigen::Vector3d w =
-        0.04 / static_cast<double>(info.fps) * static_cast<double>(info.wind_strength[t + 1]) *
+        settings.face_wind / static_cast<double>(info.fps) * static_cast<double>(info.wind_strength[t + 1]) *
         static_cast<double>(info.wind_field_factor) *
         dataset::wind_direction(info.wind_rotation.row(t + 1).transpose()).cast<double>();
     const dataset::Points force = dataset::face_wind_force(s.state.leftCols<3>(), in.faces, w);

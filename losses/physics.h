@@ -18,8 +18,8 @@
 //              interior edge, θ0 at rest, k_h = bending_h × L_h × 0.1 (Blender's angular model)
 //   gravity    −Σ_v m_v g·(x_v − x_t,v), g = 0.001 × the file's gravity (Blender's factor)
 //   wind       −Σ_v F_v·(x_v − x_t,v), F the face wind at x_t: each face gives its three corners
-//              0.02 × |e1 × e2|/3 × (w·n) n = 0.04 × area/3 × (w·n) n, w = strength × direction / fps
-//              (Blender's face wind)
+//              0.02 × area/3 × (w·n) n, w = strength × direction / fps (Blender's face wind;
+//              PhysicsSettings::face_wind)
 //   collision_body   k_c/2 Σ_v min((x_v − h_a)·n_a − d_b, 0)², a = nearest body vertex at t+1
 //   collision_layer  k_c/2 Σ_v min((x_v − y_a)·n_a − d_l, 0)² over the outer garment's vertices,
 //              y_a the nearest inner-garment vertex (predicted), n_a its predicted normal
@@ -37,8 +37,8 @@
 // spring stiffness scales and the bending factor 0.1 in cloth_calc_spring_force, gravity × 0.001
 // and drag = air_damping × 0.01 in cloth_calc_force (simulation/intern/SIM_mass_spring.cpp);
 // the linear spring force k(L − L0), the angular bending force k(θ − θ0) with θ from atan2 of
-// the two face normals, and the face wind 0.02 · |e1 × e2|/3 · (w·n) n in implicit_blender.c
-// (calc_nor_area_tri returns the cross product's length, twice the area), w divided by the frame
+// the two face normals, and the face wind 0.02 · area/3 · (w·n) n in implicit_blender.c
+// (3.x: calc_nor_area_tri returns the area; 2.8x returned twice it), w divided by the frame
 // rate in effect.c (pd_point_from_loc sets vel_to_sec to it);
 // dt = time_scale / quality per substep (blenkernel cloth.c); collision distances and their
 // 8/9 push-out factor in blenkernel collision.c. Deviations: one step per frame instead of
@@ -71,6 +71,7 @@ struct PhysicsSettings {
   double body_margin = kBlenderBodyMargin;
   double layer_margin = kBlenderLayerMargin;
   double collision_stiffness = 1e3;  // k_c (mass / frame²), the ramp's current value
+  double face_wind = kBlenderFaceWind;  // per corner: face_wind · area / 3 · (w·n) n
 };
 
 // Constants of one sample (N garment vertices, E edges, H interior edges, B body vertices).

@@ -429,6 +429,7 @@ PhysicsStepSettings physics_step_settings(const ModelConfig& model) {
   settings.energy.layer_margin = model.physics_step_layer_margin;
   settings.friction = model.physics_step_friction;
   settings.friction_distance = model.physics_step_friction_distance;
+  settings.energy.face_wind = model.physics_step_face_wind;
   return settings;
 }
 

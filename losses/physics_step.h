@@ -65,7 +65,7 @@ dataset::Points physics_step_displacement(const dataset::TrainingSample& sample,
                                           dataset::BlockSystem<float>* system = nullptr);
 
 // The step a model takes (Blender's constants, the model's iterations, inertia target, contact
-// stiffness, layer term and friction).
+// stiffness, layer term, friction and face wind coefficient).
 PhysicsStepSettings physics_step_settings(const ModelConfig& model);
 
 // Fills sample.physics_step with the step of physics_step_settings(model) when the model's

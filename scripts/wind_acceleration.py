@@ -3,7 +3,7 @@
 
 For each windy file, over the frames after the ramp whose stored strength is above --above:
 Blender's wind acceleration of every unpinned garment vertex, F / m with F the face wind
-(each triangle gives each corner 0.02 |e1 x e2| / 3 (w.n) n, w = strength x wind_field_factor x
+(each triangle of area A gives each corner 0.02 A / 3 (w.n) n, w = strength x wind_field_factor x
 direction / fps: the law `losses/physics.h` states) and m the garment's vertex mass; gravity's
 0.001 g; and the cloth's own acceleration x_{t+1} - 2 x_t + x_{t-1} relative to the body root.
 Accelerations in mm per frame squared (10 scene units per metre). Needs python3-h5py and numpy.
@@ -27,7 +27,7 @@ def face_wind(positions, faces, wind):
     cross = np.cross(positions[faces[:, 1]] - positions[faces[:, 0]], positions[faces[:, 2]] - positions[faces[:, 0]])
     length = np.linalg.norm(cross, axis=1)
     normal = cross / np.maximum(length, 1e-12)[:, None]
-    corner = (0.02 * length / 3 * (normal @ wind))[:, None] * normal
+    corner = (0.02 * (length / 2) / 3 * (normal @ wind))[:, None] * normal
     force = np.zeros_like(positions)
     for c in range(3):
         np.add.at(force, faces[:, c], corner)

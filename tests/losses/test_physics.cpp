@@ -263,9 +263,9 @@ TEST(Physics, StiffnessRuleAndWindFactorFollowTheFile) {
   EXPECT_NEAR(norm_windier / norm, 2.5, 1e-4);
 }
 
-// The wind force is Blender's: each face gives each corner 0.02 |e1 × e2| / 3 · (w·n) n with
-// w = strength × direction / fps (effect.c divides the field by the frame rate), recounted here
-// face by face; pinned vertices feel none.
+// The wind force is Blender's 3.x face wind: each face gives each corner 0.02 · area / 3 · (w·n) n
+// with w = strength × direction / fps (effect.c divides the field by the frame rate), recounted
+// here face by face; pinned vertices feel none.
 TEST(Physics, WindForceIsBlendersFaceWind) {
   const auto seq = two_layers_with_wind();
   const int t = 5;
@@ -283,7 +283,7 @@ TEST(Physics, WindForceIsBlendersFaceWind) {
       for (int c = 0; c < 3; ++c) p[c] = s.state.row(offset + g.faces(f, c)).head<3>().transpose().cast<double>();
       const Eigen::Vector3d cross = (p[0] - p[1]).cross(p[1] - p[2]);
       const Eigen::Vector3d n = cross.normalized();
-      for (int c = 0; c < 3; ++c) expected[offset + g.faces(f, c)] += 0.02 * cross.norm() / 3 * w.dot(n) * n;
+      for (int c = 0; c < 3; ++c) expected[offset + g.faces(f, c)] += 0.02 * (cross.norm() / 2) / 3 * w.dot(n) * n;
     }
     for (int v = 0; v < g.num_vertices; ++v)
       if (g.pinned(v)) expected[offset + v].setZero();
