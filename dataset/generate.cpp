@@ -140,6 +140,16 @@ std::string generate_report_markdown(const json& rep) {
   md << "accepted " << s.at("accepted") << ", dropped " << s.at("dropped") << ", regenerated "
      << s.at("regenerated") << "; Blender s/frame mean " << s.at("mean_blender_s_per_frame")
      << "; wall time of this run " << s.at("run_seconds") << " s\n\n";
+  if (s.contains("kept_blender_job_seconds")) {
+    char buf[256];
+    std::snprintf(buf, sizeof(buf),
+                  "The accepted sequences' Blender jobs, over every run that made them: %.1f h summed over jobs "
+                  "(%.1f h of wall time at %d at once), %.1f h of Blender CPU\n\n",
+                  s.at("kept_blender_job_seconds").get<double>() / 3600,
+                  s.at("kept_blender_job_seconds").get<double>() / 3600 / std::max(1, s.value("jobs", 1)),
+                  s.value("jobs", 1), s.at("kept_blender_cpu_seconds").get<double>() / 3600);
+    md << buf;
+  }
   md << "| id | split | tags | attempts | inside body | outer in inner | max stretch | p99 stretch | "
         "s/frame | body V | cloth V | status |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n";
   for (const json& e : rep.at("sequences")) {
@@ -410,6 +420,15 @@ GenerateSummary generate_dataset(const GenerateOptions& opt) {
     if (!e.is_null()) sequences.push_back(e);
   write_dataset_manifest(out, source, entries);
   const double run_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_run).count();
+  // What the whole set cost, over every run that made it: each accepted sequence's Blender job
+  // (wall and CPU; attempts that failed a gate are not in the reports).
+  double kept_job_s = 0, kept_cpu_s = 0;
+  for (const json& e : sequences) {
+    if (!e.contains("report")) continue;
+    const json& timing = e.at("report").at("timing");
+    kept_job_s += timing.value("total_s", 0.0);
+    kept_cpu_s += timing.value("blender_cpu_s_per_frame", 0.0) * e.at("report").value("frames", 0);
+  }
   json report = {{"source", source},
                  {"gates", {{"max_inside_body_share", gates.max_inside_body_share},
                             {"max_outer_inside_inner_share", gates.max_outer_inside_inner_share},
@@ -419,7 +438,8 @@ GenerateSummary generate_dataset(const GenerateOptions& opt) {
                               {"blender_runs_this_run", generated_now}, {"blender_seconds_this_run", spent},
                               {"jobs", opt.jobs}, {"threads_per_job", opt.threads},
                               {"run_seconds", run_s},
-                              {"mean_blender_s_per_frame", accepted ? s_per_frame_sum / accepted : 0.0}}},
+                              {"mean_blender_s_per_frame", accepted ? s_per_frame_sum / accepted : 0.0},
+                              {"kept_blender_job_seconds", kept_job_s}, {"kept_blender_cpu_seconds", kept_cpu_s}}},
                  {"sequences", sequences}};
   io::write_file_atomic(out / "generate_report.json", report.dump(1));
   io::write_file_atomic(out / "generate_report.md", generate_report_markdown(report));

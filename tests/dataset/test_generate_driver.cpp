@@ -83,7 +83,8 @@ TEST(GenerateDriver, WholeRunWithAStandInBlender) {
          "cat > \"$rep\" <<EOF\n"
          "{\"split\": \"$split\", \"finite\": true, \"quality\": {\"inside_body_share\": $share, \"outer_inside_inner_share\": 0.0,\n"
          " \"max_edge_stretch\": 1.5, \"p99_edge_stretch\": 0.2}, \"tags\": {\"inner\": \"tight\", \"wind\": \"windy\"},\n"
-         " \"timing\": {\"blender_s_per_frame\": 0.5}, \"body_vertices\": 10, \"cloth_vertices\": 20}\n"
+         " \"timing\": {\"blender_s_per_frame\": 0.5, \"blender_cpu_s_per_frame\": 0.25, \"total_s\": 2.0},\n"
+         " \"frames\": 6, \"body_vertices\": 10, \"cloth_vertices\": 20}\n"
          "EOF\n";
   }
   fs::permissions(blender, fs::perms::owner_all);
@@ -111,6 +112,9 @@ TEST(GenerateDriver, WholeRunWithAStandInBlender) {
   const json report = json::parse(in);
   EXPECT_EQ(report["sequences"][1]["status"], "regenerated");
   EXPECT_EQ(report["sequences"][1]["attempts"], 2);
+  // The set's cost: the three accepted jobs' 2 s of wall time and 0.25 s of CPU per frame.
+  EXPECT_DOUBLE_EQ(report["summary"]["kept_blender_job_seconds"].get<double>(), 6.0);
+  EXPECT_DOUBLE_EQ(report["summary"]["kept_blender_cpu_seconds"].get<double>(), 4.5);
   EXPECT_TRUE(fs::exists(fs::path(o.out) / "generate_report.md"));
 
   // Resume: every sequence is kept, the manifest is written again the same.
@@ -120,7 +124,9 @@ TEST(GenerateDriver, WholeRunWithAStandInBlender) {
   EXPECT_EQ(again.regenerated, 0);
   EXPECT_EQ(fs::last_write_time(fs::path(o.out) / "00002.h5"), written);
   std::ifstream in2(fs::path(o.out) / "generate_report.json");
-  for (const json& e : json::parse(in2)["sequences"]) EXPECT_EQ(e["status"], "kept");
+  const json report2 = json::parse(in2);
+  for (const json& e : report2["sequences"]) EXPECT_EQ(e["status"], "kept");
+  EXPECT_DOUBLE_EQ(report2["summary"]["kept_blender_job_seconds"].get<double>(), 6.0);  // what resuming kept
   const DatasetManifest m2 = read_manifest(o.out);
   EXPECT_EQ(m2.all_ids(), m.all_ids());
   EXPECT_EQ(m2.extra, m.extra);
