@@ -43,6 +43,15 @@ double blender_seconds_per_frame(const std::string& path) {
   return h5::read_float_attr(f.get(), "q_blender_s_per_frame", {path, "/"});
 }
 
+// Mean distance between two rollouts of the same frames (scene units, over frames and vertices);
+// NaN when either diverged.
+double mean_distance(const Rollout& a, const Rollout& b) {
+  const std::size_t n = std::min(a.frames.size(), b.frames.size());
+  double sum = 0;
+  for (std::size_t k = 0; k < n; ++k) sum += (a.frames[k] - b.frames[k]).rowwise().norm().cast<double>().mean();
+  return n ? sum / static_cast<double>(n) : 0.0;
+}
+
 SequenceResult score_rollout(const dataset::Sequence& seq, const Rollout& r, const CollisionOptions& o,
                              int mark_frames) {
   const GarmentLayout L = garment_layout(seq.info);
@@ -178,6 +187,7 @@ std::vector<MethodResult> evaluate(const dataset::DatasetManifest& manifest, std
       const bool scaled = rescale && predictors[p]->takes_scaled_wind();
       const Rollout r = rollout(*predictors[p], scaled ? scaled_wind : seq, start.input_frame, o.frames);
       SequenceResult s = score_rollout(seq, r, co, o.mark_frames);
+      if (scaled) s.wind_moved = mean_distance(r, rollout(*predictors[p], seq, start.input_frame, o.frames));
       s.id = id;
       s.after_ramp = start.after_ramp;
       if (auto it = subsets.find(id); it != subsets.end()) s.subsets = it->second;
@@ -239,7 +249,7 @@ double median_ms_per_frame(Predictor& predictor, const dataset::Sequence& seq, i
 
 Summary summarise(const MethodResult& m) {
   Summary s;
-  std::vector<double> err, inner, outer, h, lo, la, ln, strain_mean, strain_p99, steps;
+  std::vector<double> err, inner, outer, h, lo, la, ln, strain_mean, strain_p99, steps, wind_moved;
   std::vector<double> dihedral_mean, dihedral_p99, to_mark, at_mark, at_end;
   std::vector<std::vector<double>> dihedral_curve;
   std::map<std::string, std::vector<double>> by_type, by_subset;
@@ -260,6 +270,7 @@ Summary summarise(const MethodResult& m) {
     inner.push_back(r.inner_error * mm);
     h.push_back(100 * r.h_rate);
     strain_mean.push_back(100 * r.strain_mean);
+    if (r.wind_moved >= 0) wind_moved.push_back(r.wind_moved * mm);
     strain_p99.push_back(100 * r.strain_p99);
     dihedral_mean.push_back(r.dihedral_mean);
     dihedral_p99.push_back(r.dihedral_p99);
@@ -303,6 +314,7 @@ Summary summarise(const MethodResult& m) {
   s.l_all_percent = mean_std(la);
   s.l_near_percent = mean_std(ln);
   s.strain_mean_percent = mean_std(strain_mean);
+  s.wind_moved_mm = mean_std(wind_moved);
   s.strain_p99_percent = mean_std(strain_p99);
   s.dihedral_mean_deg = mean_std(dihedral_mean);
   s.dihedral_p99_deg = mean_std(dihedral_p99);

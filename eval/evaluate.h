@@ -63,6 +63,11 @@ struct SequenceResult {
   double error_to_mark = 0, dihedral_at_mark = 0;
   std::vector<double> step_ms;  // (n,)
   int diverged_at = -1;         // first rollout frame with a non-finite prediction, -1 = none
+  // Under EvalOptions::wind_scale != 1, for a predictor that sees the scaled wind: the mean
+  // distance (scene units, over the rollout's frames and vertices) between this rollout and the
+  // same predictor's under the data's wind, i.e. how far the wind change moves its cloth, whatever
+  // the direction. -1 = not measured.
+  double wind_moved = -1;
   double mm() const { return 1000.0 / scale; }  // millimetres per scene unit
 };
 
@@ -168,6 +173,7 @@ struct Summary {
   MeanStd error_mm, inner_mm, outer_mm;
   MeanStd h_percent, l_outer_percent, l_all_percent, l_near_percent;
   MeanStd strain_mean_percent, strain_p99_percent;  // edge strain × 100
+  MeanStd wind_moved_mm;                            // over the sequences where it was measured
   std::map<std::string, MeanStd> by_type_mm;    // garment type -> over sequences holding it
   std::map<std::string, MeanStd> by_subset_mm;  // T, T+W, L, L+W
   std::vector<double> curve_mm;                 // mean over sequences per rollout frame

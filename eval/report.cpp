@@ -183,6 +183,9 @@ std::string summary_table(const std::vector<MethodResult>& methods, const Report
                   m.ms_per_frame_2threads > 0 ? fmt("%.3g", m.ms_per_frame_2threads).c_str() : "–");
     o << line;
     if (s.diverged) o << "    (" << s.diverged << " diverged sequence(s) left out: non-finite prediction)\n";
+    if (s.wind_moved_mm.count)
+      o << "    the wind x " << fmt("%g", c.options.wind_scale) << " moves its cloth by " << pm(s.wind_moved_mm)
+        << " mm from its rollout under the data's wind (" << s.wind_moved_mm.count << " sequences)\n";
   }
   o << "(" << (methods.empty() ? 0 : methods[0].sequences.size()) << " " << c.options.split << " sequences, up to "
     << c.options.frames << " predicted frames from " << start_description(c.options)
@@ -242,7 +245,9 @@ std::string report_json(const std::vector<MethodResult>& methods, const ReportCo
                "the last band edge; dihedral_*_deg: angle between the normals of the two triangles of every interior "
                "edge, degrees (0 = flat), mean and p99 over edges x frames, curve per frame; *_at_mark / to_mark: at / "
                "over the first mark_frames frames; comparisons: model error / baseline error for baselines with the "
-               "same post_processed flag, ratio of the means and per sequence";
+               "same post_processed flag, ratio of the means and per sequence; wind_moved_mm (only with wind_scale != 1, "
+               "models): mean distance between the rollout with the scaled wind and the same model's under the data's "
+               "wind";
   j["methods"] = json::array();
   for (const auto& m : methods) {
     const Summary s = summarise(m);
@@ -266,6 +271,7 @@ std::string report_json(const std::vector<MethodResult>& methods, const ReportCo
                {"error_to_mark_mm", ms_json(s.error_to_mark_mm)},
                {"dihedral_at_mark_deg", ms_json(s.dihedral_at_mark_deg)},
                {"dihedral_end_deg", ms_json(s.dihedral_end_deg)}};
+    if (s.wind_moved_mm.count > 0) js["wind_moved_mm"] = ms_json(s.wind_moved_mm);
     js["error_by_body_distance"] = json::array();
     for (int b = 0; b < kBodyDistanceBands; ++b)
       js["error_by_body_distance"].push_back({{"band_m", band_bounds(b)}, {"error_mm", s.band_mm[b]},
@@ -295,6 +301,7 @@ std::string report_json(const std::vector<MethodResult>& methods, const ReportCo
                                  {"dihedral_curve_deg", r.dihedral_curve}, {"mark", r.mark},
                                  {"error_to_mark_mm", r.error_to_mark * r.mm()},
                                  {"step_ms", r.step_ms}, {"diverged_at", r.diverged_at}});
+      if (r.wind_moved >= 0) jm["sequences"].back()["wind_moved_mm"] = r.wind_moved * r.mm();
     }
     j["methods"].push_back(jm);
   }
@@ -357,6 +364,18 @@ std::string report_markdown(const std::vector<MethodResult>& methods, const Repo
       << fmt("%.1f", s.free_cloth_mm) << " | " << pm(s.h_percent, "%.2f") << " | " << pm(s.l_outer_percent, "%.2f")
       << " | " << fmt("%.1f", s.strain_mean_percent.mean) << " / " << fmt("%.0f", s.strain_p99_percent.mean) << " | "
       << fmt("%.1f", s.dihedral_mean_deg.mean) << " |\n";
+  }
+  bool moved = false;
+  for (const auto& m : methods) {
+    const Summary s = summarise(m);
+    if (!s.wind_moved_mm.count) continue;
+    if (!moved)
+      o << "\n## What the wind change moves\n\nMean distance between each model's rollout with the wind x "
+        << fmt("%g", c.options.wind_scale) << " and its rollout under the data's wind, over frames and vertices, "
+           "mean ± std over sequences with wind (per sequence: `wind_moved_mm` in eval.json). It says how far the "
+           "model's cloth follows the wind, not whether it follows it the right way.\n\n| model | moved mm |\n|---|---|\n";
+    moved = true;
+    o << "| " << m.name << " | " << pm(s.wind_moved_mm) << " |\n";
   }
   const auto comparisons = compare_with_baselines(methods);
   if (!comparisons.empty()) {

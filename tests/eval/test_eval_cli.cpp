@@ -157,7 +157,8 @@ TEST_F(EvalCli, BaselinesGetTheModelsPostProcessing) {
 }
 
 // --wind-scale changes the wind only as the models see it: the model's rollouts move, the
-// baselines and the ground truth they are scored against do not, and the reports say so.
+// baselines and the ground truth they are scored against do not, and the reports say so and how
+// far the change moved the model's cloth.
 TEST_F(EvalCli, WindScaleChangesWhatTheModelSeesNotTheTruth) {
   const auto errors = [&](const std::string& extra, const std::string& name) {
     int code = 0;
@@ -180,6 +181,20 @@ TEST_F(EvalCli, WindScaleChangesWhatTheModelSeesNotTheTruth) {
   EXPECT_NE(data_wind[0], calm[0]);  // the model reads the wind
   for (std::size_t k = 1; k < 7; ++k) EXPECT_EQ(data_wind[k], calm[k]) << k;
   EXPECT_NE(slurp(root_ / "eval_wind_0" / "eval.md").find("wind strengths x 0"), std::string::npos);
+  const auto moved = [&](const std::string& name) {
+    std::vector<nlohmann::json> out;
+    const auto report = nlohmann::json::parse(slurp(root_ / name / "eval.json"));
+    for (const auto& m : report["methods"])
+      out.push_back(m["summary"].value("wind_moved_mm", nlohmann::json()));
+    return out;
+  };
+  const auto moved_0 = moved("eval_wind_0"), moved_1 = moved("eval_wind_1");
+  ASSERT_FALSE(moved_0[0].is_null());  // the model, on the sequences with wind
+  EXPECT_GT(moved_0[0]["sequences"].get<int>(), 0);
+  EXPECT_GT(moved_0[0]["mean"].get<double>(), 0.0);
+  for (std::size_t k = 1; k < 7; ++k) EXPECT_TRUE(moved_0[k].is_null()) << k;  // the data's wind throughout
+  for (const auto& m : moved_1) EXPECT_TRUE(m.is_null());
+  EXPECT_NE(slurp(root_ / "eval_wind_0" / "eval.md").find("What the wind change moves"), std::string::npos);
 }
 
 TEST_F(EvalCli, StartsAfterTheRampByDefaultOrAtAFixedInputFrame) {
