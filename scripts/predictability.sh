@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # How far can any simulator follow the ground truth, and how much of it is the wind?
-# Re-simulates each test sequence of a `layersnet generate` data set with the same seed and
-# scene but one change, and scores these twins against the data with `layersnet eval --replay`,
-# beside the baselines:
+# Re-simulates each sequence of a split (the test split unless SPLIT says otherwise) of a
+# `layersnet generate` data set with the same seed and scene but one change, and scores these
+# twins against the data with `layersnet eval --replay`, beside the baselines:
 #   jitter     the cloth's starting vertices nudged by Gaussian noise (`cloth_jitter`, scene
 #              units): how predictable the solver's cloth is;
 #   calm-wind  every wind strength times 0 (`wind_scale`): how far the cloth moves because of
@@ -15,10 +15,11 @@
 #     OUT     output folder (default runs/predictability); resumable: finished twins are kept
 #     JITTER  noise std in scene units (default 0.01 = 1 mm at the D-LAYERS x10 scale)
 #     TWINS   jitter (default) | calm-wind | both
-# Environment: IDS="00744 00745" re-simulates only these test sequences (default: the whole
-# test split); EVAL_FRAMES=N scores N frames from the ramp's end (default: eval.frames); THREADS=N
-# Blender threads per twin (default 2) must be those the data was made with (`generate --threads`,
-# the reports' blender_threads): the cloth solver sums in a thread-dependent order, so another
+# Environment: SPLIT=val twins that split's sequences instead of the test split's; IDS="00744
+# 00745" re-simulates only these sequences of it (default: the whole split); EVAL_FRAMES=N
+# scores N frames from the ramp's end (default: eval.frames); THREADS=N Blender threads per twin
+# (default 2) must be those the data was made with (`generate --threads`, the reports'
+# blender_threads): the cloth solver sums in a thread-dependent order, so another
 # count is another trajectory (12.3 mm apart over 78 frames on a large-recipe sequence).
 # Cost: one Blender run per twin (about 1 min per 100-frame sequence on 2 cores).
 set -euo pipefail
@@ -39,7 +40,8 @@ esac
 [ -f "$DATA/dataset.json" ] || { echo "predictability: $DATA/dataset.json not found; make the data with layersnet generate" >&2; exit 2; }
 [ -f "$DATA/scene.json" ] || { echo "predictability: $DATA/scene.json not found: only data sets of layersnet generate can be re-simulated" >&2; exit 2; }
 mkdir -p "$OUT"
-ids=${IDS:-$($PY -c 'import json,sys; print(" ".join(json.load(open(sys.argv[1]))["splits"]["test"]))' "$DATA/dataset.json")}
+SPLIT=${SPLIT:-test}
+ids=${IDS:-$($PY -c 'import json,sys; print(" ".join(json.load(open(sys.argv[1]))["splits"][sys.argv[2]]))' "$DATA/dataset.json" "$SPLIT")}
 select=(--sequences "$(echo $ids | tr ' ' ',')")
 [ -n "${EVAL_FRAMES:-}" ] && select+=(--frames "$EVAL_FRAMES")
 
@@ -64,7 +66,7 @@ make_twins() {
 }
 
 make_twins same cloth_jitter 0 "${ids%% *}"
-"$BIN" eval --dataset "$DATA" --split test --sequences "${ids%% *}" "${select[@]:2}" --replay "$OUT/same" --name "re-simulated, unchanged" \
+"$BIN" eval --dataset "$DATA" --split "$SPLIT" --sequences "${ids%% *}" "${select[@]:2}" --replay "$OUT/same" --name "re-simulated, unchanged" \
   --out "$OUT/eval_unchanged"
 $PY -c 'import json,sys
 m = next(m for m in json.load(open(sys.argv[1]))["methods"] if m["kind"] == "replay")
@@ -75,11 +77,11 @@ sys.exit(f"predictability: the unchanged re-simulation differs from the data by 
 for variant in $variants; do
   if [ "$variant" = jitter ]; then
     make_twins jitter cloth_jitter "$JITTER" $ids
-    "$BIN" eval --dataset "$DATA" --split test "${select[@]}" --replay "$OUT/jitter" --name "re-simulated, cloth nudged ${JITTER} units" \
+    "$BIN" eval --dataset "$DATA" --split "$SPLIT" "${select[@]}" --replay "$OUT/jitter" --name "re-simulated, cloth nudged ${JITTER} units" \
       --out "$OUT/eval"
   else
     make_twins calm_wind wind_scale 0 $ids
-    "$BIN" eval --dataset "$DATA" --split test "${select[@]}" --replay "$OUT/calm_wind" --name "re-simulated without wind" \
+    "$BIN" eval --dataset "$DATA" --split "$SPLIT" "${select[@]}" --replay "$OUT/calm_wind" --name "re-simulated without wind" \
       --out "$OUT/eval_calm_wind"
   fi
 done
