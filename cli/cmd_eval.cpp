@@ -87,6 +87,11 @@ LAYERSNET_COMMAND(eval, "Roll out checkpoints and baselines over a split; error,
                                    "factor on the data's wind strengths as the models see them; the ground truth "
                                    "is unchanged (0: how much a model's error owes to its response to the wind)")
                         ->check(layersnet::cli::kFiniteNonNegative);
+                    sub.add_option("--wind-twins", o->wind_twins,
+                                   "folder of Blender's re-simulations of the evaluated sequences with the wind x "
+                                   "--wind-scale (scripts/predictability.sh calm-wind twins): each model's error rise "
+                                   "and movement are then set against Blender's")
+                        ->type_name("DIR");
                     sub.add_option("--speed-frames", o->speed_frames, "frames of the 1- and 2-thread speed rollouts")
                         ->check(CLI::Range(1, 1000000));
                     sub.add_option("--tether", o->tethers,

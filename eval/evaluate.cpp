@@ -15,6 +15,7 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <memory>
 #include <sstream>
 
 namespace layersnet::eval {
@@ -51,6 +52,52 @@ double mean_distance(const Rollout& a, const Rollout& b) {
   for (std::size_t k = 0; k < n; ++k) sum += (a.frames[k] - b.frames[k]).rowwise().norm().cast<double>().mean();
   return n ? sum / static_cast<double>(n) : 0.0;
 }
+
+double wind_share(const std::vector<Points>& model_scaled, const std::vector<Points>& model_data_wind,
+                  const std::vector<Points>& twin, const std::vector<Points>& truth) {
+  const std::size_t n = model_scaled.size();
+  if (model_data_wind.size() != n || twin.size() != n || truth.size() != n)
+    throw std::invalid_argument("wind_share: frame lists of different lengths");
+  double along = 0, blender = 0;
+  for (std::size_t k = 0; k < n; ++k) {
+    const Eigen::MatrixXd m = (model_data_wind[k] - model_scaled[k]).cast<double>();
+    const Eigen::MatrixXd g = (truth[k] - twin[k]).cast<double>();
+    along += m.cwiseProduct(g).sum();
+    blender += g.squaredNorm();
+  }
+  return blender > 0 ? along / blender : std::numeric_limits<double>::quiet_NaN();
+}
+
+namespace {
+
+// Checks that a twin folder was made under the wind x wind_scale, where it says so.
+void check_wind_twins(const std::string& folder, double wind_scale) {
+  if (wind_scale == 1.0)
+    throw std::runtime_error("--wind-twins " + folder + ": twins are compared under a changed wind; give --wind-scale "
+                             "(the factor the twins were simulated with, 0 for calm twins)");
+  if (!std::filesystem::is_directory(folder))
+    throw std::runtime_error("--wind-twins " + folder + ": no such folder; make the twins with scripts/predictability.sh "
+                             "DATA OUT 0.01 calm-wind (they land in OUT/calm_wind)");
+  const std::string scene = (std::filesystem::path(folder) / "scene.json").string();
+  if (!std::filesystem::exists(scene)) return;  // another generator's twins: the user vouches for them
+  std::ifstream in(scene);
+  const nlohmann::json j = nlohmann::json::parse(in, nullptr, false);
+  if (j.is_discarded()) throw std::runtime_error(scene + ": not valid JSON");
+  if (!j.contains("wind_scale") || !j["wind_scale"].is_number())
+    throw std::runtime_error(scene + ": no number 'wind_scale'; these are not twins under a changed wind (make them "
+                             "with scripts/predictability.sh ... calm-wind)");
+  const double twin_scale = j["wind_scale"].get<double>();
+  const auto text = [](double v) {
+    std::ostringstream s;
+    s << v;
+    return s.str();
+  };
+  if (twin_scale != wind_scale)
+    throw std::runtime_error(scene + ": the twins were simulated with wind_scale " + text(twin_scale) +
+                             ", not --wind-scale " + text(wind_scale) + "; pass --wind-scale " + text(twin_scale));
+}
+
+}  // namespace
 
 SequenceResult score_rollout(const dataset::Sequence& seq, const Rollout& r, const CollisionOptions& o,
                              int mark_frames) {
@@ -169,6 +216,11 @@ std::vector<MethodResult> evaluate(const dataset::DatasetManifest& manifest, std
     throw std::runtime_error(manifest.manifest_path() + ": split '" + o.split +
                              "' lists no sequences; choose another with --split");
   const auto subsets = read_subsets(manifest.root);
+  std::unique_ptr<Replay> twins;
+  if (!o.wind_twins.empty()) {
+    check_wind_twins(o.wind_twins, o.wind_scale);
+    twins = std::make_unique<Replay>("wind twin", o.wind_twins);
+  }
   std::vector<MethodResult> results(predictors.size());
   for (size_t p = 0; p < predictors.size(); ++p) results[p].name = predictors[p]->name();
   for (const std::string& id : ids) {
@@ -183,11 +235,26 @@ std::vector<MethodResult> evaluate(const dataset::DatasetManifest& manifest, std
     CollisionOptions co;
     co.max_body_distance = o.max_body_distance_m * seq.info.scale;
     co.max_layer_distance = o.max_layer_distance_m * seq.info.scale;
+    Rollout twin, truth;  // Blender's cloth under the scaled wind and under the data's, on the rollouts' frames
+    if (twins && rescale) {
+      twin = rollout(*twins, seq, start.input_frame, o.frames);
+      truth.first_frame = twin.first_frame;
+      for (std::size_t k = 0; k < twin.frames.size(); ++k)
+        truth.frames.push_back(garments_at(seq, twin.first_frame + static_cast<int>(k)));
+    }
     for (size_t p = 0; p < predictors.size(); ++p) {
       const bool scaled = rescale && predictors[p]->takes_scaled_wind();
       const Rollout r = rollout(*predictors[p], scaled ? scaled_wind : seq, start.input_frame, o.frames);
       SequenceResult s = score_rollout(seq, r, co, o.mark_frames);
-      if (scaled) s.wind_moved = mean_distance(r, rollout(*predictors[p], seq, start.input_frame, o.frames));
+      if (scaled) {
+        const Rollout data_wind = rollout(*predictors[p], seq, start.input_frame, o.frames);
+        s.wind_moved = mean_distance(r, data_wind);
+        if (!twin.frames.empty() && twin.frames.size() == r.frames.size()) {
+          s.twin_moved = mean_distance(truth, twin);
+          s.wind_error_rise = s.error - mean_distance(data_wind, truth);
+          s.wind_share = wind_share(r.frames, data_wind.frames, twin.frames, truth.frames);
+        }
+      }
       s.id = id;
       s.after_ramp = start.after_ramp;
       if (auto it = subsets.find(id); it != subsets.end()) s.subsets = it->second;
@@ -250,6 +317,7 @@ double median_ms_per_frame(Predictor& predictor, const dataset::Sequence& seq, i
 Summary summarise(const MethodResult& m) {
   Summary s;
   std::vector<double> err, inner, outer, h, lo, la, ln, strain_mean, strain_p99, steps, wind_moved;
+  std::vector<double> twin_moved, wind_error_rise, wind_shares;
   std::vector<double> dihedral_mean, dihedral_p99, to_mark, at_mark, at_end;
   std::vector<std::vector<double>> dihedral_curve;
   std::map<std::string, std::vector<double>> by_type, by_subset;
@@ -271,6 +339,11 @@ Summary summarise(const MethodResult& m) {
     h.push_back(100 * r.h_rate);
     strain_mean.push_back(100 * r.strain_mean);
     if (r.wind_moved >= 0) wind_moved.push_back(r.wind_moved * mm);
+    if (std::isfinite(r.wind_share)) {
+      twin_moved.push_back(r.twin_moved * mm);
+      wind_error_rise.push_back(r.wind_error_rise * mm);
+      wind_shares.push_back(r.wind_share);
+    }
     strain_p99.push_back(100 * r.strain_p99);
     dihedral_mean.push_back(r.dihedral_mean);
     dihedral_p99.push_back(r.dihedral_p99);
@@ -315,6 +388,9 @@ Summary summarise(const MethodResult& m) {
   s.l_near_percent = mean_std(ln);
   s.strain_mean_percent = mean_std(strain_mean);
   s.wind_moved_mm = mean_std(wind_moved);
+  s.twin_moved_mm = mean_std(twin_moved);
+  s.wind_error_rise_mm = mean_std(wind_error_rise);
+  s.wind_share = mean_std(wind_shares);
   s.strain_p99_percent = mean_std(strain_p99);
   s.dihedral_mean_deg = mean_std(dihedral_mean);
   s.dihedral_p99_deg = mean_std(dihedral_p99);

@@ -20,6 +20,7 @@
 #include "eval/rollout.h"
 
 #include <array>
+#include <limits>
 #include <map>
 #include <string>
 #include <vector>
@@ -68,6 +69,13 @@ struct SequenceResult {
   // same predictor's under the data's wind, i.e. how far the wind change moves its cloth, whatever
   // the direction. -1 = not measured.
   double wind_moved = -1;
+  // Under EvalOptions::wind_twins as well, for the same predictors (NaN = not measured), in scene
+  // units: twin_moved = mean distance between the data and Blender's twin under the scaled wind
+  // (how far the wind moves Blender's cloth); wind_error_rise = this rollout's error minus that of
+  // the rollout under the data's wind; wind_share = wind_share() of the two rollouts (a ratio).
+  double twin_moved = std::numeric_limits<double>::quiet_NaN();
+  double wind_error_rise = std::numeric_limits<double>::quiet_NaN();
+  double wind_share = std::numeric_limits<double>::quiet_NaN();
   double mm() const { return 1000.0 / scale; }  // millimetres per scene unit
 };
 
@@ -103,6 +111,10 @@ struct EvalOptions {
   // ground truth the rollouts are scored against is unchanged. With 0 or 2 it measures how much
   // a model responds to the wind.
   double wind_scale = 1.0;
+  // Folder of Blender's re-simulations of the evaluated sequences with the wind x wind_scale and
+  // nothing else changed (scripts/predictability.sh calm-wind twins; a file of the same name per
+  // sequence). Empty = none. Needs wind_scale != 1; its scene.json's wind_scale must match.
+  std::string wind_twins;
 };
 
 // Table-1 subsets of a data set: id -> subset names, from dataset.json "subsets" (written by
@@ -126,6 +138,14 @@ struct RolloutStart {
   bool after_ramp = false;
 };
 RolloutStart rollout_start(const std::string& sequence_path, const EvalOptions& options);
+
+// The share of Blender's wind movement that a model reproduces. Per frame k and vertex v, the
+// model moves by m = model_data_wind - model_scaled when its wind goes from the scaled one to the
+// data's, and Blender's cloth by g = truth - twin; the share is sum m.g / sum g.g (1 = all of it,
+// 0 = none or across it, < 0 = against it). Frame lists of equal length, points (N, 3) each.
+// NaN when Blender's cloth does not move.
+double wind_share(const std::vector<Points>& model_scaled, const std::vector<Points>& model_data_wind,
+                  const std::vector<Points>& twin, const std::vector<Points>& truth);
 
 // Predicts every sequence with every predictor. The same frames, metrics and sequences for all.
 // progress: print one line per sequence and method to stdout.
@@ -174,6 +194,7 @@ struct Summary {
   MeanStd h_percent, l_outer_percent, l_all_percent, l_near_percent;
   MeanStd strain_mean_percent, strain_p99_percent;  // edge strain × 100
   MeanStd wind_moved_mm;                            // over the sequences where it was measured
+  MeanStd twin_moved_mm, wind_error_rise_mm, wind_share;  // the same, under EvalOptions::wind_twins
   std::map<std::string, MeanStd> by_type_mm;    // garment type -> over sequences holding it
   std::map<std::string, MeanStd> by_subset_mm;  // T, T+W, L, L+W
   std::vector<double> curve_mm;                 // mean over sequences per rollout frame

@@ -186,6 +186,11 @@ std::string summary_table(const std::vector<MethodResult>& methods, const Report
     if (s.wind_moved_mm.count)
       o << "    the wind x " << fmt("%g", c.options.wind_scale) << " moves its cloth by " << pm(s.wind_moved_mm)
         << " mm from its rollout under the data's wind (" << s.wind_moved_mm.count << " sequences)\n";
+    if (s.wind_share.count)
+      o << "    against Blender's twins (" << s.wind_share.count << " sequences): Blender's cloth moves by "
+        << pm(s.twin_moved_mm) << " mm, this error rises by " << pm(s.wind_error_rise_mm) << " mm ("
+        << fmt("%.2f", s.wind_error_rise_mm.mean / s.twin_moved_mm.mean) << " of it), share of Blender's movement "
+        << pm(s.wind_share, "%.2f") << "\n";
   }
   o << "(" << (methods.empty() ? 0 : methods[0].sequences.size()) << " " << c.options.split << " sequences, up to "
     << c.options.frames << " predicted frames from " << start_description(c.options)
@@ -230,6 +235,7 @@ std::string report_json(const std::vector<MethodResult>& methods, const ReportCo
   j["start"] = c.options.start_after_ramp ? "ramp" : "fixed";  // per sequence: first_frame, input_frame
   j["start_frame"] = c.options.start_frame;
   j["wind_scale"] = c.options.wind_scale;  // 1 = the data's wind
+  j["wind_twins"] = c.options.wind_twins;  // "" = none
   j["h_collision_max_distance_m"] = c.options.max_body_distance_m;
   j["l_collision_near_max_distance_m"] = c.options.max_layer_distance_m;
   j["blender_s_per_frame"] = c.blender_s_per_frame;
@@ -247,7 +253,10 @@ std::string report_json(const std::vector<MethodResult>& methods, const ReportCo
                "over the first mark_frames frames; comparisons: model error / baseline error for baselines with the "
                "same post_processed flag, ratio of the means and per sequence; wind_moved_mm (only with wind_scale != 1, "
                "models): mean distance between the rollout with the scaled wind and the same model's under the data's "
-               "wind";
+               "wind; with wind_twins (Blender's re-simulations under the scaled wind): twin_moved_mm = mean distance "
+               "between the data and its twin, wind_error_rise_mm = error with the scaled wind minus error with the "
+               "data's, wind_share = the model's wind movement projected on Blender's, sum m.g / sum g.g over frames "
+               "and vertices (1 = all of it, 0 = none, < 0 = against it)";
   j["methods"] = json::array();
   for (const auto& m : methods) {
     const Summary s = summarise(m);
@@ -272,6 +281,11 @@ std::string report_json(const std::vector<MethodResult>& methods, const ReportCo
                {"dihedral_at_mark_deg", ms_json(s.dihedral_at_mark_deg)},
                {"dihedral_end_deg", ms_json(s.dihedral_end_deg)}};
     if (s.wind_moved_mm.count > 0) js["wind_moved_mm"] = ms_json(s.wind_moved_mm);
+    if (s.wind_share.count > 0) {
+      js["twin_moved_mm"] = ms_json(s.twin_moved_mm);
+      js["wind_error_rise_mm"] = ms_json(s.wind_error_rise_mm);
+      js["wind_share"] = ms_json(s.wind_share);
+    }
     js["error_by_body_distance"] = json::array();
     for (int b = 0; b < kBodyDistanceBands; ++b)
       js["error_by_body_distance"].push_back({{"band_m", band_bounds(b)}, {"error_mm", s.band_mm[b]},
@@ -302,6 +316,11 @@ std::string report_json(const std::vector<MethodResult>& methods, const ReportCo
                                  {"error_to_mark_mm", r.error_to_mark * r.mm()},
                                  {"step_ms", r.step_ms}, {"diverged_at", r.diverged_at}});
       if (r.wind_moved >= 0) jm["sequences"].back()["wind_moved_mm"] = r.wind_moved * r.mm();
+      if (std::isfinite(r.wind_share)) {
+        jm["sequences"].back()["twin_moved_mm"] = r.twin_moved * r.mm();
+        jm["sequences"].back()["wind_error_rise_mm"] = r.wind_error_rise * r.mm();
+        jm["sequences"].back()["wind_share"] = r.wind_share;
+      }
     }
     j["methods"].push_back(jm);
   }
@@ -366,16 +385,33 @@ std::string report_markdown(const std::vector<MethodResult>& methods, const Repo
       << fmt("%.1f", s.dihedral_mean_deg.mean) << " |\n";
   }
   bool moved = false;
+  const bool twins = !c.options.wind_twins.empty();
   for (const auto& m : methods) {
     const Summary s = summarise(m);
     if (!s.wind_moved_mm.count) continue;
-    if (!moved)
+    if (!moved) {
       o << "\n## What the wind change moves\n\nMean distance between each model's rollout with the wind x "
         << fmt("%g", c.options.wind_scale) << " and its rollout under the data's wind, over frames and vertices, "
            "mean ± std over sequences with wind (per sequence: `wind_moved_mm` in eval.json). It says how far the "
-           "model's cloth follows the wind, not whether it follows it the right way.\n\n| model | moved mm |\n|---|---|\n";
+           "model's cloth follows the wind, not whether it follows it the right way.";
+      if (twins)
+        o << " Against Blender's twins (" << c.options.wind_twins << ", the same sequences re-simulated with the wind x "
+          << fmt("%g", c.options.wind_scale) << "): how far the wind moves Blender's cloth, the model's error rise "
+             "(error with the wind x " << fmt("%g", c.options.wind_scale) << " minus error under the data's wind), "
+             "that rise over Blender's movement (ratio of the means), and the share of Blender's movement the "
+             "model reproduces (its movement projected on Blender's, per sequence; 1 = all of it, 0 = none).";
+      o << (twins ? "\n\n| model | moved mm | Blender's cloth moved mm | error rise mm | rise / Blender's | share of "
+                    "Blender's movement |\n|---|---|---|---|---|---|\n"
+                  : "\n\n| model | moved mm |\n|---|---|\n");
+    }
     moved = true;
-    o << "| " << m.name << " | " << pm(s.wind_moved_mm) << " |\n";
+    o << "| " << m.name << " | " << pm(s.wind_moved_mm);
+    if (twins && s.wind_share.count)
+      o << " | " << pm(s.twin_moved_mm) << " | " << pm(s.wind_error_rise_mm) << " | "
+        << fmt("%.2f", s.wind_error_rise_mm.mean / s.twin_moved_mm.mean) << " | " << pm(s.wind_share, "%.2f");
+    else if (twins)
+      o << " | – | – | – | –";
+    o << " |\n";
   }
   const auto comparisons = compare_with_baselines(methods);
   if (!comparisons.empty()) {

@@ -197,6 +197,66 @@ TEST_F(EvalCli, WindScaleChangesWhatTheModelSeesNotTheTruth) {
   EXPECT_NE(slurp(root_ / "eval_wind_0" / "eval.md").find("What the wind change moves"), std::string::npos);
 }
 
+// Twins of the test sequences whose cloth sits 0.02 units along x from the data's, as if the calm
+// wind had left Blender's cloth there: the report sets each model's wind response against it.
+TEST_F(EvalCli, WindTwinsSetEachModelsWindResponseAgainstBlenders) {
+  const fs::path twins = root_ / "twins";
+  fs::create_directories(twins);
+  const dataset::DatasetManifest manifest = dataset::read_manifest((root_ / "data").string());
+  for (const std::string& id : manifest.split("test")) {
+    dataset::Sequence seq = dataset::read_sequence(manifest.sequence_path(id));
+    for (auto& g : seq.frames.garments) g.col(0).array() += 0.02f;
+    dataset::write_sequence((twins / fs::path(manifest.sequence_path(id)).filename()).string(), seq);
+  }
+  std::ofstream(twins / "scene.json") << R"({"wind_scale": 0.0, "seed": 1})";
+  const auto report = [&](const std::string& extra, const std::string& name, int* code) {
+    const fs::path out = root_ / name;
+    const std::string text = run("eval --checkpoint " + (root_ / "tiny.h5").string() +
+                                     " --frames 3 --speed-frames 1 --out " + out.string() + extra, code);
+    return std::make_pair(text, *code == 0 ? nlohmann::json::parse(slurp(out / "eval.json")) : nlohmann::json());
+  };
+  int code = 0;
+  const auto [text, calm] = report(" --wind-scale 0 --wind-twins " + twins.string(), "eval_twins", &code);
+  ASSERT_EQ(code, 0) << text;
+  const auto [text_1, data_wind] = report("", "eval_twins_wind_1", &code);
+  ASSERT_EQ(code, 0) << text_1;
+  EXPECT_EQ(calm["wind_twins"], twins.string());
+  const auto& model = calm["methods"][0];
+  ASSERT_TRUE(model["summary"].contains("wind_share")) << model["summary"].dump();
+  int windy = 0;
+  for (std::size_t i = 0; i < model["sequences"].size(); ++i) {
+    const auto& r = model["sequences"][i];
+    EXPECT_EQ(r.contains("wind_share"), r.contains("wind_moved_mm")) << i;  // the sequences with wind
+    if (!r.contains("wind_moved_mm")) continue;
+    ++windy;
+    const double mm_per_unit = 1000.0 / r["scale"].get<double>();
+    EXPECT_NEAR(r["twin_moved_mm"].get<double>(), 0.02 * mm_per_unit, 1e-4 * mm_per_unit);
+    // The rise is what two evaluations, with the wind x 0 and with the data's, tell apart.
+    const double rise = r["error_mm"].get<double>() - data_wind["methods"][0]["sequences"][i]["error_mm"].get<double>();
+    EXPECT_NEAR(r["wind_error_rise_mm"].get<double>(), rise, 1e-6 * mm_per_unit);
+    EXPECT_TRUE(std::isfinite(r["wind_share"].get<double>()));
+  }
+  EXPECT_GT(windy, 0);
+  EXPECT_EQ(model["summary"]["wind_share"]["sequences"].get<int>(), windy);
+  for (std::size_t k = 1; k < calm["methods"].size(); ++k)  // baselines see the data's wind: nothing to compare
+    EXPECT_FALSE(calm["methods"][k]["summary"].contains("wind_share")) << calm["methods"][k]["name"];
+  const std::string md = slurp(root_ / "eval_twins" / "eval.md");
+  EXPECT_NE(md.find("share of Blender's movement"), std::string::npos) << md;
+  EXPECT_NE(text.find("against Blender's twins ("), std::string::npos) << text;
+
+  // Twins need a changed wind, the wind they were made with, and a folder that exists.
+  const auto [no_scale, _1] = report(" --wind-twins " + twins.string(), "eval_twins_bad", &code);
+  EXPECT_NE(code, 0);
+  EXPECT_NE(no_scale.find("give --wind-scale"), std::string::npos) << no_scale;
+  const auto [other_scale, _2] = report(" --wind-scale 2 --wind-twins " + twins.string(), "eval_twins_bad", &code);
+  EXPECT_NE(code, 0);
+  EXPECT_NE(other_scale.find((twins / "scene.json").string()), std::string::npos) << other_scale;
+  EXPECT_NE(other_scale.find("pass --wind-scale 0"), std::string::npos) << other_scale;
+  const auto [missing, _3] = report(" --wind-scale 0 --wind-twins " + (root_ / "no_twins").string(), "eval_twins_bad", &code);
+  EXPECT_NE(code, 0);
+  EXPECT_NE(missing.find("no such folder"), std::string::npos) << missing;
+}
+
 TEST_F(EvalCli, StartsAfterTheRampByDefaultOrAtAFixedInputFrame) {
   // A copy of the data whose first test sequence has the generator's ramp attributes (the
   // second has none and takes the fixed start, data.first_frame = 2).

@@ -477,5 +477,44 @@ TEST(Rollout, CorrectionScaleScalesTheNetworksCorrectionOfTheStep) {
   EXPECT_LT((half.frames[0] - 0.5f * (r0.frames[0] + r1.frames[0])).cwiseAbs().maxCoeff(), 1e-4f * std::max(1.0f, moved));
 }
 
+// The projection of a model's wind movement on Blender's: all of it, half, none, against it.
+TEST(Rollout, WindShareProjectsTheModelsWindMovementOnBlenders) {
+  std::mt19937 rng(5);
+  std::normal_distribution<float> noise(0.0f, 1.0f);
+  const auto random_frames = [&](int n) {
+    std::vector<Points> frames;
+    for (int k = 0; k < n; ++k) {
+      Points p(7, 3);
+      for (Eigen::Index i = 0; i < p.size(); ++i) p.data()[i] = noise(rng);
+      frames.push_back(p);
+    }
+    return frames;
+  };
+  const std::vector<Points> twin = random_frames(4), truth = random_frames(4), scaled = random_frames(4);
+  const auto moved_by = [&](float along, const std::vector<Points>& across) {
+    std::vector<Points> out;
+    for (std::size_t k = 0; k < twin.size(); ++k) out.push_back(scaled[k] + along * (truth[k] - twin[k]) + across[k]);
+    return out;
+  };
+  const std::vector<Points> none(4, Points::Zero(7, 3));
+  EXPECT_NEAR(wind_share(scaled, moved_by(1.0f, none), twin, truth), 1.0, 1e-6);
+  EXPECT_NEAR(wind_share(scaled, moved_by(0.5f, none), twin, truth), 0.5, 1e-6);
+  EXPECT_NEAR(wind_share(scaled, moved_by(-1.0f, none), twin, truth), -1.0, 1e-6);
+  // A movement across Blender's adds nothing: g kept in the xy plane, the model moving by g turned
+  // a quarter about z.
+  std::vector<Points> flat_twin = twin, across;
+  for (std::size_t k = 0; k < twin.size(); ++k) {
+    flat_twin[k].col(2) = truth[k].col(2);
+    const Points g = truth[k] - flat_twin[k];
+    Points quarter = Points::Zero(7, 3);
+    quarter.col(0) = -g.col(1);
+    quarter.col(1) = g.col(0);
+    across.push_back(scaled[k] + 3.0f * quarter);
+  }
+  EXPECT_NEAR(wind_share(scaled, across, flat_twin, truth), 0.0, 1e-6);
+  EXPECT_TRUE(std::isnan(wind_share(scaled, moved_by(1.0f, none), truth, truth)));  // Blender's cloth did not move
+  EXPECT_THROW(wind_share(scaled, random_frames(3), twin, truth), std::invalid_argument);
+}
+
 }  // namespace
 }  // namespace layersnet::eval
