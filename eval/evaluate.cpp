@@ -235,12 +235,19 @@ std::vector<MethodResult> evaluate(const dataset::DatasetManifest& manifest, std
     CollisionOptions co;
     co.max_body_distance = o.max_body_distance_m * seq.info.scale;
     co.max_layer_distance = o.max_layer_distance_m * seq.info.scale;
-    Rollout twin, truth;  // Blender's cloth under the scaled wind and under the data's, on the rollouts' frames
+    // Blender's cloth under the scaled wind and under the data's, on the rollouts' frames; and the
+    // twin moved by the two's difference at the input frame, where both rollouts start from the
+    // data, so that truth - twin_from_start is what the wind moves within the rollout's window.
+    Rollout twin, truth, twin_from_start;
     if (twins && rescale) {
       twin = rollout(*twins, seq, start.input_frame, o.frames);
-      truth.first_frame = twin.first_frame;
-      for (std::size_t k = 0; k < twin.frames.size(); ++k)
+      const Points start_offset = garments_at(seq, start.input_frame) -
+                                  twins->step(seq, start.input_frame - 1, Points(), Points(), Points());
+      truth.first_frame = twin_from_start.first_frame = twin.first_frame;
+      for (std::size_t k = 0; k < twin.frames.size(); ++k) {
         truth.frames.push_back(garments_at(seq, twin.first_frame + static_cast<int>(k)));
+        twin_from_start.frames.push_back(twin.frames[k] + start_offset);
+      }
     }
     for (size_t p = 0; p < predictors.size(); ++p) {
       const bool scaled = rescale && predictors[p]->takes_scaled_wind();
@@ -251,8 +258,9 @@ std::vector<MethodResult> evaluate(const dataset::DatasetManifest& manifest, std
         s.wind_moved = mean_distance(r, data_wind);
         if (!twin.frames.empty() && twin.frames.size() == r.frames.size()) {
           s.twin_moved = mean_distance(truth, twin);
+          s.twin_moved_in_window = mean_distance(truth, twin_from_start);
           s.wind_error_rise = s.error - mean_distance(data_wind, truth);
-          s.wind_share = wind_share(r.frames, data_wind.frames, twin.frames, truth.frames);
+          s.wind_share = wind_share(r.frames, data_wind.frames, twin_from_start.frames, truth.frames);
         }
       }
       s.id = id;
@@ -317,7 +325,7 @@ double median_ms_per_frame(Predictor& predictor, const dataset::Sequence& seq, i
 Summary summarise(const MethodResult& m) {
   Summary s;
   std::vector<double> err, inner, outer, h, lo, la, ln, strain_mean, strain_p99, steps, wind_moved;
-  std::vector<double> twin_moved, wind_error_rise, wind_shares;
+  std::vector<double> twin_moved, twin_moved_in_window, wind_error_rise, wind_shares;
   std::vector<double> dihedral_mean, dihedral_p99, to_mark, at_mark, at_end;
   std::vector<std::vector<double>> dihedral_curve;
   std::map<std::string, std::vector<double>> by_type, by_subset;
@@ -341,6 +349,7 @@ Summary summarise(const MethodResult& m) {
     if (r.wind_moved >= 0) wind_moved.push_back(r.wind_moved * mm);
     if (std::isfinite(r.wind_share)) {
       twin_moved.push_back(r.twin_moved * mm);
+      twin_moved_in_window.push_back(r.twin_moved_in_window * mm);
       wind_error_rise.push_back(r.wind_error_rise * mm);
       wind_shares.push_back(r.wind_share);
     }
@@ -389,6 +398,7 @@ Summary summarise(const MethodResult& m) {
   s.strain_mean_percent = mean_std(strain_mean);
   s.wind_moved_mm = mean_std(wind_moved);
   s.twin_moved_mm = mean_std(twin_moved);
+  s.twin_moved_in_window_mm = mean_std(twin_moved_in_window);
   s.wind_error_rise_mm = mean_std(wind_error_rise);
   s.wind_share = mean_std(wind_shares);
   s.strain_p99_percent = mean_std(strain_p99);

@@ -71,9 +71,13 @@ struct SequenceResult {
   double wind_moved = -1;
   // Under EvalOptions::wind_twins as well, for the same predictors (NaN = not measured), in scene
   // units: twin_moved = mean distance between the data and Blender's twin under the scaled wind
-  // (how far the wind moves Blender's cloth); wind_error_rise = this rollout's error minus that of
-  // the rollout under the data's wind; wind_share = wind_share() of the two rollouts (a ratio).
+  // (how far the wind moves Blender's cloth); twin_moved_in_window = the same with the twin moved
+  // by the two's difference at the input frame (how far it moves it within the rollout's window,
+  // from the state the rollouts start from); wind_error_rise = this rollout's error minus that of
+  // the rollout under the data's wind; wind_share = wind_share() of the two rollouts against the
+  // twin moved so (a ratio).
   double twin_moved = std::numeric_limits<double>::quiet_NaN();
+  double twin_moved_in_window = std::numeric_limits<double>::quiet_NaN();
   double wind_error_rise = std::numeric_limits<double>::quiet_NaN();
   double wind_share = std::numeric_limits<double>::quiet_NaN();
   double mm() const { return 1000.0 / scale; }  // millimetres per scene unit
@@ -143,7 +147,8 @@ RolloutStart rollout_start(const std::string& sequence_path, const EvalOptions& 
 // model moves by m = model_data_wind - model_scaled when its wind goes from the scaled one to the
 // data's, and Blender's cloth by g = truth - twin; the share is sum m.g / sum g.g (1 = all of it,
 // 0 = none or across it, < 0 = against it). Frame lists of equal length, points (N, 3) each.
-// NaN when Blender's cloth does not move.
+// NaN when Blender's cloth does not move. evaluate() passes the twin moved by its offset from the
+// data at the input frame, since both model rollouts start from the data's state there.
 double wind_share(const std::vector<Points>& model_scaled, const std::vector<Points>& model_data_wind,
                   const std::vector<Points>& twin, const std::vector<Points>& truth);
 
@@ -194,7 +199,7 @@ struct Summary {
   MeanStd h_percent, l_outer_percent, l_all_percent, l_near_percent;
   MeanStd strain_mean_percent, strain_p99_percent;  // edge strain × 100
   MeanStd wind_moved_mm;                            // over the sequences where it was measured
-  MeanStd twin_moved_mm, wind_error_rise_mm, wind_share;  // the same, under EvalOptions::wind_twins
+  MeanStd twin_moved_mm, twin_moved_in_window_mm, wind_error_rise_mm, wind_share;  // under EvalOptions::wind_twins
   std::map<std::string, MeanStd> by_type_mm;    // garment type -> over sequences holding it
   std::map<std::string, MeanStd> by_subset_mm;  // T, T+W, L, L+W
   std::vector<double> curve_mm;                 // mean over sequences per rollout frame

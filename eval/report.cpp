@@ -188,7 +188,7 @@ std::string summary_table(const std::vector<MethodResult>& methods, const Report
         << " mm from its rollout under the data's wind (" << s.wind_moved_mm.count << " sequences)\n";
     if (s.wind_share.count)
       o << "    against Blender's twins (" << s.wind_share.count << " sequences): Blender's cloth moves by "
-        << pm(s.twin_moved_mm) << " mm, this error rises by " << pm(s.wind_error_rise_mm) << " mm ("
+        << pm(s.twin_moved_mm) << " mm (" << pm(s.twin_moved_in_window_mm) << " within the window), this error rises by " << pm(s.wind_error_rise_mm) << " mm ("
         << fmt("%.2f", s.wind_error_rise_mm.mean / s.twin_moved_mm.mean) << " of it), share of Blender's movement "
         << pm(s.wind_share, "%.2f") << "\n";
   }
@@ -254,9 +254,10 @@ std::string report_json(const std::vector<MethodResult>& methods, const ReportCo
                "same post_processed flag, ratio of the means and per sequence; wind_moved_mm (only with wind_scale != 1, "
                "models): mean distance between the rollout with the scaled wind and the same model's under the data's "
                "wind; with wind_twins (Blender's re-simulations under the scaled wind): twin_moved_mm = mean distance "
-               "between the data and its twin, wind_error_rise_mm = error with the scaled wind minus error with the "
-               "data's, wind_share = the model's wind movement projected on Blender's, sum m.g / sum g.g over frames "
-               "and vertices (1 = all of it, 0 = none, < 0 = against it)";
+               "between the data and its twin, twin_moved_in_window_mm = the same with the twin moved by its offset from the "
+               "data at the input frame (what the wind moves within the rollout's window), wind_error_rise_mm = error with the scaled wind minus error with the "
+               "data's, wind_share = the model's wind movement projected on Blender's within the window, sum m.g / "
+               "sum g.g over frames and vertices (1 = all of it, 0 = none, < 0 = against it)";
   j["methods"] = json::array();
   for (const auto& m : methods) {
     const Summary s = summarise(m);
@@ -283,6 +284,7 @@ std::string report_json(const std::vector<MethodResult>& methods, const ReportCo
     if (s.wind_moved_mm.count > 0) js["wind_moved_mm"] = ms_json(s.wind_moved_mm);
     if (s.wind_share.count > 0) {
       js["twin_moved_mm"] = ms_json(s.twin_moved_mm);
+      js["twin_moved_in_window_mm"] = ms_json(s.twin_moved_in_window_mm);
       js["wind_error_rise_mm"] = ms_json(s.wind_error_rise_mm);
       js["wind_share"] = ms_json(s.wind_share);
     }
@@ -318,6 +320,7 @@ std::string report_json(const std::vector<MethodResult>& methods, const ReportCo
       if (r.wind_moved >= 0) jm["sequences"].back()["wind_moved_mm"] = r.wind_moved * r.mm();
       if (std::isfinite(r.wind_share)) {
         jm["sequences"].back()["twin_moved_mm"] = r.twin_moved * r.mm();
+        jm["sequences"].back()["twin_moved_in_window_mm"] = r.twin_moved_in_window * r.mm();
         jm["sequences"].back()["wind_error_rise_mm"] = r.wind_error_rise * r.mm();
         jm["sequences"].back()["wind_share"] = r.wind_share;
       }
@@ -396,21 +399,23 @@ std::string report_markdown(const std::vector<MethodResult>& methods, const Repo
            "model's cloth follows the wind, not whether it follows it the right way.";
       if (twins)
         o << " Against Blender's twins (" << c.options.wind_twins << ", the same sequences re-simulated with the wind x "
-          << fmt("%g", c.options.wind_scale) << "): how far the wind moves Blender's cloth, the model's error rise "
-             "(error with the wind x " << fmt("%g", c.options.wind_scale) << " minus error under the data's wind), "
-             "that rise over Blender's movement (ratio of the means), and the share of Blender's movement the "
-             "model reproduces (its movement projected on Blender's, per sequence; 1 = all of it, 0 = none).";
-      o << (twins ? "\n\n| model | moved mm | Blender's cloth moved mm | error rise mm | rise / Blender's | share of "
-                    "Blender's movement |\n|---|---|---|---|---|---|\n"
+          << fmt("%g", c.options.wind_scale) << "): how far the wind moves Blender's cloth (the data against its twin; "
+             "within the window: with the twin moved by its offset at the input frame, from which both rollouts "
+             "start), the model's error rise (error with the wind x " << fmt("%g", c.options.wind_scale)
+          << " minus error under the data's wind), that rise over Blender's movement (ratio of the means), and the "
+             "share of Blender's movement within the window that the model reproduces (its movement projected on "
+             "Blender's, per sequence; 1 = all of it, 0 = none).";
+      o << (twins ? "\n\n| model | moved mm | Blender's cloth moved mm | within the window mm | error rise mm | rise / "
+                    "Blender's | share of Blender's movement |\n|---|---|---|---|---|---|---|\n"
                   : "\n\n| model | moved mm |\n|---|---|\n");
     }
     moved = true;
     o << "| " << m.name << " | " << pm(s.wind_moved_mm);
     if (twins && s.wind_share.count)
-      o << " | " << pm(s.twin_moved_mm) << " | " << pm(s.wind_error_rise_mm) << " | "
+      o << " | " << pm(s.twin_moved_mm) << " | " << pm(s.twin_moved_in_window_mm) << " | " << pm(s.wind_error_rise_mm) << " | "
         << fmt("%.2f", s.wind_error_rise_mm.mean / s.twin_moved_mm.mean) << " | " << pm(s.wind_share, "%.2f");
     else if (twins)
-      o << " | – | – | – | –";
+      o << " | – | – | – | – | –";
     o << " |\n";
   }
   const auto comparisons = compare_with_baselines(methods);

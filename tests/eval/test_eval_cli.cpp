@@ -197,15 +197,22 @@ TEST_F(EvalCli, WindScaleChangesWhatTheModelSeesNotTheTruth) {
   EXPECT_NE(slurp(root_ / "eval_wind_0" / "eval.md").find("What the wind change moves"), std::string::npos);
 }
 
-// Twins of the test sequences whose cloth sits 0.02 units along x from the data's, as if the calm
-// wind had left Blender's cloth there: the report sets each model's wind response against it.
+// Twins of the test sequences whose cloth sits 0.01 units per frame index along x from the data's,
+// as if the calm wind had left Blender's cloth there: the report sets each model's wind response
+// against it.
 TEST_F(EvalCli, WindTwinsSetEachModelsWindResponseAgainstBlenders) {
   const fs::path twins = root_ / "twins";
   fs::create_directories(twins);
   const dataset::DatasetManifest manifest = dataset::read_manifest((root_ / "data").string());
   for (const std::string& id : manifest.split("test")) {
     dataset::Sequence seq = dataset::read_sequence(manifest.sequence_path(id));
-    for (auto& g : seq.frames.garments) g.col(0).array() += 0.02f;
+    for (int g = 0; g < seq.info.num_garments(); ++g)
+      for (int t = seq.frames.first; t < seq.frames.first + seq.frames.count; ++t)
+        seq.frames.garments[g]
+            .middleRows(static_cast<Eigen::Index>(t - seq.frames.first) * seq.info.garments[g].num_vertices,
+                        seq.info.garments[g].num_vertices)
+            .col(0)
+            .array() += 0.01f * static_cast<float>(t);
     dataset::write_sequence((twins / fs::path(manifest.sequence_path(id)).filename()).string(), seq);
   }
   std::ofstream(twins / "scene.json") << R"({"wind_scale": 0.0, "seed": 1})";
@@ -230,7 +237,16 @@ TEST_F(EvalCli, WindTwinsSetEachModelsWindResponseAgainstBlenders) {
     if (!r.contains("wind_moved_mm")) continue;
     ++windy;
     const double mm_per_unit = 1000.0 / r["scale"].get<double>();
-    EXPECT_NEAR(r["twin_moved_mm"].get<double>(), 0.02 * mm_per_unit, 1e-4 * mm_per_unit);
+    // Frames first .. first + n - 1 from input frame first - 1: the twin is 0.01 t away, and within
+    // the window 0.01 (t - input frame).
+    const int first = r["first_frame"].get<int>(), n = static_cast<int>(r["error_curve_mm"].size());
+    double apart = 0, in_window = 0;
+    for (int t = first; t < first + n; ++t) {
+      apart += 0.01 * t / n;
+      in_window += 0.01 * (t - first + 1) / n;
+    }
+    EXPECT_NEAR(r["twin_moved_mm"].get<double>(), apart * mm_per_unit, 1e-4 * mm_per_unit);
+    EXPECT_NEAR(r["twin_moved_in_window_mm"].get<double>(), in_window * mm_per_unit, 1e-4 * mm_per_unit);
     // The rise is what two evaluations, with the wind x 0 and with the data's, tell apart.
     const double rise = r["error_mm"].get<double>() - data_wind["methods"][0]["sequences"][i]["error_mm"].get<double>();
     EXPECT_NEAR(r["wind_error_rise_mm"].get<double>(), rise, 1e-6 * mm_per_unit);
