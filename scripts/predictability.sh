@@ -6,7 +6,9 @@
 #   jitter     the cloth's starting vertices nudged by Gaussian noise (`cloth_jitter`, scene
 #              units): how predictable the solver's cloth is;
 #   calm-wind  every wind strength times 0 (`wind_scale`): how far the cloth moves because of
-#              the wind (a model that ignored the wind could not get closer than this twin).
+#              the wind (a model that ignored the wind could not get closer than this twin);
+#              `layersnet eval --wind-scale 0 --wind-twins OUT/calm_wind` grades the models'
+#              wind response against these twins.
 # The first sequence is also re-simulated unchanged: Blender must reproduce it exactly (error 0),
 # or the comparison means nothing.
 #
