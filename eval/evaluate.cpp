@@ -239,15 +239,17 @@ std::vector<MethodResult> evaluate(const dataset::DatasetManifest& manifest, std
     // twin moved by the two's difference at the input frame, where both rollouts start from the
     // data, so that truth - twin_from_start is what the wind moves within the rollout's window.
     Rollout twin, truth, twin_from_start;
+    double twin_moved = 0, twin_moved_in_window = 0;
     if (twins && rescale) {
+      GroundTruth data;
+      truth = rollout(data, seq, start.input_frame, o.frames);
       twin = rollout(*twins, seq, start.input_frame, o.frames);
       const Points start_offset = garments_at(seq, start.input_frame) -
                                   twins->step(seq, start.input_frame - 1, Points(), Points(), Points());
-      truth.first_frame = twin_from_start.first_frame = twin.first_frame;
-      for (std::size_t k = 0; k < twin.frames.size(); ++k) {
-        truth.frames.push_back(garments_at(seq, twin.first_frame + static_cast<int>(k)));
-        twin_from_start.frames.push_back(twin.frames[k] + start_offset);
-      }
+      twin_from_start = twin;
+      for (Points& frame : twin_from_start.frames) frame += start_offset;
+      twin_moved = mean_distance(truth, twin);
+      twin_moved_in_window = mean_distance(truth, twin_from_start);
     }
     for (size_t p = 0; p < predictors.size(); ++p) {
       const bool scaled = rescale && predictors[p]->takes_scaled_wind();
@@ -257,8 +259,8 @@ std::vector<MethodResult> evaluate(const dataset::DatasetManifest& manifest, std
         const Rollout data_wind = rollout(*predictors[p], seq, start.input_frame, o.frames);
         s.wind_moved = mean_distance(r, data_wind);
         if (!twin.frames.empty() && twin.frames.size() == r.frames.size()) {
-          s.twin_moved = mean_distance(truth, twin);
-          s.twin_moved_in_window = mean_distance(truth, twin_from_start);
+          s.twin_moved = twin_moved;
+          s.twin_moved_in_window = twin_moved_in_window;
           s.wind_error_rise = s.error - mean_distance(data_wind, truth);
           s.wind_share = wind_share(r.frames, data_wind.frames, twin_from_start.frames, truth.frames);
         }
