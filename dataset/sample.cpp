@@ -6,6 +6,7 @@
 #include <Eigen/Geometry>
 
 #include <algorithm>
+#include <cmath>
 #include <map>
 
 namespace layersnet::dataset {
@@ -112,6 +113,16 @@ void build_edges_and_hinges(const SequenceInfo& info, SequenceStructure& s) {
       const Side& A = list[0];
       const Side& B = list[1];
       double cos0 = 1.0, sin0 = 0.0;
+      // A face's height over the edge, from its three rest edge lengths (Heron).
+      auto height = [&](const Side& f) {
+        const double l0 = length;
+        const double l1 = has_rest ? (rest(f.q) - rest(f.opposite)).norm() : neighbour_rest(o + f.q, o + f.opposite);
+        const double l2 = has_rest ? (rest(f.opposite) - rest(f.p)).norm() : neighbour_rest(o + f.opposite, o + f.p);
+        const double s4 = (l0 + l1 + l2) * (-l0 + l1 + l2) * (l0 - l1 + l2) * (l0 + l1 - l2);
+        return l0 > 0 ? std::sqrt(std::max(s4, 0.0)) / (2 * l0) : 0.0;
+      };
+      const double hA = height(A), hB = height(B);
+      const double rest_height = hA + hB > 0 ? 2 * hA * hB / (hA + hB) : 0.0;
       if (has_rest) {
         const Eigen::Vector3d nA = unit_normal(rest(A.p), rest(A.q), rest(A.opposite));
         const Eigen::Vector3d nB = unit_normal(rest(B.p), rest(B.q), rest(B.opposite));
@@ -121,7 +132,7 @@ void build_edges_and_hinges(const SequenceInfo& info, SequenceStructure& s) {
       } else if (A.p == B.p) {
         cos0 = -1.0;  // inconsistent winding: flat means opposite normals
       }
-      s.hinges.push_back({o + A.p, o + A.q, o + A.opposite, o + B.p, o + B.q, o + B.opposite, g, length, cos0, sin0});
+      s.hinges.push_back({o + A.p, o + A.q, o + A.opposite, o + B.p, o + B.q, o + B.opposite, g, length, cos0, sin0, rest_height});
     }
   }
 }

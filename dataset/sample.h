@@ -82,10 +82,11 @@ struct SequenceStructure {
     double rest_length;
   };
   // Face A = (i, j, a) as wound, face B = (p, q, b) as wound, {p, q} = {i, j}; cos0 and sin0 of
-  // the rest dihedral angle (sin about the unit i − j).
+  // the rest dihedral angle (sin about the unit i − j); rest_height the harmonic mean of the two
+  // faces' rest heights over the edge (2 area / edge length, scene units).
   struct Hinge {
     int32_t i, j, a, p, q, b, garment;
-    double rest_length, cos0, sin0;
+    double rest_length, cos0, sin0, rest_height;
   };
   std::vector<Edge> edges;    // per garment, in ascending (i, j)
   std::vector<Hinge> hinges;  // in the order of their edges

@@ -121,7 +121,7 @@ PhysicsInput<float> physics_input_from_sample(const dataset::TrainingSample& s, 
   for (auto* v : {&in.hinge_i, &in.hinge_j, &in.hinge_a, &in.hinge_p, &in.hinge_q, &in.hinge_b}) v->reserve(H);
   in.hinge_k_cos0.reserve(H), in.hinge_k_sin0.reserve(H);
   for (const auto& h : s.structure->hinges) {
-    const double k = layer_bending[h.garment] * h.rest_length * 0.1;
+    const double k = layer_bending[h.garment] * h.rest_length * 0.1 * (settings.bending_by_height ? h.rest_height : 1.0);
     in.hinge_i.push_back(h.i), in.hinge_j.push_back(h.j), in.hinge_a.push_back(h.a);
     in.hinge_p.push_back(h.p), in.hinge_q.push_back(h.q), in.hinge_b.push_back(h.b);
     in.hinge_k_cos0.push_back(static_cast<float>(k * h.cos0));

@@ -15,7 +15,8 @@
 //   stretch    Σ_e k_e/2 (‖x_i − x_j‖ − L_e)², k_e = tension_e / avg_spring_len, L_e the rest
 //              length: one structural spring per mesh edge (a triangle mesh has no shear springs)
 //   bending    Σ_h k_h (1 − cos(θ_h − θ0_h)) ≈ k_h/2 (θ_h − θ0_h)², θ the dihedral angle at an
-//              interior edge, θ0 at rest, k_h = bending_h × L_h × 0.1 (Blender's angular model)
+//              interior edge, θ0 at rest, k_h = bending_h × L_h × 0.1 (Blender's angular model),
+//              × the rest height h_h with PhysicsSettings::bending_by_height (Blender's force)
 //   gravity    −Σ_v m_v g·(x_v − x_t,v), g = 0.001 × the file's gravity (Blender's factor)
 //   wind       −Σ_v F_v·(x_v − x_t,v), F the face wind at x_t: each face gives its three corners
 //              0.02 × area/3 × (w·n) n, w = strength × direction / fps (Blender's face wind;
@@ -72,6 +73,10 @@ struct PhysicsSettings {
   double layer_margin = kBlenderLayerMargin;
   double collision_stiffness = 1e3;  // k_c (mass / frame²), the ramp's current value
   double face_wind = kBlenderFaceWind;  // per corner: face_wind · area / 3 · (w·n) n
+  // k_h times the hinge's rest height h (SequenceStructure::Hinge::rest_height): Blender's angular
+  // spring pushes a wing vertex with k_h (θ − θ0), where the energy's gradient pushes it with
+  // k_h (θ − θ0) / h, 1/h times as hard (h is 0.3–0.5 units on the generator's garments).
+  bool bending_by_height = false;
 };
 
 // Constants of one sample (N garment vertices, E edges, H interior edges, B body vertices).

@@ -120,6 +120,7 @@ struct PhysicsConfig {
   // the energy, so the loss holds touching cloth as the step does; 0 = none (needs the physics base).
   double friction = 0;
   double air_damping = 1.0;      // Blender's air_damping the data was made with (its default)
+  bool bending_by_height = false;  // losses::PhysicsSettings::bending_by_height
   double body_margin = kBlenderBodyMargin;    // scene units: Blender's push-out distance (generator's settings)
   double layer_margin = kBlenderLayerMargin;  // scene units, cloth-cloth
   // Collision stiffness k_c ramped as HOOD ramps its collision weight: start, then linear to max.

@@ -65,6 +65,7 @@ losses::PhysicsSettings physics_settings(const PhysicsConfig& pc, double collisi
   s.inertia = pc.inertia, s.drag = pc.drag, s.stretch = pc.stretch, s.bending = pc.bending, s.gravity = pc.gravity;
   s.wind = pc.wind, s.collision_body = pc.collision_body, s.collision_layer = pc.collision_layer, s.friction = pc.friction;
   s.air_damping = pc.air_damping, s.body_margin = pc.body_margin, s.layer_margin = pc.layer_margin;
+  s.bending_by_height = pc.bending_by_height;
   s.collision_stiffness = collision_stiffness;
   return s;
 }

@@ -215,6 +215,41 @@ TEST(Physics, InputMatchesBlenderRules) {
   }
 }
 
+// With bending_by_height each hinge's stiffness is k_h times the harmonic mean of its two faces'
+// rest heights over the edge (2 area / length, from the garments' rest shapes).
+TEST(Physics, BendingByHeightScalesEachHingeByItsRestHeight) {
+  const dataset::Sequence seq = two_layers_with_wind();
+  const auto s = synthetic_sample(seq, 4);
+  PhysicsSettings by_height;
+  by_height.bending_by_height = true;
+  const PhysicsInput<float> plain = physics_input_from_sample(s, seq.info, PhysicsSettings{});
+  const PhysicsInput<float> scaled = physics_input_from_sample(s, seq.info, by_height);
+  const auto& offsets = s.structure->vertex_offsets;
+  auto rest = [&](int32_t v) {
+    int g = 0;
+    while (v >= offsets[g + 1]) ++g;
+    return Eigen::Vector3d(seq.info.garments[g].rest.row(v - offsets[g]).transpose().cast<double>());
+  };
+  auto height = [&](int32_t p, int32_t q, int32_t opposite) {
+    const Eigen::Vector3d e = rest(q) - rest(p);
+    return e.cross(rest(opposite) - rest(p)).norm() / e.norm();
+  };
+  ASSERT_FALSE(s.structure->hinges.empty());
+  double lowest = 1e9, highest = 0;
+  for (std::size_t k = 0; k < s.structure->hinges.size(); ++k) {
+    const auto& h = s.structure->hinges[k];
+    const double hA = height(h.i, h.j, h.a), hB = height(h.p, h.q, h.b);
+    const double expected = 2 * hA * hB / (hA + hB);
+    EXPECT_NEAR(h.rest_height, expected, 1e-9 * expected);
+    const double k_plain = std::hypot(plain.hinge_k_cos0[k], plain.hinge_k_sin0[k]);
+    const double k_scaled = std::hypot(scaled.hinge_k_cos0[k], scaled.hinge_k_sin0[k]);
+    EXPECT_NEAR(k_scaled, k_plain * expected, 1e-5 * k_plain * expected);
+    lowest = std::min(lowest, expected), highest = std::max(highest, expected);
+  }
+  EXPECT_GT(lowest, 0.0);
+  EXPECT_GT(std::max(std::fabs(lowest - 1), std::fabs(highest - 1)), 1e-3);  // the scaling is not the identity
+}
+
 // An outer layer softer than the inner one: the older generator rule simulated it with
 // 2 × inner − outer, a "per_layer" file with its stored values; the wind field factor scales
 // the face wind.

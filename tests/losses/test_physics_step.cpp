@@ -325,6 +325,20 @@ TEST(PhysicsStep, TakesTheModelsLayerMargin) {
   EXPECT_GT((apart.physics_step - touching.physics_step).cwiseAbs().maxCoeff(), 1e-4f);
 }
 
+// The bending factor reaches the step: without bending the cloth folds differently.
+TEST(PhysicsStep, TakesTheModelsBendingFactor) {
+  const dataset::Sequence seq = two_layers_with_wind();
+  ModelConfig m;
+  m.velocity_base = "physics";
+  auto blenders = sample_for(seq, 5, m);
+  add_physics_step(blenders, seq.info, m);
+  m.physics_step_bending = 0;
+  auto limp = sample_for(seq, 5, m);
+  add_physics_step(limp, seq.info, m);
+  EXPECT_EQ(physics_step_settings(m).energy.bending, 0.0);
+  EXPECT_GT((blenders.physics_step - limp.physics_step).cwiseAbs().maxCoeff(), 1e-5f);
+}
+
 // The step's linear system (model.physics_step_correction = "solved") is its answer to a moved
 // inertia target: moving v_t by a small a moves the step's result by about A⁻¹ (s ⊙ a). The
 // system is symmetric and positive definite along a (pinned rows: tests/autodiff/test_gradcheck_solve.cpp).
@@ -426,7 +440,14 @@ std::vector<double> pinned_square_angles(double strength, int frames, const Phys
     in.edge_rest.push_back(rest_length(ij.first, ij.second));
     in.edge_half_k.push_back(tension / mean_rest / 2);
     if (sides.size() != 2) continue;
-    const double k = bending * rest_length(ij.first, ij.second) * 0.1;
+    auto height = [&](const std::array<int, 3>& side) {  // of the face over the edge, in the x-z plane
+      const double ux = x[3 * side[1]] - x[3 * side[0]], uz = x[3 * side[1] + 2] - x[3 * side[0] + 2];
+      const double vx = x[3 * side[2]] - x[3 * side[0]], vz = x[3 * side[2] + 2] - x[3 * side[0] + 2];
+      return std::fabs(ux * vz - uz * vx) / std::hypot(ux, uz);
+    };
+    const double hA = height(sides[0]), hB = height(sides[1]);
+    const double k = bending * rest_length(ij.first, ij.second) * 0.1 *
+                     (settings.energy.bending_by_height ? 2 * hA * hB / (hA + hB) : 1.0);
     in.hinge_i.push_back(sides[0][0]), in.hinge_j.push_back(sides[0][1]), in.hinge_a.push_back(sides[0][2]);
     in.hinge_p.push_back(sides[1][0]), in.hinge_q.push_back(sides[1][1]), in.hinge_b.push_back(sides[1][2]);
     in.hinge_k_cos0.push_back(k), in.hinge_k_sin0.push_back(0.0);
@@ -474,10 +495,14 @@ TEST(PhysicsStep, PinnedSquareHangsAndSwingsAsBlendersDoes) {
   auto mean_of_last = [](const std::vector<double>& a, int k) {
     return std::accumulate(a.end() - k, a.end(), 0.0) / k;
   };
-  EXPECT_NEAR(mean_of_last(pinned_square_angles(5, 600, settings), 100), 6.4, 0.5);
-  const std::vector<double> light = pinned_square_angles(20, 600, settings);
-  EXPECT_NEAR(mean_of_last(light, 100), 24.3, 1.0);
-  EXPECT_NEAR(*std::max_element(light.begin(), light.begin() + 120), 38.3, 2.0);
+  for (bool by_height : {false, true}) {
+    SCOPED_TRACE(by_height ? "bending by height" : "bending as the energy's gradient");
+    settings.energy.bending_by_height = by_height;
+    EXPECT_NEAR(mean_of_last(pinned_square_angles(5, 600, settings), 100), 6.4, 0.5);
+    const std::vector<double> light = pinned_square_angles(20, 600, settings);
+    EXPECT_NEAR(mean_of_last(light, 100), 24.3, 1.0);
+    EXPECT_NEAR(*std::max_element(light.begin(), light.begin() + 120), 38.3, 2.0);
+  }
 }
 
 }  // namespace
