@@ -53,6 +53,13 @@ dataset::TrainingSample sample_for(const dataset::Sequence& seq, int t, const Mo
                                dataset::build_structure(seq.info, dataset::kDefaultPatchSize), model::sample_options_for(m));
 }
 
+// The sample at frame 5 with the model's physics step added.
+dataset::TrainingSample stepped_sample(const dataset::Sequence& seq, const ModelConfig& m) {
+  auto s = sample_for(seq, 5, m);
+  add_physics_step(s, seq.info, m);
+  return s;
+}
+
 // Inertia, drag and gravity alone are quadratic: (m + c) x = m x̃ + c x_t + m g, reached in one
 // Newton iteration from any guess.
 TEST(PhysicsStep, QuadraticEnergyIsSolvedExactly) {
@@ -298,11 +305,9 @@ TEST(PhysicsStep, TakesTheModelsConjugateGradientIterations) {
   const dataset::Sequence seq = two_layers_with_wind();
   ModelConfig m;
   m.velocity_base = "physics";
-  auto full = sample_for(seq, 5, m);
-  add_physics_step(full, seq.info, m);
+  const auto full = stepped_sample(seq, m);
   m.physics_step_cg_iterations = 1;
-  auto short_solve = sample_for(seq, 5, m);
-  add_physics_step(short_solve, seq.info, m);
+  const auto short_solve = stepped_sample(seq, m);
   EXPECT_GT((full.physics_step - short_solve.physics_step).cwiseAbs().maxCoeff(), 1e-4f);
   const PhysicsStepSettings settings = physics_step_settings(m);
   ASSERT_EQ(settings.cg_iterations, 1);
@@ -316,25 +321,26 @@ TEST(PhysicsStep, TakesTheModelsLayerMargin) {
   m.velocity_base = "physics";
   m.physics_step_layer_collision = true;
   m.physics_step_layer_margin = 0;
-  auto touching = sample_for(seq, 5, m);
-  add_physics_step(touching, seq.info, m);
+  const auto touching = stepped_sample(seq, m);
   m.physics_step_layer_margin = 0.3;
-  auto apart = sample_for(seq, 5, m);
-  add_physics_step(apart, seq.info, m);
+  const auto apart = stepped_sample(seq, m);
   EXPECT_EQ(physics_step_settings(m).energy.layer_margin, 0.3);
   EXPECT_GT((apart.physics_step - touching.physics_step).cwiseAbs().maxCoeff(), 1e-4f);
 }
 
-// The bending factor reaches the step: without bending the cloth folds differently.
-TEST(PhysicsStep, TakesTheModelsBendingFactor) {
+// The bending settings reach the step: without bending, or with each hinge scaled by its rest
+// height, the cloth folds differently.
+TEST(PhysicsStep, TakesTheModelsBending) {
   const dataset::Sequence seq = two_layers_with_wind();
   ModelConfig m;
   m.velocity_base = "physics";
-  auto blenders = sample_for(seq, 5, m);
-  add_physics_step(blenders, seq.info, m);
+  const auto energys = stepped_sample(seq, m);
+  m.physics_step_bending_by_height = true;
+  const auto blenders = stepped_sample(seq, m);
+  EXPECT_TRUE(physics_step_settings(m).energy.bending_by_height);
+  EXPECT_GT((energys.physics_step - blenders.physics_step).cwiseAbs().maxCoeff(), 1e-5f);
   m.physics_step_bending = 0;
-  auto limp = sample_for(seq, 5, m);
-  add_physics_step(limp, seq.info, m);
+  const auto limp = stepped_sample(seq, m);
   EXPECT_EQ(physics_step_settings(m).energy.bending, 0.0);
   EXPECT_GT((blenders.physics_step - limp.physics_step).cwiseAbs().maxCoeff(), 1e-5f);
 }
