@@ -121,8 +121,7 @@ void build_edges_and_hinges(const SequenceInfo& info, SequenceStructure& s) {
         const double s4 = (l0 + l1 + l2) * (-l0 + l1 + l2) * (l0 - l1 + l2) * (l0 + l1 - l2);
         return l0 > 0 ? std::sqrt(std::max(s4, 0.0)) / (2 * l0) : 0.0;
       };
-      const double hA = height(A), hB = height(B);
-      const double rest_height = hA + hB > 0 ? 2 * hA * hB / (hA + hB) : 0.0;
+      const double rest_height = hinge_rest_height(height(A), height(B));
       if (has_rest) {
         const Eigen::Vector3d nA = unit_normal(rest(A.p), rest(A.q), rest(A.opposite));
         const Eigen::Vector3d nB = unit_normal(rest(B.p), rest(B.q), rest(B.opposite));
@@ -138,6 +137,11 @@ void build_edges_and_hinges(const SequenceInfo& info, SequenceStructure& s) {
 }
 
 }  // namespace
+
+double hinge_rest_height(double face_height_a, double face_height_b) {
+  const double sum = face_height_a + face_height_b;
+  return sum > 0 ? 2 * face_height_a * face_height_b / sum : 0.0;
+}
 
 Eigen::Matrix<float, 1, 5> normalised_attributes(const GarmentAttributes& g, float body_friction) {
   Eigen::Matrix<float, 1, 5> a;

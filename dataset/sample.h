@@ -107,6 +107,10 @@ Eigen::Matrix<float, 1, 5> normalised_attributes(const GarmentAttributes& g, flo
 
 std::shared_ptr<const SequenceStructure> build_structure(const SequenceInfo& info, float patch_size);
 
+// A hinge's rest height from its two faces' heights over the edge (scene units): their harmonic
+// mean, 0 when either is 0 (a degenerate face).
+double hinge_rest_height(double face_height_a, double face_height_b);
+
 // A symmetric positive-definite matrix A of 3×3 blocks over the garment vertices (block CSR)
 // and a scale s per vertex: y = A⁻¹ (s ⊙ b) moves the cloth as the physics step's last Newton
 // system would (losses/physics_step.h). A pinned vertex has an identity block, no other block in

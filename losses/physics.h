@@ -75,7 +75,7 @@ struct PhysicsSettings {
   double face_wind = kBlenderFaceWind;  // per corner: face_wind · area / 3 · (w·n) n
   // k_h times the hinge's rest height h (SequenceStructure::Hinge::rest_height): Blender's angular
   // spring pushes a wing vertex with k_h (θ − θ0), where the energy's gradient pushes it with
-  // k_h (θ − θ0) / h, 1/h times as hard (h is 0.3–0.5 units on the generator's garments).
+  // k_h (θ − θ0) / h, 1/h times as hard (h is 0.23–0.48 units on the generator's garments).
   bool bending_by_height = false;
 };
 

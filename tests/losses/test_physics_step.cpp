@@ -451,9 +451,8 @@ std::vector<double> pinned_square_angles(double strength, int frames, const Phys
       const double vx = x[3 * side[2]] - x[3 * side[0]], vz = x[3 * side[2] + 2] - x[3 * side[0] + 2];
       return std::fabs(ux * vz - uz * vx) / std::hypot(ux, uz);
     };
-    const double hA = height(sides[0]), hB = height(sides[1]);
     const double k = bending * rest_length(ij.first, ij.second) * 0.1 *
-                     (settings.energy.bending_by_height ? 2 * hA * hB / (hA + hB) : 1.0);
+                     (settings.energy.bending_by_height ? dataset::hinge_rest_height(height(sides[0]), height(sides[1])) : 1.0);
     in.hinge_i.push_back(sides[0][0]), in.hinge_j.push_back(sides[0][1]), in.hinge_a.push_back(sides[0][2]);
     in.hinge_p.push_back(sides[1][0]), in.hinge_q.push_back(sides[1][1]), in.hinge_b.push_back(sides[1][2]);
     in.hinge_k_cos0.push_back(k), in.hinge_k_sin0.push_back(0.0);
