@@ -60,8 +60,16 @@ void run_evaluation(EvalRunOptions o) {
   std::vector<std::unique_ptr<Predictor>> owned;
   std::vector<std::string> kinds, paths;
   std::vector<bool> model_post;  // the post-processing settings the models run with
+  // The step baseline is the first physics-base model's own step, so that a model is measured
+  // against its zero output, not against a step with other settings.
+  std::string step_from;
+  ModelConfig step_settings;
   for (size_t i = 0; i < o.checkpoints.size(); ++i) {
     const Config c = parse_config_text(read_checkpoint_config(o.checkpoints[i]), o.checkpoints[i]);
+    if (step_from.empty() && c.model.velocity_base == "physics") {
+      step_from = o.checkpoints[i];
+      step_settings = c.model;
+    }
     const std::string name = i < o.names.size() ? o.names[i] : default_name(o.checkpoints[i], c);
     const std::vector<double> tethers = o.tethers.empty() ? std::vector<double>{c.eval.patch_tether} : o.tethers;
     std::vector<bool> constrained;
@@ -114,7 +122,7 @@ void run_evaluation(EvalRunOptions o) {
     plain.push_back(std::make_unique<FollowBody>());
     plain.push_back(std::make_unique<SkinnedToBody>(false));
     plain.push_back(std::make_unique<SkinnedToBody>(true));
-    plain.push_back(std::make_unique<PhysicsStep>());
+    plain.push_back(std::make_unique<PhysicsStep>(step_settings));
     for (auto& b : plain) {
       owned.push_back(on ? std::make_unique<PostProcessed>(std::move(b), post.eval) : std::move(b));
       kinds.push_back("baseline");
@@ -127,6 +135,8 @@ void run_evaluation(EvalRunOptions o) {
   paths.push_back("");
   std::vector<Predictor*> predictors;
   for (auto& p : owned) predictors.push_back(p.get());
+  std::printf("eval: baseline 'one physics step' is %s\n",
+              step_from.empty() ? "the step with its default settings" : ("the step of " + step_from).c_str());
 
   std::printf("eval: %s split '%s', %zu model(s), %zu replay(s) + %zu baselines, up to %d frames from %s, %d thread(s), "
               "products %s%s%s\n",
@@ -147,6 +157,7 @@ void run_evaluation(EvalRunOptions o) {
   ctx.manifest_sha256 = io::sha256_file(manifest.manifest_path());
   ctx.post_processing = post.eval;
   ctx.options = eo;
+  ctx.physics_step_from = step_from;
   // Speed on the first sequence of the split, 1 and 2 threads.
   const std::string speed_id = results[0].sequences[0].id;
   const dataset::Sequence speed_seq = dataset::read_sequence(manifest.sequence_path(speed_id));

@@ -240,6 +240,7 @@ std::string report_json(const std::vector<MethodResult>& methods, const ReportCo
   j["l_collision_near_max_distance_m"] = c.options.max_layer_distance_m;
   j["blender_s_per_frame"] = c.blender_s_per_frame;
   j["speed"] = {{"sequence", c.speed_sequence}, {"frames", c.speed_frames}, {"load_average_1min", c.load_average}};
+  j["physics_step_baseline"] = c.physics_step_from.empty() ? "defaults" : c.physics_step_from;
   j["units"] = "error_*_mm: millimetres (scene units / scale * 1000); error_units: scene units; rates in [0, 1], "
                "*_percent in percent; l_rate_outer = colliding / outer vertices, l_rate_all = colliding / all garment "
                "vertices (official aggregate); strain_*: |edge length / rest length - 1| over every garment edge and rollout "
@@ -377,7 +378,10 @@ std::string report_markdown(const std::vector<MethodResult>& methods, const Repo
        "eval.json `post_processing`), for the baselines exactly as for the model. Near / free: error over the "
        "vertex-frames whose ground truth lies within / beyond "
     << kBodyDistanceBandEdgesM.back()
-    << " m of the body. Crumple: mean dihedral angle between adjacent triangles (0° = flat).\n\n"
+    << " m of the body. Crumple: mean dihedral angle between adjacent triangles (0° = flat). *One physics step*: "
+    << (c.physics_step_from.empty() ? std::string("the step with its default settings")
+                                    : "the step of `" + c.physics_step_from + "` (its zero output)")
+    << ".\n\n"
        "| method | error mm | near body mm | free cloth mm | H-coll % | L-coll % | strain % (mean / p99) | crumple ° |\n"
        "|---|---|---|---|---|---|---|---|\n";
   for (const auto& m : methods) {

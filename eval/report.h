@@ -25,6 +25,7 @@ struct ReportContext {
   int speed_frames = 0;             // frames of the speed rollouts
   std::string speed_sequence;       // id of the sequence the speed was measured on
   double load_average = -1;         // 1-minute load average after the run (/proc/loadavg), -1 = unknown
+  std::string physics_step_from;    // checkpoint whose step the "one physics step" baseline is; "" = defaults
 };
 
 // Where the rollouts start under `options`, for the reports' prose.

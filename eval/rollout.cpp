@@ -54,7 +54,9 @@ Points SkinnedToBody::step(const dataset::Sequence& seq, int t, const Points&, c
   return dataset::carry_with_body(binding_, body, frames_of(body));
 }
 
-PhysicsStep::PhysicsStep() {
+PhysicsStep::PhysicsStep() : PhysicsStep(ModelConfig{}) {}
+
+PhysicsStep::PhysicsStep(const ModelConfig& step_of) : model_(step_of) {
   model_.velocity_base = "physics";
   options_ = model::sample_options_for(model_);
 }

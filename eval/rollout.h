@@ -88,11 +88,13 @@ class SkinnedToBody : public Predictor {
 };
 
 // Baseline: one implicit step of Blender's cloth energy per frame, no network
-// (losses/physics_step.h with the "physics" velocity base's defaults): what a model with
-// model.velocity_base = "physics" predicts when its output is zero, fed its own frames.
+// (losses/physics_step.h): what a model with model.velocity_base = "physics" predicts when its
+// output is zero, fed its own frames. Built from such a model's config it is that model's own
+// step (its physics_step_* keys); by default, the step with every key at its default.
 class PhysicsStep : public Predictor {
  public:
   PhysicsStep();
+  explicit PhysicsStep(const ModelConfig& step_of);
   std::string name() const override { return "one physics step"; }
   void begin(const dataset::Sequence& seq) override;
   Points step(const dataset::Sequence& seq, int t, const Points& x_prev2, const Points& x_prev,

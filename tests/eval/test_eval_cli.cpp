@@ -72,6 +72,7 @@ TEST_F(EvalCli, EvalWritesReportsAndPrintsTheSummaryTable) {
   const auto j = nlohmann::json::parse(slurp(out / "eval.json"));
   EXPECT_NE(text.find("skinned to the body"), std::string::npos) << text;
   EXPECT_NE(text.find("one physics step"), std::string::npos) << text;
+  EXPECT_EQ(j["physics_step_baseline"], "defaults");  // neither model corrects a physics step
   // 2 models, 5 baselines (bare: the models run without the constraints), ground truth.
   ASSERT_EQ(j["methods"].size(), 8u);
   EXPECT_EQ(j["split"], "test");
@@ -154,6 +155,41 @@ TEST_F(EvalCli, BaselinesGetTheModelsPostProcessing) {
     EXPECT_EQ(c["model"].get<std::string>().rfind("[constrained] ", 0) == 0, c["post_processed"].get<bool>()) << c;
   EXPECT_EQ(j["comparisons"].size(), 10u);
   EXPECT_EQ(j["post_processing"]["strain_limit"].get<double>(), 0.05);
+}
+
+// The step baseline is the evaluated physics-base model's own step: a zero-output model on a
+// softer step scores exactly what the baseline scores, and the reports name where the step came
+// from. Without such a model the baseline keeps the defaults (the test above: "defaults").
+TEST_F(EvalCli, PhysicsStepBaselineIsThePhysicsModelsOwnStep) {
+  Config c = load_config({std::string(LAYERSNET_SOURCE_DIR) + "/configs/tiny.toml"},
+                         {"model.velocity_base=physics", "model.physics_step_bending=0.25"});
+  c.data.dataset = (root_ / "data").string();
+  ad::ParamStore<float> ps;
+  model::register_params(ps, c.model);
+  model::init_params(ps, c.model, 7);  // the output layer starts at zero: the model predicts its step
+  Checkpoint cp;
+  cp.config_toml = to_toml(c);
+  cp.stats = stats_to_arrays(dataset::read_stats((root_ / "data" / "stats.h5").string()));
+  const fs::path soft = root_ / "soft_step.h5";
+  write_checkpoint(soft.string(), ps, cp);
+  int code = 0;
+  const fs::path out = root_ / "eval_soft_step";
+  const std::string text = run("eval --checkpoint " + (root_ / "tiny.h5").string() + " --checkpoint " +
+                                   soft.string() + " --frames 3 --speed-frames 1 --out " + out.string(),
+                               &code);
+  ASSERT_EQ(code, 0) << text;
+  EXPECT_NE(text.find("baseline 'one physics step' is the step of " + soft.string()), std::string::npos) << text;
+  const auto j = nlohmann::json::parse(slurp(out / "eval.json"));
+  EXPECT_EQ(j["physics_step_baseline"], soft.string());
+  double step_error = -1, zero_model = -1;
+  for (const auto& m : j["methods"]) {
+    const double e = m["summary"]["error_mm"]["mean"].get<double>();
+    if (m["name"] == "one physics step") step_error = e;
+    if (m["checkpoint"] == soft.string()) zero_model = e;
+  }
+  EXPECT_GT(step_error, 0.0);
+  EXPECT_NEAR(zero_model, step_error, 1e-3 * step_error);
+  EXPECT_NE(slurp(out / "eval.md").find("the step of `" + soft.string() + "`"), std::string::npos);
 }
 
 // --wind-scale changes the wind only as the models see it: the model's rollouts move, the

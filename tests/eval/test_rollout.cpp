@@ -452,6 +452,26 @@ TEST(Rollout, PhysicsStepBaselineIsTheZeroOutputPhysicsModel) {
   }
 }
 
+// Built from a model's config, the baseline is that model's step: a zero-output model on a softer
+// step rolls out what PhysicsStep(its config) does, and not what the default step does.
+TEST(Rollout, PhysicsStepBaselineTakesTheModelsStepSettings) {
+  const dataset::Sequence seq = sequence(2);
+  Config c = load_config({std::string(LAYERSNET_SOURCE_DIR) + "/configs/tiny.toml"},
+                         {"model.velocity_base=physics", "model.physics_step_bending=0.25"});
+  ad::ParamStore<float> ps;
+  model::register_params(ps, c.model);
+  model::init_params(ps, c.model, 3);
+  ModelPredictor zero("zero, softer step", c, std::move(ps), dataset::NormalisationStats{});
+  PhysicsStep own(c.model), defaults;
+  const Rollout a = rollout(zero, seq, 2, 4), b = rollout(own, seq, 2, 4), d = rollout(defaults, seq, 2, 4);
+  float apart = 0;
+  for (size_t f = 0; f < 4; ++f) {
+    EXPECT_LT((a.frames[f] - b.frames[f]).cwiseAbs().maxCoeff(), 1e-4f) << "frame " << f;
+    apart = std::max(apart, (b.frames[f] - d.frames[f]).cwiseAbs().maxCoeff());
+  }
+  EXPECT_GT(apart, 1e-3f) << "the bending factor should move the step";
+}
+
 // eval.correction_scale scales the network's correction of the physics step: 0 rolls out the step
 // itself, and one frame from the same input at 0.5 lies halfway between the frames at 0 and 1.
 TEST(Rollout, CorrectionScaleScalesTheNetworksCorrectionOfTheStep) {
