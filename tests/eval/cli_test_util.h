@@ -39,11 +39,11 @@ inline std::string slurp(const std::filesystem::path& p) {
   return s.str();
 }
 
-// A freshly initialised configs/tiny.toml model (seed 7) carrying `stats`; its config names
-// `dataset` when one is given.
+// A freshly initialised configs/tiny.toml model (seed 7; its output layer starts at zero) carrying
+// `stats`, with `overrides` (--set assignments) applied; its config names `dataset` when one is given.
 inline void write_tiny_checkpoint(const std::filesystem::path& path, const dataset::NormalisationStats& stats,
-                                  const std::string& dataset = "") {
-  Config c = load_config({std::string(LAYERSNET_SOURCE_DIR) + "/configs/tiny.toml"});
+                                  const std::string& dataset = "", const std::vector<std::string>& overrides = {}) {
+  Config c = load_config({std::string(LAYERSNET_SOURCE_DIR) + "/configs/tiny.toml"}, overrides);
   if (!dataset.empty()) c.data.dataset = dataset;
   ad::ParamStore<float> ps;
   model::register_params(ps, c.model);

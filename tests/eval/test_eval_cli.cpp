@@ -161,17 +161,10 @@ TEST_F(EvalCli, BaselinesGetTheModelsPostProcessing) {
 // softer step scores exactly what the baseline scores, and the reports name where the step came
 // from. Without such a model the baseline keeps the defaults (the test above: "defaults").
 TEST_F(EvalCli, PhysicsStepBaselineIsThePhysicsModelsOwnStep) {
-  Config c = load_config({std::string(LAYERSNET_SOURCE_DIR) + "/configs/tiny.toml"},
-                         {"model.velocity_base=physics", "model.physics_step_bending=0.25"});
-  c.data.dataset = (root_ / "data").string();
-  ad::ParamStore<float> ps;
-  model::register_params(ps, c.model);
-  model::init_params(ps, c.model, 7);  // the output layer starts at zero: the model predicts its step
-  Checkpoint cp;
-  cp.config_toml = to_toml(c);
-  cp.stats = stats_to_arrays(dataset::read_stats((root_ / "data" / "stats.h5").string()));
-  const fs::path soft = root_ / "soft_step.h5";
-  write_checkpoint(soft.string(), ps, cp);
+  const fs::path soft = root_ / "soft_step.h5";  // untrained: the model predicts its step
+  cli_test::write_tiny_checkpoint(soft, dataset::read_stats((root_ / "data" / "stats.h5").string()),
+                                  (root_ / "data").string(),
+                                  {"model.velocity_base=physics", "model.physics_step_bending=0.25"});
   int code = 0;
   const fs::path out = root_ / "eval_soft_step";
   const std::string text = run("eval --checkpoint " + (root_ / "tiny.h5").string() + " --checkpoint " +
