@@ -1,7 +1,7 @@
 // `layersnet pack --checkpoint C --out F`: a trained model to ship — weights, normalisation
 // statistics and the resolved config of a checkpoint, without the optimizer state (Adam's
 // moments are twice the weights). Every command that takes --checkpoint reads the result;
-// `train --resume` refuses it. --set changes rollout settings (eval.*) in the packed config.
+// `train --resume` refuses it. --set changes rollout settings (eval.*, the step's conjugate-gradient iterations) in the packed config.
 // --average adds checkpoints of the same model whose weights are averaged with the first's
 // (e.g. a run's last epochs).
 #include "cli/command_registry.h"
@@ -66,7 +66,7 @@ LAYERSNET_COMMAND(pack, "Write a checkpoint's weights, statistics and config wit
                     o->model.add_to(sub, "checkpoint to pack (e.g. runs/medium/best.h5)");
                     sub.add_option("--out", o->out, "model file to write (e.g. models/medium/model.h5)")->required();
                     sub.add_option("--set", o->settings,
-                                   "rollout setting stored with the model, e.g. --set eval.constraints=true (eval.* keys only)");
+                                   "rollout setting stored with the model, e.g. --set eval.constraints=true (eval.* keys and model.physics_step_cg_iterations only)");
                     sub.add_option("--average", o->averaged,
                                    "another checkpoint of the same model and data whose weights are averaged with --checkpoint's "
                                    "(repeat it; e.g. a run's last epochs)")

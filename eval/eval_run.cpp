@@ -68,7 +68,9 @@ void run_evaluation(EvalRunOptions o) {
     const Config c = parse_config_text(read_checkpoint_config(o.checkpoints[i]), o.checkpoints[i]);
     if (step_from.empty() && c.model.velocity_base == "physics") {
       step_from = o.checkpoints[i];
-      step_settings = c.model;
+      Config stepped = c;  // the model's step as --set leaves it
+      for (const auto& a : o.settings) apply_rollout_override(stepped, a);
+      step_settings = stepped.model;
     }
     const std::string name = i < o.names.size() ? o.names[i] : default_name(o.checkpoints[i], c);
     const std::vector<double> tethers = o.tethers.empty() ? std::vector<double>{c.eval.patch_tether} : o.tethers;

@@ -431,6 +431,7 @@ PhysicsStepSettings physics_step_settings(const ModelConfig& model) {
   settings.friction_distance = model.physics_step_friction_distance;
   settings.energy.face_wind = model.physics_step_face_wind;
   settings.energy.bending = model.physics_step_bending;
+  settings.energy.stretch = model.physics_step_stretch;
   settings.energy.bending_by_height = model.physics_step_bending_by_height;
   return settings;
 }

@@ -57,7 +57,8 @@ struct ModelConfig {
   // no layer term.
   int physics_step_iterations = 2;
   // Conjugate-gradient iterations per Newton iteration (fewer stop the linear solve short: a
-  // speed-accuracy trade measured in docs/decisions.md, "Fewer conjugate-gradient iterations").
+  // speed-accuracy trade measured in docs/decisions.md, "Fewer conjugate-gradient iterations" and
+  // "... on the softer step"). The one model key a rollout may change (run/config.h).
   int physics_step_cg_iterations = 60;
   int physics_step_substeps = 1;
   std::string physics_step_inertia = "world";
@@ -82,6 +83,9 @@ struct ModelConfig {
   // large val the step alone is closest at 0.25 (45.8 mm against 48.8 at 1, 47.3 by the height;
   // docs/decisions.md, "The step's bending at a quarter"); 1 is the step the shipped models have.
   double physics_step_bending = 1.0;
+  // Factor on the step's spring stiffness (k = tension / rest length). Half or twice it moves the
+  // step 6–11 % further from Blender (docs/decisions.md, "The step's springs: the energy's own").
+  double physics_step_stretch = 1.0;
   bool physics_step_bending_by_height = false;
   // How the network's correction a joins the step: "added" (x_{t+1} = x_t + s + a) or "solved":
   // a moves the step's inertia target and the step's last Newton system answers,

@@ -176,6 +176,7 @@ const Schema& schema() {
     k.add("model.physics_step_friction", [](Config& c) -> double& { return c.model.physics_step_friction; }, "the physics step's contact friction: cloth within physics_step_friction_distance of the body is held to its tangential motion with this stiffness x the vertex mass (0 = frictionless; read with velocity_base physics only)", {0, 1e6, {}});
     k.add("model.physics_step_face_wind", [](Config& c) -> double& { return c.model.physics_step_face_wind; }, "the physics step's face wind: each triangle gives each corner this x area / 3 x (w.n) n (Blender's is 0.02; twice it is closest to Blender for one step per frame)", {0, 1, {}});
     k.add("model.physics_step_bending", [](Config& c) -> double& { return c.model.physics_step_bending; }, "factor on the physics step's bending stiffness (1 = the energy's hinges, k = bending x edge length x 0.1; 0.25 is closest to Blender on large val)", {0, 100, {}});
+    k.add("model.physics_step_stretch", [](Config& c) -> double& { return c.model.physics_step_stretch; }, "factor on the physics step's spring stiffness (1 = the energy's springs, k = tension / rest length; read with velocity_base physics only)", {0, 100, {}});
     k.add("model.physics_step_bending_by_height", [](Config& c) -> bool& { return c.model.physics_step_bending_by_height; }, "each hinge's bending stiffness in the physics step times its rest height over the edge, so that it pushes as hard as Blender's angular spring (off: the energy's gradient, 1/height times as hard)");
     k.add("model.physics_step_friction_distance", [](Config& c) -> double& { return c.model.physics_step_friction_distance; }, "scene units from the body surface (along its normal) within which the physics step's friction acts", {0, 10, {}});
     k.add("model.physics_step_correction", [](Config& c) -> std::string& { return c.model.physics_step_correction; }, "how the network's correction joins the physics step: added after it, or solved through its last Newton system, so that springs and bending resist a correction that stretches or folds the cloth (needs velocity_base physics, one substep, no output_smoothing)", {0, 0, {"added", "solved"}});
@@ -405,9 +406,14 @@ void apply_override(Config& config, const std::string& assignment) {
 }
 
 void apply_rollout_override(Config& config, const std::string& assignment) {
-  if (assignment.rfind("eval.", 0) != 0)
-    throw ConfigError("--set " + assignment + ": only rollout settings (eval.*) can change for a trained model; "
-                      "the other keys are fixed by its weights and training");
+  std::string key = assignment.substr(0, assignment.find('='));
+  key.erase(key.find_last_not_of(" \t") + 1);
+  // The step's conjugate-gradient count belongs to the solver, not to the weights: fewer
+  // iterations trade accuracy for speed (docs/decisions.md, "Fewer conjugate-gradient iterations
+  // on the softer step").
+  if (key.rfind("eval.", 0) != 0 && key != "model.physics_step_cg_iterations")
+    throw ConfigError("--set " + assignment + ": only rollout settings (eval.* and model.physics_step_cg_iterations) "
+                      "can change for a trained model; the other keys are fixed by its weights and training");
   apply_override(config, assignment);
 }
 

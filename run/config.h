@@ -165,8 +165,9 @@ Config parse_config_text(const std::string& toml_text, const std::string& origin
 void apply_saved_config_defaults(Config& config, const std::string& saved_toml_text);
 // Applies one "section.key=value" (value in TOML syntax; a bare word is a string).
 void apply_override(Config& config, const std::string& assignment);
-// The same for a trained model's config: only rollout settings (eval.*) may change; any other
-// key throws ConfigError (it is fixed by the weights and the training).
+// The same for a trained model's config: only rollout settings (eval.*) and the physics step's
+// conjugate-gradient iterations may change; any other key throws ConfigError (it is fixed by the
+// weights and the training).
 void apply_rollout_override(Config& config, const std::string& assignment);
 
 // Settings that load but are likely mistakes, one message each naming the keys and the fix

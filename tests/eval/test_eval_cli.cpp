@@ -183,6 +183,22 @@ TEST_F(EvalCli, PhysicsStepBaselineIsThePhysicsModelsOwnStep) {
   EXPECT_GT(step_error, 0.0);
   EXPECT_NEAR(zero_model, step_error, 1e-3 * step_error);
   EXPECT_NE(slurp(out / "eval.md").find("the step of `" + soft.string() + "`"), std::string::npos);
+
+  // --set model.physics_step_cg_iterations moves the model's step and the baseline together.
+  const fs::path short_out = root_ / "eval_soft_step_cg2";
+  const std::string short_text = run("eval --checkpoint " + soft.string() + " --frames 3 --speed-frames 1 " +
+                                         "--set model.physics_step_cg_iterations=2 --out " + short_out.string(),
+                                     &code);
+  ASSERT_EQ(code, 0) << short_text;
+  double short_step = -1, short_model = -1;
+  const auto short_json = nlohmann::json::parse(slurp(short_out / "eval.json"));
+  for (const auto& m : short_json["methods"]) {
+    const double e = m["summary"]["error_mm"]["mean"].get<double>();
+    if (m["name"] == "one physics step") short_step = e;
+    if (m["checkpoint"] == soft.string()) short_model = e;
+  }
+  EXPECT_NEAR(short_model, short_step, 1e-3 * short_step);
+  EXPECT_GT(std::abs(short_step - step_error), 1e-3 * step_error) << "two iterations solve as far as sixty";
 }
 
 // --wind-scale changes the wind only as the models see it: the model's rollouts move, the

@@ -345,6 +345,19 @@ TEST(PhysicsStep, TakesTheModelsBending) {
   EXPECT_GT((blenders.physics_step - limp.physics_step).cwiseAbs().maxCoeff(), 1e-5f);
 }
 
+// The spring factor reaches the step: softer springs let the cloth fall further in one step.
+TEST(PhysicsStep, TakesTheModelsStretch) {
+  const dataset::Sequence seq = two_layers_with_wind();
+  ModelConfig m;
+  m.velocity_base = "physics";
+  const auto stiff = stepped_sample(seq, m);
+  EXPECT_EQ(physics_step_settings(m).energy.stretch, 1.0);
+  m.physics_step_stretch = 0.25;
+  const auto soft = stepped_sample(seq, m);
+  EXPECT_EQ(physics_step_settings(m).energy.stretch, 0.25);
+  EXPECT_GT((stiff.physics_step - soft.physics_step).cwiseAbs().maxCoeff(), 1e-5f);
+}
+
 // The step's linear system (model.physics_step_correction = "solved") is its answer to a moved
 // inertia target: moving v_t by a small a moves the step's result by about A⁻¹ (s ⊙ a). The
 // system is symmetric and positive definite along a (pinned rows: tests/autodiff/test_gradcheck_solve.cpp).
