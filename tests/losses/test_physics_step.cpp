@@ -345,7 +345,7 @@ TEST(PhysicsStep, TakesTheModelsBending) {
   EXPECT_GT((blenders.physics_step - limp.physics_step).cwiseAbs().maxCoeff(), 1e-5f);
 }
 
-// The spring factor reaches the step: softer springs let the cloth fall further in one step.
+// The spring factor reaches the step: a quarter of the springs moves its result.
 TEST(PhysicsStep, TakesTheModelsStretch) {
   const dataset::Sequence seq = two_layers_with_wind();
   ModelConfig m;
