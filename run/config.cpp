@@ -387,13 +387,21 @@ void apply_saved_config_defaults(Config& config, const std::string& saved_toml_t
   if (saved_toml_text.find("val_rollout_frames") == std::string::npos) config.train.val_rollout_frames = 0;
 }
 
-void apply_override(Config& config, const std::string& assignment) {
+namespace {
+// The key of a "section.key=value" assignment, trailing blanks removed.
+std::string override_key(const std::string& assignment) {
   const auto eq = assignment.find('=');
   if (eq == std::string::npos || eq == 0)
     throw ConfigError("--set " + assignment + ": expected key=value, e.g. --set train.epochs=2");
   std::string key = assignment.substr(0, eq);
   key.erase(key.find_last_not_of(" \t") + 1);
-  const std::string text = assignment.substr(eq + 1);
+  return key;
+}
+}  // namespace
+
+void apply_override(Config& config, const std::string& assignment) {
+  const std::string key = override_key(assignment);
+  const std::string text = assignment.substr(assignment.find('=') + 1);
   const std::string at = "--set " + assignment;
   toml::table parsed;
   try {
@@ -406,8 +414,7 @@ void apply_override(Config& config, const std::string& assignment) {
 }
 
 void apply_rollout_override(Config& config, const std::string& assignment) {
-  std::string key = assignment.substr(0, assignment.find('='));
-  key.erase(key.find_last_not_of(" \t") + 1);
+  const std::string key = override_key(assignment);
   // The step's conjugate-gradient count belongs to the solver, not to the weights: fewer
   // iterations trade accuracy for speed (docs/decisions.md, "Fewer conjugate-gradient iterations
   // on the softer step").

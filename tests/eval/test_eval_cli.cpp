@@ -174,12 +174,16 @@ TEST_F(EvalCli, PhysicsStepBaselineIsThePhysicsModelsOwnStep) {
   EXPECT_NE(text.find("baseline 'one physics step' is the step of " + soft.string()), std::string::npos) << text;
   const auto j = nlohmann::json::parse(slurp(out / "eval.json"));
   EXPECT_EQ(j["physics_step_baseline"], soft.string());
-  double step_error = -1, zero_model = -1;
-  for (const auto& m : j["methods"]) {
-    const double e = m["summary"]["error_mm"]["mean"].get<double>();
-    if (m["name"] == "one physics step") step_error = e;
-    if (m["checkpoint"] == soft.string()) zero_model = e;
-  }
+  // (the step baseline's error, the zero-output model's) in an eval.json, mm; -1 where missing.
+  const auto step_and_model = [&](const nlohmann::json& report) {
+    std::pair<double, double> e{-1, -1};
+    for (const auto& m : report["methods"]) {
+      if (m["name"] == "one physics step") e.first = m["summary"]["error_mm"]["mean"].get<double>();
+      if (m["checkpoint"] == soft.string()) e.second = m["summary"]["error_mm"]["mean"].get<double>();
+    }
+    return e;
+  };
+  const auto [step_error, zero_model] = step_and_model(j);
   EXPECT_GT(step_error, 0.0);
   EXPECT_NEAR(zero_model, step_error, 1e-3 * step_error);
   EXPECT_NE(slurp(out / "eval.md").find("the step of `" + soft.string() + "`"), std::string::npos);
@@ -190,13 +194,7 @@ TEST_F(EvalCli, PhysicsStepBaselineIsThePhysicsModelsOwnStep) {
                                          "--set model.physics_step_cg_iterations=2 --out " + short_out.string(),
                                      &code);
   ASSERT_EQ(code, 0) << short_text;
-  double short_step = -1, short_model = -1;
-  const auto short_json = nlohmann::json::parse(slurp(short_out / "eval.json"));
-  for (const auto& m : short_json["methods"]) {
-    const double e = m["summary"]["error_mm"]["mean"].get<double>();
-    if (m["name"] == "one physics step") short_step = e;
-    if (m["checkpoint"] == soft.string()) short_model = e;
-  }
+  const auto [short_step, short_model] = step_and_model(nlohmann::json::parse(slurp(short_out / "eval.json")));
   EXPECT_NEAR(short_model, short_step, 1e-3 * short_step);
   EXPECT_GT(std::abs(short_step - step_error), 1e-3 * step_error) << "two iterations solve as far as sixty";
 }
