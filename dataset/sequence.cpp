@@ -304,6 +304,30 @@ int64_t FrameWindow::bytes() const {
   return b * static_cast<int64_t>(sizeof(float));
 }
 
+SequenceInfo mirrored(SequenceInfo info) {
+  const auto rewind = [](Faces& faces) { faces.col(1).swap(faces.col(2)); };
+  rewind(info.body_faces);
+  info.translation.col(0) *= -1.f;
+  info.gravity.x() = -info.gravity.x();
+  for (GarmentMesh& g : info.garments) {
+    rewind(g.faces);
+    for (Eigen::Index f = 0; f < g.faces.rows(); ++f) g.uv.row(3 * f + 1).swap(g.uv.row(3 * f + 2));  // corners follow
+    if (g.rest.rows() > 0) g.rest.col(0) *= -1.f;
+  }
+  // The mirrored rotation is M R M, M = diag(−1, 1, 1): (w, x, y, z) → (w, x, −y, −z). It maps the
+  // wind's reference axis z (which M keeps) to M times the old direction.
+  if (info.wind_rotation.rows() > 0) {
+    info.wind_rotation.col(2) *= -1.f;
+    info.wind_rotation.col(3) *= -1.f;
+  }
+  return info;
+}
+
+void mirror_positions(FrameWindow& frames) {
+  frames.body.col(0) *= -1.f;
+  for (Points& g : frames.garments) g.col(0) *= -1.f;
+}
+
 SequenceFile::SequenceFile(const std::string& path) {
   h5::guard_file(path, [&] { SequenceFile(path).read_all(); });  // every read this program makes of it
   info_.path = path;

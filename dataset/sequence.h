@@ -154,6 +154,16 @@ class SequenceFile {
 
 Sequence read_sequence(const std::string& path);
 
+// The mirror image of a sequence in the plane x = 0: positions, rest shapes, the root translation
+// and gravity get x → −x, the wind blows along its mirrored direction, and every face is wound
+// the other way round so that normals still point out of the body and the cloth. Every term of
+// Blender's cloth (and of losses/physics.h) is symmetric under it, so the image is a sequence the
+// simulator could have made: data.mirror trains on it beside the original. x is never the up axis
+// (z or y). Mirroring twice gives the original back exactly.
+SequenceInfo mirrored(SequenceInfo info);
+// x → −x on every body and garment position of the window.
+void mirror_positions(FrameWindow& frames);
+
 struct SequenceWriteOptions {
   bool float64 = false;  // float arrays as float64 (default float32)
   bool int64 = false;    // index arrays as int64 (default int32)

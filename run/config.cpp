@@ -228,6 +228,7 @@ const Schema& schema() {
     k.add("data.max_frames", [](Config& c) -> int& { return c.data.max_frames; }, "frames used per sequence (0 = all)", {0, 1e6, {}});
     k.add("data.after_ramp", [](Config& c) -> bool& { return c.data.after_ramp; }, "samples start where each file's ramp into the motion ends (rest_frames + ramp_frames - 1 as first input frame), as eval's rollouts do");
     k.add("data.cache_sequences", [](Config& c) -> int& { return c.data.cache_sequences; }, "sequences cached in memory", positive);
+    k.add("data.mirror", [](Config& c) -> bool& { return c.data.mirror; }, "train on every training sequence and on its mirror image in the plane x = 0 (twice the sequences; validation and test unchanged)");
     // [train]
     k.add("train.epochs", [](Config& c) -> int& { return c.train.epochs; }, "epochs", positive);
     k.add("train.batch_size", [](Config& c) -> int& { return c.train.batch_size; }, "samples per update (each holds its own tape: thousands exhaust memory)", {1, 4096, {}});

@@ -28,6 +28,10 @@ struct DataConfig {
   // without those attributes keep first_frame.
   bool after_ramp = false;
   int cache_sequences = 8;  // sequences kept in memory by the lazy reader
+  // Train on every training sequence and on its mirror image in the plane x = 0
+  // (dataset::mirrored): twice the training sequences at no simulation cost. Validation and test
+  // are left as they are; the training split's cache holds both (2 × cache_sequences).
+  bool mirror = false;
 };
 
 struct TrainConfig {

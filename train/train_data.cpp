@@ -55,30 +55,53 @@ TrainData::TrainData(const dataset::DatasetManifest& manifest, const std::string
       model_(config.model),
       max_open_files_(std::max(config.data.cache_sequences, 1)),
       constraint_settings_(config.train.rollout_constraints ? std::optional<EvalConfig>(config.eval) : std::nullopt),
-      ids_(manifest.split(split)),
+      file_ids_(manifest.split(split)),
+      ids_(file_ids_),
       patch_size_(static_cast<float>(config.model.patch_size)) {
+  const bool mirror = config.data.mirror && split == "train";
+  const int n = static_cast<int>(file_ids_.size());
+  if (mirror) {
+    max_open_files_ *= 2;
+    for (const std::string& id : file_ids_) ids_.push_back(id + " mirrored");
+  }
   const dataset::FrameSelection selection = frame_selection_for(config.data);
-  for (int s = 0; s < static_cast<int>(ids_.size()); ++s) {
-    auto f = std::make_shared<dataset::SequenceFile>(manifest_.sequence_path(ids_[static_cast<std::size_t>(s)]));
+  std::vector<std::shared_ptr<dataset::SequenceFile>> kept(static_cast<std::size_t>(n));
+  std::vector<std::vector<int>> frames(static_cast<std::size_t>(n));
+  for (int s = 0; s < n; ++s) {
+    auto f = std::make_shared<dataset::SequenceFile>(manifest_.sequence_path(file_ids_[static_cast<std::size_t>(s)]));
     std::vector<int> ts = dataset::sample_frames(f->info().num_frames, selection);
     const int after_ramp = f->info().settled_frame() - 1;
     if (config.data.after_ramp && after_ramp >= 2) std::erase_if(ts, [&](int t) { return t < after_ramp; });
     first_t_.push_back(ts.empty() ? 0 : ts.front());
     rollout_start_.push_back(std::find(ts.begin(), ts.end(), after_ramp) != ts.end() ? after_ramp : first_t_.back());
     garment_vertices_.push_back(static_cast<int>(f->info().total_garment_vertices()));
-    for (int t : ts) samples_.push_back({s, t});
-    // The first cache_sequences files stay open with their structures: a cache as large as the
-    // split then never reopens a file or rebuilds a structure during training.
-    if (s < max_open_files_) keep_open(s, std::move(f));
+    frames[static_cast<std::size_t>(s)] = std::move(ts);
+    if (s < max_open_files_) kept[static_cast<std::size_t>(s)] = std::move(f);
+  }
+  const int sequences = static_cast<int>(ids_.size());
+  for (int s = n; s < sequences; ++s) {  // mirror images: the same frames
+    first_t_.push_back(first_t_[static_cast<std::size_t>(s - n)]);
+    rollout_start_.push_back(rollout_start_[static_cast<std::size_t>(s - n)]);
+    garment_vertices_.push_back(garment_vertices_[static_cast<std::size_t>(s - n)]);
+  }
+  for (int s = 0; s < sequences; ++s)
+    for (int t : frames[static_cast<std::size_t>(s % std::max(n, 1))]) samples_.push_back({s, t});
+  // The first cache_sequences sequences stay open with their structures (an image shares its
+  // file's handle): a cache as large as the split then never reopens a file or rebuilds a
+  // structure during training.
+  for (int s = 0; s < std::min(sequences, max_open_files_); ++s) {
+    auto& f = kept[static_cast<std::size_t>(s % n)];
+    keep_open(s, f ? f : std::make_shared<dataset::SequenceFile>(manifest_.sequence_path(file_ids_[static_cast<std::size_t>(s % n)])));
   }
 }
 
 TrainData::OpenFile& TrainData::keep_open(int sequence, std::shared_ptr<dataset::SequenceFile> file) {
   ++reads_.files_opened;
-  auto info = std::make_shared<const dataset::SequenceInfo>(file->info());
+  auto info = std::make_shared<const dataset::SequenceInfo>(mirrored(sequence) ? dataset::mirrored(file->info()) : file->info());
   std::shared_ptr<const ClothConstraints> constraints;
   if (constraint_settings_) {
-    const dataset::FrameWindow frame0 = file->read_frames(0, 1);
+    dataset::FrameWindow frame0 = file->read_frames(0, 1);
+    if (mirrored(sequence)) dataset::mirror_positions(frame0);
     const dataset::Points first = dataset::garments_at(*info, frame0, 0);
     constraints = std::make_shared<const ClothConstraints>(*info, dataset::rest_shapes(*info, first),
                                                            frame0.body_at(0, info->num_body_vertices), first, *constraint_settings_);
@@ -95,8 +118,8 @@ TrainData::OpenFile& TrainData::open(int sequence) {
       files_.splice(files_.begin(), files_, it);
       return files_.front();
     }
-  return keep_open(sequence,
-                   std::make_shared<dataset::SequenceFile>(manifest_.sequence_path(ids_.at(static_cast<std::size_t>(sequence)))));
+  const std::string& id = file_ids_.at(static_cast<std::size_t>(sequence) % file_ids_.size());
+  return keep_open(sequence, std::make_shared<dataset::SequenceFile>(manifest_.sequence_path(id)));
 }
 
 Window TrainData::read_window(int sequence, int t_first, int t_last) {
@@ -107,6 +130,7 @@ Window TrainData::read_window(int sequence, int t_first, int t_last) {
   w.constraints = f.constraints;
   w.structure = f.structure;
   w.frames = f.file->read_frames(t_first - 2, t_last - t_first + 4);
+  if (mirrored(sequence)) dataset::mirror_positions(w.frames);
   ++reads_.windows;
   reads_.bytes += w.frames.bytes();
   return w;

@@ -55,12 +55,15 @@ class TrainData {
  public:
   // Opens each sequence of `split` once for its frame count, and keeps the first
   // data.cache_sequences of them open with their structures. Sample frames follow
-  // config.data (first_frame .. first_frame + max_frames - 2).
+  // config.data (first_frame .. first_frame + max_frames - 2). With data.mirror the training
+  // split also holds each file's mirror image (dataset::mirrored) as sequence index n + i of file
+  // i, n files, with the same sample frames; the cache then holds 2 × data.cache_sequences.
   TrainData(const dataset::DatasetManifest& manifest, const std::string& split, const dataset::NormalisationStats& stats,
             const Config& config);
 
   const std::vector<SampleRef>& samples() const { return samples_; }
   int64_t num_samples() const { return static_cast<int64_t>(samples_.size()); }
+  // Sequence names: the file's id, and "<id> mirrored" for a mirror image.
   const std::vector<std::string>& ids() const { return ids_; }
   const std::string& split() const { return split_; }
   // First sample frame of a sequence: a rollout may start no earlier.
@@ -106,7 +109,9 @@ class TrainData {
   ModelConfig model_;  // what the velocity base adds to each sample
   int max_open_files_;
   std::optional<EvalConfig> constraint_settings_;  // train.rollout_constraints only
-  std::vector<std::string> ids_;
+  std::vector<std::string> file_ids_;  // the split's files (n)
+  std::vector<std::string> ids_;       // sequences: the n files, then their n mirror images with data.mirror
+  bool mirrored(int sequence) const { return sequence >= static_cast<int>(file_ids_.size()); }
   std::vector<int> first_t_;
   std::vector<int> rollout_start_;
   std::vector<int> garment_vertices_;

@@ -3,6 +3,8 @@
 #include "dataset/manifest.h"
 #include "dataset/sequence.h"
 #include "dataset/synthetic.h"
+#include "dataset/neighbours.h"
+#include "dataset/wind.h"
 #include "test_util.h"
 
 #include <fstream>
@@ -219,6 +221,58 @@ TEST(Manifest, AcceptsMissingSplitsAndExtraKeys) {
       R"({"format":"dlayers-h5","version":1,"source":"x","splits":{"train":["a","b"]},"extra":3})", "m.json");
   EXPECT_EQ(m.train.size(), 2u);
   EXPECT_TRUE(m.test.empty());
+}
+
+// The mirror image (x → −x) is a valid sequence: its faces still face outward (the reader
+// refuses inward bodies), its normals and wind are the mirrored ones, every corner keeps its UV,
+// and mirroring twice gives the original back bit for bit.
+TEST(SequenceIo, MirrorImageIsAValidSequenceAndTwiceTheOriginal) {
+  const auto dir = temp_dir("mirror");
+  SyntheticOptions o;
+  o.garments = 2;
+  o.wind = true;
+  o.offset = {0.7f, 0.3f, 0.f};  // off the mirror plane: no vertex is its own image
+  const Sequence s = make_synthetic_sequence(o);
+  Sequence m{mirrored(s.info), s.frames};
+  mirror_positions(m.frames);
+  write_sequence((dir / "m.h5").string(), m);
+  const Sequence r = read_sequence((dir / "m.h5").string());
+  expect_same(m, r, 0.f);
+
+  const Eigen::Matrix3f M = Eigen::Vector3f(-1.f, 1.f, 1.f).asDiagonal();
+  EXPECT_EQ(m.body_at(3), s.body_at(3) * M);
+  const auto& g = s.info.garments[1];
+  const auto& gm = m.info.garments[1];
+  const auto normals_differ = [&](const Points& image, const Points& original) {
+    return (image - original * M).cwiseAbs().maxCoeff();  // a rounding apart: the cross products' order differs
+  };
+  EXPECT_LT(normals_differ(vertex_normals(m.body_at(3), m.info.body_faces), vertex_normals(s.body_at(3), s.info.body_faces)), 1e-6f);
+  EXPECT_LT(normals_differ(vertex_normals(m.garment_at(1, 3), gm.faces), vertex_normals(s.garment_at(1, 3), g.faces)), 1e-6f);
+  for (Eigen::Index f = 0; f < g.faces.rows(); ++f)
+    for (int c = 0; c < 3; ++c) {  // every corner keeps its UV
+      const int mc = c == 0 ? 0 : 3 - c;
+      EXPECT_EQ(gm.faces(f, mc), g.faces(f, c));
+      EXPECT_EQ(gm.uv.row(3 * f + mc), g.uv.row(3 * f + c));
+    }
+  ASSERT_GT(s.info.wind_strength.maxCoeff(), 0.f);
+  for (int t = 0; t < s.info.num_frames; ++t) {
+    const Eigen::Vector3f d = wind_direction(s.info.wind_rotation.row(t).transpose());
+    EXPECT_LT((wind_direction(m.info.wind_rotation.row(t).transpose()) - M * d).norm(), 1e-6f) << "frame " << t;
+  }
+  EXPECT_EQ(m.info.translation, s.info.translation * M);
+  EXPECT_EQ(m.info.gravity, s.info.gravity);  // along z
+
+  Sequence back{mirrored(m.info), m.frames};
+  mirror_positions(back.frames);
+  expect_same(s, back, 0.f);
+  EXPECT_EQ(back.frames.body, s.frames.body);
+  for (int k = 0; k < s.info.num_garments(); ++k) {
+    EXPECT_EQ(back.frames.garments[k], s.frames.garments[k]);
+    EXPECT_EQ(back.info.garments[k].faces, s.info.garments[k].faces);
+    EXPECT_EQ(back.info.garments[k].uv, s.info.garments[k].uv);
+    EXPECT_EQ(back.info.garments[k].rest, s.info.garments[k].rest);
+  }
+  EXPECT_EQ(back.info.wind_rotation, s.info.wind_rotation);
 }
 
 }  // namespace

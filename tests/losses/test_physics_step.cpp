@@ -299,6 +299,32 @@ TEST(PhysicsStep, ModelInputTakesTheStep) {
   EXPECT_EQ(plain.physics_step.rows(), 0);
 }
 
+// Every term of the step is symmetric under a mirror image (x → −x, faces wound the other way,
+// dataset::mirrored): the image of a scene steps to the image of its step, with contact friction
+// and with the layer term. This is what makes data.mirror's images sequences the simulator could
+// have made.
+TEST(PhysicsStep, MirrorImageStepsToTheMirroredStep) {
+  dataset::SyntheticOptions o;
+  o.garments = 2;
+  o.wind = true;
+  o.offset = {0.7f, 0.3f, 0.f};
+  const dataset::Sequence seq = dataset::make_synthetic_sequence(o);
+  dataset::Sequence image{dataset::mirrored(seq.info), seq.frames};
+  dataset::mirror_positions(image.frames);
+  const Eigen::Matrix3f M = Eigen::Vector3f(-1.f, 1.f, 1.f).asDiagonal();
+  for (bool layer : {false, true}) {
+    ModelConfig m;
+    m.velocity_base = "physics";
+    m.physics_step_layer_collision = layer;
+    const auto a = stepped_sample(seq, m);
+    const auto b = stepped_sample(image, m);
+    const float size = (a.physics_step - a.body_carry).cwiseAbs().maxCoeff();
+    ASSERT_GT(size, 1e-3f);  // the step moves the cloth off the carried guess
+    EXPECT_LT((b.physics_step - a.physics_step * M).cwiseAbs().maxCoeff(), 1e-5f * size) << "layer term " << layer;
+    EXPECT_LT((b.body_carry - a.body_carry * M).cwiseAbs().maxCoeff(), 1e-5f * size);
+  }
+}
+
 // The model's step settings reach the step: one conjugate-gradient iteration stops the solve
 // short of the default's, and the result equals physics_step_displacement with the same settings.
 TEST(PhysicsStep, TakesTheModelsConjugateGradientIterations) {

@@ -112,6 +112,36 @@ TEST_F(TrainDataTest, CachingEverySequenceOpensEachOnceAndReadsWhatAFreshReaderR
   EXPECT_EQ(cached.reads().windows, 12);
 }
 
+// data.mirror adds each training file's mirror image as a sequence of its own (index n + i),
+// with the same sample frames: its window is the file's window with x → −x, its sample is built
+// from the mirrored faces, and one open file serves both. Validation is left as it is.
+TEST_F(TrainDataTest, MirrorAddsEachTrainingFilesImage) {
+  config_.model.velocity_base = "physics";
+  config_.data.cache_sequences = 3;
+  TrainData plain(manifest_, "train", stats_, config_);
+  config_.data.mirror = true;
+  TrainData both(manifest_, "train", stats_, config_);
+  ASSERT_EQ(both.ids().size(), 6u);
+  EXPECT_EQ(both.ids()[4], plain.ids()[1] + " mirrored");
+  EXPECT_EQ(both.num_samples(), 2 * plain.num_samples());
+  EXPECT_EQ(both.reads().files_opened, 6);  // every sequence cached: the images beside the files
+  const Eigen::Matrix3f M = Eigen::Vector3f(-1.f, 1.f, 1.f).asDiagonal();
+  const Window a = plain.read_window(1, 5, 6), b = both.read_window(4, 5, 6), same = both.read_window(1, 5, 6);
+  EXPECT_EQ(same.frames.body, a.frames.body);
+  EXPECT_EQ(b.frames.body, a.frames.body * M);
+  EXPECT_EQ(b.frames.garments[1], a.frames.garments[1] * M);
+  EXPECT_EQ(b.info->garments[1].faces.col(1), a.info->garments[1].faces.col(2));
+  const dataset::TrainingSample x = plain.build(a, 5), y = both.build(b, 5);
+  EXPECT_EQ(y.sequence_id, both.ids()[4]);
+  EXPECT_EQ(y.target.leftCols(3), x.target.leftCols(3) * M);
+  EXPECT_EQ(y.world_edges.items, x.world_edges.items);
+  const float size = x.physics_step.cwiseAbs().maxCoeff();
+  ASSERT_GT(size, 0.f);
+  EXPECT_LT((y.physics_step - x.physics_step * M).cwiseAbs().maxCoeff(), 1e-5f * size);
+  EXPECT_EQ(both.reads().files_opened, 6);
+  EXPECT_EQ(TrainData(manifest_, "val", stats_, config_).ids().size(), 1u);
+}
+
 TEST_F(TrainDataTest, FrameSelectionFollowsTheConfig) {
   config_.data.max_frames = 4;  // t = 2, 3, 4
   EXPECT_EQ(TrainData(manifest_, "train", stats_, config_).num_samples(), 3 * 3);
