@@ -87,6 +87,10 @@ LAYERSNET_COMMAND(eval, "Roll out checkpoints and baselines over a split; error,
                                    "factor on the data's wind strengths as the models see them; the ground truth "
                                    "is unchanged (0: how much a model's error owes to its response to the wind)")
                         ->check(layersnet::cli::kFiniteNonNegative);
+                    sub.add_flag("--mirror", o->mirror,
+                                 "evaluate the mirror images of the sequences (x -> -x) instead: the simulator and the "
+                                 "model-free baselines are symmetric under it, so a model that learned the cloth rather "
+                                 "than its data's handedness is as close on both");
                     sub.add_option("--wind-twins", o->wind_twins,
                                    "folder of Blender's re-simulations of the evaluated sequences with the wind x "
                                    "--wind-scale (scripts/predictability.sh calm-wind twins): each model's error rise "

@@ -328,6 +328,11 @@ void mirror_positions(FrameWindow& frames) {
   for (Points& g : frames.garments) g.col(0) *= -1.f;
 }
 
+void mirror(Sequence& seq) {
+  seq.info = mirrored(std::move(seq.info));
+  mirror_positions(seq.frames);
+}
+
 SequenceFile::SequenceFile(const std::string& path) {
   h5::guard_file(path, [&] { SequenceFile(path).read_all(); });  // every read this program makes of it
   info_.path = path;

@@ -163,6 +163,8 @@ Sequence read_sequence(const std::string& path);
 SequenceInfo mirrored(SequenceInfo info);
 // x → −x on every body and garment position of the window.
 void mirror_positions(FrameWindow& frames);
+// The whole sequence's image: mirrored(info) and mirror_positions(frames).
+void mirror(Sequence& seq);
 
 struct SequenceWriteOptions {
   bool float64 = false;  // float arrays as float64 (default float32)

@@ -55,6 +55,7 @@ void run_evaluation(EvalRunOptions o) {
   eo.sequences = o.sequences;
   eo.wind_scale = o.wind_scale;
   eo.wind_twins = o.wind_twins;
+  eo.mirror = o.mirror;
 
   const bool any_bf16 = std::count(o.precisions.begin(), o.precisions.end(), ad::MatmulPrecision::kBFloat16) > 0;
   std::vector<std::unique_ptr<Predictor>> owned;

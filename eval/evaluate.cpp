@@ -218,13 +218,20 @@ std::vector<MethodResult> evaluate(const dataset::DatasetManifest& manifest, std
   const auto subsets = read_subsets(manifest.root);
   std::unique_ptr<Replay> twins;
   if (!o.wind_twins.empty()) {
+    if (o.mirror)
+      throw std::runtime_error("--wind-twins " + o.wind_twins + " with --mirror: the twins are of the files, not of their "
+                               "mirror images; evaluate the twins without --mirror");
     check_wind_twins(o.wind_twins, o.wind_scale);
     twins = std::make_unique<Replay>("wind twin", o.wind_twins);
   }
   std::vector<MethodResult> results(predictors.size());
   for (size_t p = 0; p < predictors.size(); ++p) results[p].name = predictors[p]->name();
   for (const std::string& id : ids) {
-    const dataset::Sequence seq = dataset::read_sequence(manifest.sequence_path(id));
+    const dataset::Sequence seq = [&] {
+      dataset::Sequence read = dataset::read_sequence(manifest.sequence_path(id));
+      if (o.mirror) dataset::mirror(read);
+      return read;
+    }();
     dataset::Sequence scaled_wind;  // what the models see under --wind-scale
     const bool rescale = seq.info.has_wind && o.wind_scale != 1.0;
     if (rescale) {

@@ -119,6 +119,11 @@ struct EvalOptions {
   // nothing else changed (scripts/predictability.sh calm-wind twins; a file of the same name per
   // sequence). Empty = none. Needs wind_scale != 1; its scene.json's wind_scale must match.
   std::string wind_twins;
+  // Evaluate the mirror images of the split's sequences (dataset::mirror, x → −x) instead: every
+  // predictor and the ground truth see the image. The simulator and the model-free baselines are
+  // symmetric under it, so a model that learned the cloth rather than its data's handedness is as
+  // close on the images as on the files. Not with wind_twins.
+  bool mirror = false;
 };
 
 // Table-1 subsets of a data set: id -> subset names, from dataset.json "subsets" (written by

@@ -159,9 +159,10 @@ std::string start_description(const EvalOptions& o) {
   const std::string fixed = "input frame " + std::to_string(o.start_frame);
   // A changed wind is part of what the rollouts were, so every place that says where they start says it too.
   const std::string wind = o.wind_scale == 1.0 ? "" : "; the models saw the data's wind strengths x " + fmt("%g", o.wind_scale);
+  const std::string mirror = o.mirror ? "; on the sequences' mirror images (x -> -x)" : "";
   return (o.start_after_ramp ? "input frame rest_frames + ramp_frames - 1 of each file, the first predicted frame "
                                "following the generator's ramp (" + fixed + " for files without them)"
-                             : fixed) + wind;
+                             : fixed) + wind + mirror;
 }
 
 std::string summary_table(const std::vector<MethodResult>& methods, const ReportContext& c) {
@@ -236,6 +237,7 @@ std::string report_json(const std::vector<MethodResult>& methods, const ReportCo
   j["start_frame"] = c.options.start_frame;
   j["wind_scale"] = c.options.wind_scale;  // 1 = the data's wind
   j["wind_twins"] = c.options.wind_twins;  // "" = none
+  j["mirror"] = c.options.mirror;  // true: the sequences' mirror images were evaluated
   j["h_collision_max_distance_m"] = c.options.max_body_distance_m;
   j["l_collision_near_max_distance_m"] = c.options.max_layer_distance_m;
   j["blender_s_per_frame"] = c.blender_s_per_frame;

@@ -199,6 +199,39 @@ TEST_F(EvalCli, PhysicsStepBaselineIsThePhysicsModelsOwnStep) {
   EXPECT_GT(std::abs(short_step - step_error), 1e-3 * step_error) << "two iterations solve as far as sixty";
 }
 
+// --mirror evaluates the sequences' mirror images: the model-free baselines and the physics step
+// are symmetric under a mirror, so their errors stay (to rounding); the network is not, so its
+// rollouts move. The reports say which sequences were evaluated.
+TEST_F(EvalCli, MirrorLeavesTheSymmetricBaselinesAndMovesTheNetwork) {
+  const auto errors = [&](const std::string& extra, const std::string& name) {
+    int code = 0;
+    const fs::path out = root_ / name;
+    const std::string text = run("eval --checkpoint " + (root_ / "tiny.h5").string() +
+                                     " --frames 3 --speed-frames 1 --out " + out.string() + extra,
+                                 &code);
+    EXPECT_EQ(code, 0) << text;
+    const auto j = nlohmann::json::parse(slurp(out / "eval.json"));
+    std::vector<double> e;
+    for (const auto& m : j["methods"]) e.push_back(m["summary"]["error_mm"]["mean"].get<double>());
+    return std::make_pair(e, j["mirror"].get<bool>());
+  };
+  const auto [files, mirror_off] = errors("", "eval_files");
+  const auto [images, mirror_on] = errors(" --mirror", "eval_mirror");
+  EXPECT_FALSE(mirror_off);
+  EXPECT_TRUE(mirror_on);
+  ASSERT_EQ(files.size(), 7u);  // model, 5 baselines, ground truth
+  ASSERT_EQ(images.size(), 7u);
+  EXPECT_GT(std::abs(files[0] - images[0]), 1e-4 * files[0]);  // the network is not mirror-symmetric
+  for (std::size_t k = 1; k < 7; ++k) EXPECT_NEAR(images[k], files[k], 1e-4 * files[k] + 1e-9) << k;
+  EXPECT_NE(slurp(root_ / "eval_mirror" / "eval.md").find("mirror images"), std::string::npos);
+  int code = 0;
+  const std::string refused = run("eval --checkpoint " + (root_ / "tiny.h5").string() + " --frames 3 --mirror --wind-scale 0 --wind-twins " +
+                                      (root_ / "no_twins").string() + " --out " + (root_ / "eval_refused").string(),
+                                  &code);
+  EXPECT_EQ(code, 1) << refused;
+  EXPECT_NE(refused.find("mirror images"), std::string::npos) << refused;
+}
+
 // --wind-scale changes the wind only as the models see it: the model's rollouts move, the
 // baselines and the ground truth they are scored against do not, and the reports say so and how
 // far the change moved the model's cloth.
