@@ -139,6 +139,14 @@ void NetworkPredictor<T>::begin(const dataset::Sequence& seq) {
   if (config_.eval.patch_tether > 0) tether_limit_ = tether_limits(seq, *structure_, config_.eval.patch_tether);
   constraints_.reset();
   if (config_.eval.constraints) constraints_ = make_cloth_constraints(seq, config_.eval);
+  mirrored_.reset();
+  mirrored_structure_.reset();
+  if (config_.eval.mirror_average) {
+    auto image = std::make_unique<dataset::Sequence>(seq);
+    dataset::mirror(*image);
+    mirrored_structure_ = dataset::build_structure(image->info, sample_options_.patch_size);
+    mirrored_ = std::move(image);
+  }
 }
 
 template <class T>
@@ -154,6 +162,15 @@ Points NetworkPredictor<T>::step(const dataset::Sequence& seq, int t, const Poin
   const dataset::TrainingSample sample =
       rollout_sample(seq, t, x_prev2, x_prev, x_now, stats_, structure_, sample_options_, config_.model);
   Points x = predict_positions(tape_, params_, config_, sample, stats_);
+  if (mirrored_) {
+    const auto image = [](Points p) {
+      p.col(0) *= -1.f;
+      return p;
+    };
+    const dataset::TrainingSample mirrored_sample = rollout_sample(*mirrored_, t, image(x_prev2), image(x_prev), image(x_now),
+                                                                   stats_, mirrored_structure_, sample_options_, config_.model);
+    x = 0.5f * (x + image(predict_positions(tape_, params_, config_, mirrored_sample, stats_)));
+  }
   if (!tether_limit_.empty()) apply_tether(structure_->all, tether_limit_, x);
   if (constraints_) constraints_->apply(seq.body_at(t + 1), x, seq.body_at(t), x_now);
   return x;

@@ -147,8 +147,9 @@ Points predict_positions(ad::Tape<T>& tape, ad::ParamStore<T>& params, const Con
 
 // The network as a predictor, in precision T (float, or double for the precision check):
 // builds the dataset sample of the rollout's window (rollout_sample), the model input, runs
-// forward without recording; world x_{t+1} = predicted root-relative x + r_{t+1}, then the
-// patch tether when the config's eval.patch_tether > 0 (eval/tether.h), then the cloth
+// forward without recording; world x_{t+1} = predicted root-relative x + r_{t+1} (with
+// eval.mirror_average, the mean of that and the mirrored prediction on the mirrored scene), then
+// the patch tether when the config's eval.patch_tether > 0 (eval/tether.h), then the cloth
 // constraints when eval.constraints is set (run/cloth_constraints.h).
 template <class T>
 class NetworkPredictor : public Predictor {
@@ -180,6 +181,9 @@ class NetworkPredictor : public Predictor {
   std::shared_ptr<const dataset::SequenceStructure> structure_;
   std::vector<float> tether_limit_;  // (N,) eval.patch_tether > 0 only
   std::unique_ptr<const ClothConstraints> constraints_;  // eval.constraints only
+  // eval.mirror_average only: the sequence's mirror image and its structure.
+  std::unique_ptr<const dataset::Sequence> mirrored_;
+  std::shared_ptr<const dataset::SequenceStructure> mirrored_structure_;
 };
 extern template class NetworkPredictor<float>;
 extern template class NetworkPredictor<double>;

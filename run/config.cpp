@@ -272,6 +272,7 @@ const Schema& schema() {
     k.add("eval.body_friction", [](Config& c) -> double& { return c.eval.body_friction; }, "constraints: share of a near-body garment vertex's tangential motion relative to the body that the body takes away (0 = off, 1 = the vertex sticks)", {0, 1, {}});
     k.add("eval.layer_friction", [](Config& c) -> double& { return c.eval.layer_friction; }, "constraints: the same as eval.body_friction for an outer-layer vertex against the inner layer (0 = off)", {0, 1, {}});
     k.add("eval.friction_distance", [](Config& c) -> double& { return c.eval.friction_distance; }, "constraints: scene units from the body surface (along its normal) within which eval.body_friction acts", {0, 10, {}});
+    k.add("eval.mirror_average", [](Config& c) -> bool& { return c.eval.mirror_average; }, "rollouts: each frame the mean of the network's prediction and the mirror image of its prediction on the mirrored scene (symmetric under mirrors as the cloth is; twice the time per frame)");
     k.add("eval.correction_scale", [](Config& c) -> double& { return c.eval.correction_scale; }, "rollouts: factor on the network's output, the correction of its velocity base (1 = as trained, 0 = the base alone)", {0, 10, {}});
     k.add("eval.constraint_iterations", [](Config& c) -> int& { return c.eval.constraint_iterations; }, "constraints: projection passes per predicted frame", {1, 1000, {}});
     return k;

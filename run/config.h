@@ -110,6 +110,10 @@ struct EvalConfig {
   // Factor on the network's correction of its velocity base in rollouts (1 = as trained, 0 = the
   // base alone, e.g. the physics step): a rollout's own frames drift from what training showed it.
   double correction_scale = 1.0;
+  // Each predicted frame is the mean of the network's prediction and the mirror image of its
+  // prediction on the mirrored scene (dataset::mirror): symmetric under mirrors as the cloth is,
+  // for twice the network's (and its velocity base's) time per frame. Off = one prediction.
+  bool mirror_average = false;
 };
 
 // The physics energy of losses/physics.h on the self-fed steps of the curriculum (not in the

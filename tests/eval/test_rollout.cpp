@@ -497,6 +497,39 @@ TEST(Rollout, CorrectionScaleScalesTheNetworksCorrectionOfTheStep) {
   EXPECT_LT((half.frames[0] - 0.5f * (r0.frames[0] + r1.frames[0])).cwiseAbs().maxCoeff(), 1e-4f * std::max(1.0f, moved));
 }
 
+// eval.mirror_average makes the network symmetric under mirrors as the cloth is: its rollout of
+// a scene's mirror image is the mirror image of its rollout, where the plain network's is not;
+// and its first frame is the mean of the plain network's prediction and the image of its
+// prediction on the image.
+TEST(Rollout, MirrorAverageMakesTheNetworkMirrorSymmetric) {
+  const dataset::Sequence seq = sequence(2);
+  dataset::Sequence image = seq;
+  dataset::mirror(image);
+  auto predictor = [&](bool average) {
+    Config c = load_config({std::string(LAYERSNET_SOURCE_DIR) + "/configs/tiny.toml"},
+                           {"model.velocity_base=physics", std::string("eval.mirror_average=") + (average ? "true" : "false")});
+    ad::ParamStore<float> ps;
+    model::register_params(ps, c.model);
+    model::init_params(ps, c.model, 3);
+    std::mt19937_64 rng(5);
+    std::normal_distribution<float> normal(0, 0.3f);
+    for (auto& x : ps.value(ps.index_of("decoder.proj.2.weight"))) x = normal(rng);  // a non-zero correction
+    return std::make_unique<ModelPredictor>(average ? "averaged" : "plain", c, std::move(ps), dataset::NormalisationStats{});
+  };
+  const Eigen::Matrix3f M = Eigen::Vector3f(-1.f, 1.f, 1.f).asDiagonal();
+  const auto asymmetry = [&](bool average) {
+    const Rollout a = rollout(*predictor(average), seq, 2, 3), b = rollout(*predictor(average), image, 2, 3);
+    float worst = 0;
+    for (size_t f = 0; f < 3; ++f) worst = std::max(worst, (b.frames[f] - a.frames[f] * M).cwiseAbs().maxCoeff());
+    return worst;
+  };
+  EXPECT_GT(asymmetry(false), 1e-3f);  // the plain network tells a scene from its image
+  EXPECT_LT(asymmetry(true), 1e-4f);
+  const Rollout plain = rollout(*predictor(false), seq, 2, 1), plain_image = rollout(*predictor(false), image, 2, 1),
+                averaged = rollout(*predictor(true), seq, 2, 1);
+  EXPECT_LT((averaged.frames[0] - 0.5f * (plain.frames[0] + plain_image.frames[0] * M)).cwiseAbs().maxCoeff(), 1e-5f);
+}
+
 // The projection of a model's wind movement on Blender's: all of it, half, none, against it.
 TEST(Rollout, WindShareProjectsTheModelsWindMovementOnBlenders) {
   std::mt19937 rng(5);
