@@ -472,21 +472,24 @@ TEST(Rollout, PhysicsStepBaselineTakesTheModelsStepSettings) {
   EXPECT_GT(apart, 1e-3f) << "the bending factor should move the step";
 }
 
+// The tiny model on the physics step with a non-zero correction (random output weights), under
+// one rollout setting "eval.KEY=VALUE".
+std::unique_ptr<ModelPredictor> corrected_step_model(const std::string& setting) {
+  Config c = load_config({std::string(LAYERSNET_SOURCE_DIR) + "/configs/tiny.toml"}, {"model.velocity_base=physics", setting});
+  ad::ParamStore<float> ps;
+  model::register_params(ps, c.model);
+  model::init_params(ps, c.model, 3);
+  std::mt19937_64 rng(5);
+  std::normal_distribution<float> normal(0, 0.3f);
+  for (auto& x : ps.value(ps.index_of("decoder.proj.2.weight"))) x = normal(rng);
+  return std::make_unique<ModelPredictor>(setting, c, std::move(ps), dataset::NormalisationStats{});
+}
+
 // eval.correction_scale scales the network's correction of the physics step: 0 rolls out the step
 // itself, and one frame from the same input at 0.5 lies halfway between the frames at 0 and 1.
 TEST(Rollout, CorrectionScaleScalesTheNetworksCorrectionOfTheStep) {
   const dataset::Sequence seq = sequence(2);
-  auto predictor = [&](const std::string& scale) {
-    Config c = load_config({std::string(LAYERSNET_SOURCE_DIR) + "/configs/tiny.toml"},
-                           {"model.velocity_base=physics", "eval.correction_scale=" + scale});
-    ad::ParamStore<float> ps;
-    model::register_params(ps, c.model);
-    model::init_params(ps, c.model, 3);
-    std::mt19937_64 rng(5);
-    std::normal_distribution<float> normal(0, 0.3f);
-    for (auto& x : ps.value(ps.index_of("decoder.proj.2.weight"))) x = normal(rng);  // a non-zero correction
-    return std::make_unique<ModelPredictor>("scaled " + scale, c, std::move(ps), dataset::NormalisationStats{});
-  };
+  auto predictor = [&](const std::string& scale) { return corrected_step_model("eval.correction_scale=" + scale); };
   PhysicsStep physics;
   const Rollout step = rollout(physics, seq, 2, 3);
   const Rollout r0 = rollout(*predictor("0"), seq, 2, 3), r1 = rollout(*predictor("1"), seq, 2, 1),
@@ -506,15 +509,7 @@ TEST(Rollout, MirrorAverageMakesTheNetworkMirrorSymmetric) {
   dataset::Sequence image = seq;
   dataset::mirror(image);
   auto predictor = [&](bool average) {
-    Config c = load_config({std::string(LAYERSNET_SOURCE_DIR) + "/configs/tiny.toml"},
-                           {"model.velocity_base=physics", std::string("eval.mirror_average=") + (average ? "true" : "false")});
-    ad::ParamStore<float> ps;
-    model::register_params(ps, c.model);
-    model::init_params(ps, c.model, 3);
-    std::mt19937_64 rng(5);
-    std::normal_distribution<float> normal(0, 0.3f);
-    for (auto& x : ps.value(ps.index_of("decoder.proj.2.weight"))) x = normal(rng);  // a non-zero correction
-    return std::make_unique<ModelPredictor>(average ? "averaged" : "plain", c, std::move(ps), dataset::NormalisationStats{});
+    return corrected_step_model(std::string("eval.mirror_average=") + (average ? "true" : "false"));
   };
   const Eigen::Matrix3f M = Eigen::Vector3f(-1.f, 1.f, 1.f).asDiagonal();
   const auto asymmetry = [&](bool average) {
