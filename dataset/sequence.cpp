@@ -307,12 +307,12 @@ int64_t FrameWindow::bytes() const {
 SequenceInfo mirrored(SequenceInfo info) {
   const auto rewind = [](Faces& faces) { faces.col(1).swap(faces.col(2)); };
   rewind(info.body_faces);
-  info.translation.col(0) *= -1.f;
+  mirror_points(info.translation);
   info.gravity.x() = -info.gravity.x();
   for (GarmentMesh& g : info.garments) {
     rewind(g.faces);
     for (Eigen::Index f = 0; f < g.faces.rows(); ++f) g.uv.row(3 * f + 1).swap(g.uv.row(3 * f + 2));  // corners follow
-    if (g.rest.rows() > 0) g.rest.col(0) *= -1.f;
+    mirror_points(g.rest);
   }
   // The mirrored rotation is M R M, M = diag(−1, 1, 1): (w, x, y, z) → (w, x, −y, −z). It maps the
   // wind's reference axis z (which M keeps) to M times the old direction.
@@ -323,9 +323,11 @@ SequenceInfo mirrored(SequenceInfo info) {
   return info;
 }
 
+void mirror_points(Points& points) { points.col(0) *= -1.f; }
+
 void mirror_positions(FrameWindow& frames) {
-  frames.body.col(0) *= -1.f;
-  for (Points& g : frames.garments) g.col(0) *= -1.f;
+  mirror_points(frames.body);
+  for (Points& g : frames.garments) mirror_points(g);
 }
 
 void mirror(Sequence& seq) {

@@ -161,6 +161,8 @@ Sequence read_sequence(const std::string& path);
 // simulator could have made: data.mirror trains on it beside the original. x is never the up axis
 // (z or y). Mirroring twice gives the original back exactly.
 SequenceInfo mirrored(SequenceInfo info);
+// x → −x on every row of positions (rows, 3).
+void mirror_points(Points& points);
 // x → −x on every body and garment position of the window.
 void mirror_positions(FrameWindow& frames);
 // The whole sequence's image: mirrored(info) and mirror_positions(frames).

@@ -164,7 +164,7 @@ Points NetworkPredictor<T>::step(const dataset::Sequence& seq, int t, const Poin
   Points x = predict_positions(tape_, params_, config_, sample, stats_);
   if (mirrored_) {
     const auto image = [](Points p) {
-      p.col(0) *= -1.f;
+      dataset::mirror_points(p);
       return p;
     };
     const dataset::TrainingSample mirrored_sample = rollout_sample(*mirrored_, t, image(x_prev2), image(x_prev), image(x_now),

@@ -54,6 +54,22 @@ class EvalCli : public ::testing::Test {
   static void TearDownTestSuite() {
     if (!std::getenv("LAYERSNET_EVAL_TEST_KEEP")) fs::remove_all(root_);
   }
+  // The report of `eval` on the tiny model, 3 frames, with `extra` options, written to root_/name.
+  static nlohmann::json eval_tiny(const std::string& extra, const std::string& name) {
+    int code = 0;
+    const fs::path out = root_ / name;
+    const std::string text = run("eval --checkpoint " + (root_ / "tiny.h5").string() +
+                                     " --frames 3 --speed-frames 1 --out " + out.string() + extra,
+                                 &code);
+    EXPECT_EQ(code, 0) << text;
+    return nlohmann::json::parse(slurp(out / "eval.json"));
+  }
+  // Each method's mean error (mm), in the report's order.
+  static std::vector<double> mean_errors(const nlohmann::json& report) {
+    std::vector<double> e;
+    for (const auto& m : report["methods"]) e.push_back(m["summary"]["error_mm"]["mean"].get<double>());
+    return e;
+  }
   static fs::path root_;
 };
 fs::path EvalCli::root_;
@@ -204,16 +220,8 @@ TEST_F(EvalCli, PhysicsStepBaselineIsThePhysicsModelsOwnStep) {
 // rollouts move. The reports say which sequences were evaluated.
 TEST_F(EvalCli, MirrorLeavesTheSymmetricBaselinesAndMovesTheNetwork) {
   const auto errors = [&](const std::string& extra, const std::string& name) {
-    int code = 0;
-    const fs::path out = root_ / name;
-    const std::string text = run("eval --checkpoint " + (root_ / "tiny.h5").string() +
-                                     " --frames 3 --speed-frames 1 --out " + out.string() + extra,
-                                 &code);
-    EXPECT_EQ(code, 0) << text;
-    const auto j = nlohmann::json::parse(slurp(out / "eval.json"));
-    std::vector<double> e;
-    for (const auto& m : j["methods"]) e.push_back(m["summary"]["error_mm"]["mean"].get<double>());
-    return std::make_pair(e, j["mirror"].get<bool>());
+    const auto j = eval_tiny(extra, name);
+    return std::make_pair(mean_errors(j), j["mirror"].get<bool>());
   };
   const auto [files, mirror_off] = errors("", "eval_files");
   const auto [images, mirror_on] = errors(" --mirror", "eval_mirror");
@@ -237,16 +245,8 @@ TEST_F(EvalCli, MirrorLeavesTheSymmetricBaselinesAndMovesTheNetwork) {
 // far the change moved the model's cloth.
 TEST_F(EvalCli, WindScaleChangesWhatTheModelSeesNotTheTruth) {
   const auto errors = [&](const std::string& extra, const std::string& name) {
-    int code = 0;
-    const fs::path out = root_ / name;
-    const std::string text = run("eval --checkpoint " + (root_ / "tiny.h5").string() +
-                                     " --frames 3 --speed-frames 1 --out " + out.string() + extra,
-                                 &code);
-    EXPECT_EQ(code, 0) << text;
-    const auto j = nlohmann::json::parse(slurp(out / "eval.json"));
-    std::vector<double> e;
-    for (const auto& m : j["methods"]) e.push_back(m["summary"]["error_mm"]["mean"].get<double>());
-    return std::make_pair(e, j["wind_scale"].get<double>());
+    const auto j = eval_tiny(extra, name);
+    return std::make_pair(mean_errors(j), j["wind_scale"].get<double>());
   };
   const auto [data_wind, scale_1] = errors("", "eval_wind_1");
   const auto [calm, scale_0] = errors(" --wind-scale 0", "eval_wind_0");
