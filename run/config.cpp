@@ -501,8 +501,8 @@ std::vector<std::string> config_warnings(const Config& config) {
   std::ostringstream size;
   size << "a model.patch_size = " << config.model.patch_size << " patch spans " << extent << " scene units";
   // Reach is not accuracy: on the large recipe larger radii lost on validation.
-  const char* measure_it =
-      ", and keep it only if validation improves (on the large recipe radii of one patch came out 4.5 % further "
+  const char* fix_tail =
+      " or a smaller model.patch_size, and keep it only if validation improves (on the large recipe radii of one patch came out 4.5 % further "
       "from Blender: model/README.md, \"Radii and patch size\")";
   std::vector<std::string> out;
   if (config.model.world_radius < extent * slack) {
@@ -510,14 +510,14 @@ std::vector<std::string> config_warnings(const Config& config) {
     w << "model.world_radius = " << config.model.world_radius << " is smaller than one patch: " << size.str()
       << ", so outer-garment patches over the inner garment can have no world edge to it (`layersnet inspect "
          "DATASET --config FILE` counts them); set model.world_radius >= "
-      << extent << " or a smaller model.patch_size" << measure_it;
+      << extent << fix_tail;
     out.push_back(w.str());
   }
   if (config.model.body_radius < extent * slack) {
     std::ostringstream w;
     w << "model.body_radius = " << config.model.body_radius << " is smaller than one patch: " << size.str()
       << ", so a patch touching the body can find no body vertex within it; set model.body_radius >= " << extent
-      << " or a smaller model.patch_size" << measure_it;
+      << fix_tail;
     out.push_back(w.str());
   }
   return out;
