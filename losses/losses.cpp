@@ -26,12 +26,13 @@ dataset::Points points(const T* xyz, int64_t r0, int64_t r1, int64_t stride) {
 // query (constants or tape tensors of (Q, 3)). Returns Σ min(d − eps, 0)² / max(N_c, 1).
 template <class T>
 Var<T> collision_term(ad::Tape<T>& tape, const Var<T>& x, const Var<T>& anchor, const Var<T>& normal, T eps,
-                      int64_t& count) {
+                      bool over_all_rows, int64_t& count) {
   const Var<T> d = ad::row_sum(tape, ad::mul(tape, ad::sub(tape, x, anchor), normal));  // (Q, 1)
   const Var<T> pen = ad::hinge_sq(tape, d, eps);
   count = 0;
   for (int64_t i = 0; i < pen.rows; ++i) count += pen.value[i] > T(0);
-  return ad::scale(tape, ad::sum_all(tape, pen), T(1) / static_cast<T>(std::max<int64_t>(count, 1)));
+  const int64_t divisor = over_all_rows ? pen.rows : count;
+  return ad::scale(tape, ad::sum_all(tape, pen), T(1) / static_cast<T>(std::max<int64_t>(divisor, 1)));
 }
 
 }  // namespace
@@ -121,7 +122,7 @@ LossTerms<T> compute_losses(ad::Tape<T>& tape, ad::ParamStore<T>& params, const 
     const auto idx = dataset::nearest_body(points(pred.vertex.value, 0, N, 9), points(tg.body_pos.data(), 0, B, 3)).index;
     const Var<T> h = ad::gather_rows(tape, model::constant(tape, tg.body_pos, B, 3), idx);
     const Var<T> n = ad::gather_rows(tape, model::constant(tape, tg.body_normals, B, 3), idx);
-    add_term(collision_term(tape, x, h, n, eps, out.body_collisions), lc.collision_body, out.collision_body);
+    add_term(collision_term(tape, x, h, n, eps, false, out.body_collisions), lc.collision_body, out.collision_body);
   }
   if (layer_term) {
     const int64_t o0 = tg.garment_offsets[G - 1], o1 = tg.garment_offsets[G];
@@ -129,7 +130,7 @@ LossTerms<T> compute_losses(ad::Tape<T>& tape, ad::ParamStore<T>& params, const 
     const auto idx = dataset::nearest_body(points(pred.vertex.value, o0, o1, 9), points(pred.vertex.value, 0, o0, 9)).index;
     const Var<T> xo = model::rows_of(x, o0, o1);
     add_term(collision_term(tape, xo, ad::gather_rows(tape, x, idx), ad::gather_rows(tape, normals, idx), eps,
-                            out.layer_collisions),
+                            lc.layer_mean_over == "outer", out.layer_collisions),
              lc.collision_layer, out.collision_layer);
   }
   if (lc.edge_strain != 0 && !tg.edges.empty()) {

@@ -8,7 +8,8 @@
 //   collision_body   Σ_v min((x̂_v − h_a)·n_a − d_ε, 0)² / N_c, a = nearest GT body vertex at t+1,
 //                    N_c = number of vertices with a non-zero term (eq. 18)
 //   collision_layer  the same for the outer (last) garment's vertices against the nearest
-//                    vertex of all inner garments, with the PREDICTED inner normals (eq. 18)
+//                    vertex of all inner garments, with the PREDICTED inner normals (eq. 18);
+//                    with loss.layer_mean_over = "outer" the sum is divided by every outer vertex
 //   orthogonality    Σ_W ‖W Wᵀ − I‖²_F + ‖Wᵀ W − I‖²_F over every RET map W (eq. 9 as a penalty);
 //                    absent with model.orthogonality = "exact" (W orthonormal by construction)
 //   edge_strain      Σ_e ((‖x̂_i − x̂_j‖ − l_e) / l_e)² / E over the garment edges, l_e the ground-truth

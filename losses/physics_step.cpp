@@ -425,7 +425,7 @@ PhysicsStepSettings physics_step_settings(const ModelConfig& model) {
   settings.substeps = model.physics_step_substeps;
   settings.inertia = model.physics_step_inertia;
   settings.energy.collision_stiffness = model.physics_step_collision_stiffness;
-  settings.energy.collision_layer = model.physics_step_layer_collision ? 1.0 : 0.0;
+  settings.energy.collision_layer = model.physics_step_layer_collision ? model.physics_step_layer_stiffness : 0.0;
   settings.energy.layer_margin = model.physics_step_layer_margin;
   settings.friction = model.physics_step_friction;
   settings.friction_distance = model.physics_step_friction_distance;

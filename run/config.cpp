@@ -172,6 +172,7 @@ const Schema& schema() {
     k.add("model.physics_step_substeps", [](Config& c) -> int& { return c.model.physics_step_substeps; }, "implicit steps per frame of the physics step, each of 1/substeps frame (read with velocity_base physics only)", {1, 100, {}});
     k.add("model.physics_step_collision_stiffness", [](Config& c) -> double& { return c.model.physics_step_collision_stiffness; }, "the physics step's body-contact stiffness k_c (mass / frame^2; read with velocity_base physics only)", {0, 1e9, {}});
     k.add("model.physics_step_layer_collision", [](Config& c) -> bool& { return c.model.physics_step_layer_collision; }, "the physics step also pushes the outer layer out of the inner one (read with velocity_base physics only)");
+    k.add("model.physics_step_layer_stiffness", [](Config& c) -> double& { return c.model.physics_step_layer_stiffness; }, "the physics step's layer term stiffness as a factor on physics_step_collision_stiffness (with physics_step_layer_collision)", {0, 1e6, {}});
     k.add("model.physics_step_layer_margin", [](Config& c) -> double& { return c.model.physics_step_layer_margin; }, "scene units the physics step's layer term keeps the outer layer outside the inner one (with physics_step_layer_collision)", {0, 10, {}});
     k.add("model.physics_step_friction", [](Config& c) -> double& { return c.model.physics_step_friction; }, "the physics step's contact friction: cloth within physics_step_friction_distance of the body is held to its tangential motion with this stiffness x the vertex mass (0 = frictionless; read with velocity_base physics only)", {0, 1e6, {}});
     k.add("model.physics_step_face_wind", [](Config& c) -> double& { return c.model.physics_step_face_wind; }, "the physics step's face wind: each triangle gives each corner this x area / 3 x (w.n) n (Blender's is 0.02; twice it is closest to Blender for one step per frame)", {0, 1, {}});
@@ -195,6 +196,7 @@ const Schema& schema() {
     k.add("loss.normal", [](Config& c) -> double& { return c.loss.normal; }, "vertex normal loss weight", weight);
     k.add("loss.collision_body", [](Config& c) -> double& { return c.loss.collision_body; }, "garment-body collision weight", weight);
     k.add("loss.collision_layer", [](Config& c) -> double& { return c.loss.collision_layer; }, "outer-inner layer collision weight", weight);
+    k.add("loss.layer_mean_over", [](Config& c) -> std::string& { return c.loss.layer_mean_over; }, "what the layer collision sum is divided by: the outer vertices that collide (colliding, eq. 18) or every outer vertex (outer; not in the paper)", {0, 0, {"colliding", "outer"}});
     k.add("loss.collision_eps", [](Config& c) -> double& { return c.loss.collision_eps; }, "collision margin d_eps (scene units)", {0, 10, {}});
     k.add("loss.orthogonality", [](Config& c) -> double& { return c.loss.orthogonality; }, "W_R orthogonality penalty weight", weight);
     k.add("loss.relative_to_base", [](Config& c) -> bool& { return c.loss.relative_to_base; }, "divide each sample's vertex and patch terms by its zero-output prediction's error (not in the paper)");

@@ -65,6 +65,21 @@ TEST(Losses, HandCountedValues) {
   EXPECT_NEAR(t.total.scalar(), t.vertex + t.patch + t.normal + 1.3 * t.collision_body + 0.1 * t.collision_layer, 1e-12);
 }
 
+// loss.layer_mean_over = "outer": the same two colliding outer vertices, their sum over all three
+// outer vertices; the body term keeps its mean over the colliding ones.
+TEST(Losses, LayerTermOverEveryOuterVertex) {
+  Toy toy;
+  ad::ParamStore<double> ps;
+  ad::Tape<double> tape;
+  model::Predictions<double> pred{tape.leaf(toy.pred.data(), 6, 9), tape.leaf(toy.patch.data(), 1, 9)};
+  LossConfig lc;
+  lc.layer_mean_over = "outer";
+  const auto t = compute_losses(tape, ps, no_ret(), lc, toy.target, pred);
+  EXPECT_EQ(t.layer_collisions, 2);
+  EXPECT_NEAR(t.collision_layer, (0.0005 * 0.0005 + 0.051 * 0.051) / 3, 1e-12);
+  EXPECT_NEAR(t.collision_body, 0.0015 * 0.0015, 1e-12);
+}
+
 // loss.relative_to_base: the vertex and patch terms are divided by the error of x − a, the
 // prediction with a zero network output; the reported terms stay the raw errors.
 TEST(Losses, RelativeToBaseDividesByTheZeroOutputError) {

@@ -354,6 +354,22 @@ TEST(PhysicsStep, TakesTheModelsLayerMargin) {
   EXPECT_GT((apart.physics_step - touching.physics_step).cwiseAbs().maxCoeff(), 1e-4f);
 }
 
+// The layer term's stiffness factor reaches the step: a tenth of the contact's pushes less far.
+TEST(PhysicsStep, TakesTheModelsLayerStiffness) {
+  const dataset::Sequence seq = two_layers_with_wind();
+  ModelConfig m;
+  m.velocity_base = "physics";
+  m.physics_step_layer_collision = true;
+  m.physics_step_layer_margin = 0.3;
+  const auto full = stepped_sample(seq, m);
+  m.physics_step_layer_stiffness = 0.1;
+  const auto soft = stepped_sample(seq, m);
+  EXPECT_EQ(physics_step_settings(m).energy.collision_layer, 0.1);
+  EXPECT_GT((full.physics_step - soft.physics_step).cwiseAbs().maxCoeff(), 1e-4f);
+  m.physics_step_layer_collision = false;
+  EXPECT_EQ(physics_step_settings(m).energy.collision_layer, 0.0);
+}
+
 // The bending settings reach the step: without bending, or with each hinge scaled by its rest
 // height, the cloth folds differently.
 TEST(PhysicsStep, TakesTheModelsBending) {
