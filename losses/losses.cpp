@@ -23,7 +23,8 @@ dataset::Points points(const T* xyz, int64_t r0, int64_t r1, int64_t stride) {
 }
 
 // Eq. 18 for the query points `x` (Q, 3) against anchors: anchor position and normal per
-// query (constants or tape tensors of (Q, 3)). Returns Σ min(d − eps, 0)² / max(N_c, 1).
+// query (constants or tape tensors of (Q, 3)). Returns Σ min(d − eps, 0)² / max(N_c, 1), or / Q
+// with over_all_rows (loss.layer_mean_over = "outer").
 template <class T>
 Var<T> collision_term(ad::Tape<T>& tape, const Var<T>& x, const Var<T>& anchor, const Var<T>& normal, T eps,
                       bool over_all_rows, int64_t& count) {

@@ -16,6 +16,10 @@ struct Toy {
   LossInput<double> target;
   std::vector<double> pred;  // (6, 9)
   std::vector<double> patch; // (1, 9)
+  // The predictions as tape leaves (read when called: a test may change pred or patch first).
+  model::Predictions<double> leaves(ad::Tape<double>& tape) {
+    return {tape.leaf(pred.data(), 6, 9), tape.leaf(patch.data(), 1, 9)};
+  }
   Toy() {
     const double x[6][3] = {{0, 0, 0.1}, {1, 0, 0.1}, {0, 1, 0.1}, {0, 0, 0.1005}, {1, 0, 0.05}, {0, 1, 0.3}};
     pred.assign(6 * 9, 0.0);
@@ -44,7 +48,7 @@ TEST(Losses, HandCountedValues) {
   Toy toy;
   ad::ParamStore<double> ps;
   ad::Tape<double> tape;
-  model::Predictions<double> pred{tape.leaf(toy.pred.data(), 6, 9), tape.leaf(toy.patch.data(), 1, 9)};
+  model::Predictions<double> pred = toy.leaves(tape);
   LossConfig lc;
   const auto t = compute_losses(tape, ps, no_ret(), lc, toy.target, pred);
   // vertex: outer z errors 0.0995, 0.15, 0.1 over 6 vertices
@@ -71,7 +75,7 @@ TEST(Losses, LayerTermOverEveryOuterVertex) {
   Toy toy;
   ad::ParamStore<double> ps;
   ad::Tape<double> tape;
-  model::Predictions<double> pred{tape.leaf(toy.pred.data(), 6, 9), tape.leaf(toy.patch.data(), 1, 9)};
+  model::Predictions<double> pred = toy.leaves(tape);
   LossConfig lc;
   lc.layer_mean_over = "outer";
   const auto t = compute_losses(tape, ps, no_ret(), lc, toy.target, pred);
@@ -88,7 +92,7 @@ TEST(Losses, RelativeToBaseDividesByTheZeroOutputError) {
   toy.patch[8] = 0.1;                                      // patch base z = 0.1
   ad::ParamStore<double> ps;
   ad::Tape<double> tape;
-  model::Predictions<double> pred{tape.leaf(toy.pred.data(), 6, 9), tape.leaf(toy.patch.data(), 1, 9)};
+  model::Predictions<double> pred = toy.leaves(tape);
   LossConfig lc;
   lc.normal = lc.collision_body = lc.collision_layer = 0;
   lc.relative_to_base = true;
@@ -127,7 +131,7 @@ TEST(Losses, EdgeStrainHandCountedAndGradcheck) {
   lc.edge_strain = 2.0;
   ad::ParamStore<double> ps;
   ad::Tape<double> tape;
-  model::Predictions<double> pred{tape.leaf(toy.pred.data(), 6, 9), tape.leaf(toy.patch.data(), 1, 9)};
+  model::Predictions<double> pred = toy.leaves(tape);
   const auto t = compute_losses(tape, ps, no_ret(), lc, toy.target, pred);
   // Inner triangle: exact lengths (0 strain). Outer edges: ground truth 1, 1, sqrt(2) at z = 0.2;
   // predicted (0,0,.1005)-(1,0,.05), (0,0,.1005)-(0,1,.3), (1,0,.05)-(0,1,.3).

@@ -340,12 +340,18 @@ TEST(PhysicsStep, TakesTheModelsConjugateGradientIterations) {
   EXPECT_EQ((physics_step_displacement(short_solve, seq.info, settings) - short_solve.physics_step).cwiseAbs().maxCoeff(), 0.f);
 }
 
-// The layer term's margin reaches the step: a wider one pushes the outer layer further out.
-TEST(PhysicsStep, TakesTheModelsLayerMargin) {
-  const dataset::Sequence seq = two_layers_with_wind();
+// The physics step with its layer term on.
+ModelConfig with_layer_term() {
   ModelConfig m;
   m.velocity_base = "physics";
   m.physics_step_layer_collision = true;
+  return m;
+}
+
+// The layer term's margin reaches the step: a wider one pushes the outer layer further out.
+TEST(PhysicsStep, TakesTheModelsLayerMargin) {
+  const dataset::Sequence seq = two_layers_with_wind();
+  ModelConfig m = with_layer_term();
   m.physics_step_layer_margin = 0;
   const auto touching = stepped_sample(seq, m);
   m.physics_step_layer_margin = 0.3;
@@ -357,9 +363,7 @@ TEST(PhysicsStep, TakesTheModelsLayerMargin) {
 // The layer term's stiffness factor reaches the step: a tenth of the contact's pushes less far.
 TEST(PhysicsStep, TakesTheModelsLayerStiffness) {
   const dataset::Sequence seq = two_layers_with_wind();
-  ModelConfig m;
-  m.velocity_base = "physics";
-  m.physics_step_layer_collision = true;
+  ModelConfig m = with_layer_term();
   m.physics_step_layer_margin = 0.3;
   const auto full = stepped_sample(seq, m);
   m.physics_step_layer_stiffness = 0.1;
