@@ -92,6 +92,9 @@ struct SequenceInfo {
   // below the inner one was simulated as 2 x inner - outer).
   float wind_field_factor = 1.f;
   bool stiffness_per_layer = false;
+  // The garments' frames record where the simulator drove the pinned vertices (a file's do; a
+  // scene built for `simulate` holds only the rest shape there, so its pins must be carried).
+  bool pins_recorded = true;
 
   // First frame after the rest pose and the ramp: where the motion proper starts.
   int settled_frame() const { return rest_frames + ramp_frames; }

@@ -73,6 +73,8 @@ void run_evaluation(EvalRunOptions o) {
       for (const auto& a : o.settings) apply_rollout_override(stepped, a);
       step_settings = stepped.model;
     }
+    // A model whose step takes the recorded pins is compared with methods that get them too.
+    if (c.model.velocity_base == "physics" && c.model.physics_step_pins == "recorded") eo.recorded_pins = true;
     const std::string name = i < o.names.size() ? o.names[i] : default_name(o.checkpoints[i], c);
     const std::vector<double> tethers = o.tethers.empty() ? std::vector<double>{c.eval.patch_tether} : o.tethers;
     std::vector<bool> constrained;
@@ -138,6 +140,8 @@ void run_evaluation(EvalRunOptions o) {
   paths.push_back("");
   std::vector<Predictor*> predictors;
   for (auto& p : owned) predictors.push_back(p.get());
+  if (eo.recorded_pins)
+    std::printf("eval: every method's pinned vertices are the data's at every frame (a model's step takes them)\n");
   std::printf("eval: baseline 'one physics step' is %s\n",
               step_from.empty() ? "the step with its default settings" : ("the step of " + step_from).c_str());
 

@@ -260,10 +260,10 @@ std::vector<MethodResult> evaluate(const dataset::DatasetManifest& manifest, std
     }
     for (size_t p = 0; p < predictors.size(); ++p) {
       const bool scaled = rescale && predictors[p]->takes_scaled_wind();
-      const Rollout r = rollout(*predictors[p], scaled ? scaled_wind : seq, start.input_frame, o.frames);
+      const Rollout r = rollout(*predictors[p], scaled ? scaled_wind : seq, start.input_frame, o.frames, o.recorded_pins);
       SequenceResult s = score_rollout(seq, r, co, o.mark_frames);
       if (scaled) {
-        const Rollout data_wind = rollout(*predictors[p], seq, start.input_frame, o.frames);
+        const Rollout data_wind = rollout(*predictors[p], seq, start.input_frame, o.frames, o.recorded_pins);
         s.wind_moved = mean_distance(r, data_wind);
         if (!twin.frames.empty() && twin.frames.size() == r.frames.size()) {
           s.twin_moved = twin_moved;

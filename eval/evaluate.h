@@ -124,6 +124,8 @@ struct EvalOptions {
   // symmetric under it, so a model that learned the cloth rather than its data's handedness is as
   // close on the images as on the files. Not with wind_twins.
   bool mirror = false;
+  // Every method's pinned vertices are the data's each frame (eval::rollout's recorded_pins).
+  bool recorded_pins = false;
 };
 
 // Table-1 subsets of a data set: id -> subset names, from dataset.json "subsets" (written by

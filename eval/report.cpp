@@ -238,6 +238,7 @@ std::string report_json(const std::vector<MethodResult>& methods, const ReportCo
   j["wind_scale"] = c.options.wind_scale;  // 1 = the data's wind
   j["wind_twins"] = c.options.wind_twins;  // "" = none
   j["mirror"] = c.options.mirror;  // true: the sequences' mirror images were evaluated
+  j["recorded_pins"] = c.options.recorded_pins;  // true: every method's pinned vertices were the data's
   j["h_collision_max_distance_m"] = c.options.max_body_distance_m;
   j["l_collision_near_max_distance_m"] = c.options.max_layer_distance_m;
   j["blender_s_per_frame"] = c.blender_s_per_frame;
@@ -380,7 +381,11 @@ std::string report_markdown(const std::vector<MethodResult>& methods, const Repo
        "eval.json `post_processing`), for the baselines exactly as for the model. Near / free: error over the "
        "vertex-frames whose ground truth lies within / beyond "
     << kBodyDistanceBandEdgesM.back()
-    << " m of the body. Crumple: mean dihedral angle between adjacent triangles (0° = flat). *One physics step*: "
+    << " m of the body. "
+    << (c.options.recorded_pins ? "Pinned vertices: every method, the ground truth included, takes them from the data "
+                                  "at every frame (driven like the body; a model's step takes them). "
+                                : "")
+    << "Crumple: mean dihedral angle between adjacent triangles (0° = flat). *One physics step*: "
     << (c.physics_step_from.empty() ? std::string("the step with its default settings")
                                     : "the step of `" + c.physics_step_from + "` (its zero output)")
     << ".\n\n"

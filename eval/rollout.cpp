@@ -213,7 +213,7 @@ std::unique_ptr<ModelPredictor> load_model_predictor(const std::string& path, co
   return std::make_unique<ModelPredictor>(name, std::move(m.config), std::move(m.params), std::move(stats));
 }
 
-Rollout rollout(Predictor& predictor, const dataset::Sequence& seq, int t0, int n) {
+Rollout rollout(Predictor& predictor, const dataset::Sequence& seq, int t0, int n, bool recorded_pins) {
   const int T = seq.info.num_frames;
   if (t0 < 2 || t0 + 1 > T - 1)
     throw std::invalid_argument(seq.info.path + ": a rollout from input frame " + std::to_string(t0) +
@@ -224,6 +224,15 @@ Rollout rollout(Predictor& predictor, const dataset::Sequence& seq, int t0, int 
   r.first_frame = t0 + 1;
   predictor.begin(seq);
   Points a = garments_at(seq, t0 - 2), b = garments_at(seq, t0 - 1), c = garments_at(seq, t0);
+  std::vector<Eigen::Index> driven;  // rows taken from the data every frame
+  if (recorded_pins && seq.info.pins_recorded) {
+    Eigen::Index offset = 0;
+    for (const dataset::GarmentMesh& g : seq.info.garments) {
+      for (int v = 0; v < g.num_vertices; ++v)
+        if (g.pinned(v)) driven.push_back(offset + v);
+      offset += g.num_vertices;
+    }
+  }
   for (int k = 0; k < n; ++k) {
     const int t = t0 + k;
     if (r.diverged_at >= 0) {  // nothing sensible to feed back
@@ -237,6 +246,10 @@ Rollout rollout(Predictor& predictor, const dataset::Sequence& seq, int t0, int 
     if (next.rows() != c.rows())
       throw std::runtime_error(predictor.name() + " returned " + std::to_string(next.rows()) + " rows for " +
                                std::to_string(c.rows()) + " garment vertices");
+    if (!driven.empty()) {
+      const Points recorded = garments_at(seq, t + 1);
+      for (const Eigen::Index v : driven) next.row(v) = recorded.row(v);
+    }
     if (!next.allFinite()) r.diverged_at = k;
     r.frames.push_back(next);
     a = std::move(b);

@@ -220,6 +220,9 @@ struct Rollout {
 
 // Rolls `predictor` over seq from input frame t0 (2 <= t0) for n frames, clamped so that
 // t0 + n <= T − 1. Throws when not even one frame can be predicted.
-Rollout rollout(Predictor& predictor, const dataset::Sequence& seq, int t0, int n);
+// recorded_pins: when the sequence records its pinned vertices (SequenceInfo::pins_recorded),
+// every predicted frame takes them from the data, as it takes the body: they are driven, not
+// simulated, so every method gets them alike.
+Rollout rollout(Predictor& predictor, const dataset::Sequence& seq, int t0, int n, bool recorded_pins = false);
 
 }  // namespace layersnet::eval

@@ -357,6 +357,12 @@ dataset::Points physics_step_displacement(const dataset::TrainingSample& s, cons
                   "physics step of sample '" << s.sequence_id << "' frame " << s.frame
                                              << ": needs the body carry" << (body_inertia ? " from t-1 and from t" : "")
                                              << "; build the sample with model::sample_options_for(the model's config)");
+  LAYERSNET_CHECK(settings.pins == "carried" || settings.pins == "recorded",
+                  "physics step: pins \"" << settings.pins << "\" are neither \"carried\" nor \"recorded\"");
+  const bool recorded_pins = settings.pins == "recorded" && info.pins_recorded;
+  LAYERSNET_CHECK(!recorded_pins || s.target.rows() == N,
+                  "physics step of sample '" << s.sequence_id << "' frame " << s.frame
+                                             << ": recorded pins need the sample's frame t+1 (its target)");
   LAYERSNET_CHECK(settings.substeps >= 1, "physics step: " << settings.substeps << " substeps; give 1 or more");
   LAYERSNET_CHECK(!system || settings.substeps == 1,
                   "physics step: its linear system is made for one step per frame, not " << settings.substeps << " substeps");
@@ -368,7 +374,7 @@ dataset::Points physics_step_displacement(const dataset::TrainingSample& s, cons
   for (int64_t v = 0; v < N; ++v) {
     fixed[v] = in.inertia_weight[v] == 0;  // pinned
     for (int c = 0; c < 3; ++c) {
-      guess(v, c) = s.state(v, c) + s.body_carry(v, c);
+      guess(v, c) = fixed[v] && recorded_pins ? s.target(v, c) : s.state(v, c) + s.body_carry(v, c);
       if (body_inertia)  // 2 x_t − x_{t−1} = x̃_t + c + (v_t − c_t)
         in.x_tm1[3 * v + c] = 2 * in.x_t[3 * v + c] - (guess(v, c) + s.state(v, 3 + c) - s.body_carry_prev(v, c));
     }
@@ -424,6 +430,7 @@ PhysicsStepSettings physics_step_settings(const ModelConfig& model) {
   settings.cg_iterations = model.physics_step_cg_iterations;
   settings.substeps = model.physics_step_substeps;
   settings.inertia = model.physics_step_inertia;
+  settings.pins = model.physics_step_pins;
   settings.energy.collision_stiffness = model.physics_step_collision_stiffness;
   settings.energy.collision_layer = model.physics_step_layer_collision ? model.physics_step_layer_stiffness : 0.0;
   settings.energy.layer_margin = model.physics_step_layer_margin;

@@ -12,8 +12,8 @@
 // block-Jacobi preconditioner solve it, and a backtracking line search keeps the energy
 // decreasing. Contact friction holds cloth that touches the body to the body's motion,
 // tangentially, as Blender's body friction does (off in these settings; ModelConfig turns it on
-// for the "physics" base). Pinned vertices (no inertia weight) stay at
-// the carried guess: Blender moves them with the body. One frame is one step by default (Blender takes
+// for the "physics" base). Pinned vertices (no inertia weight) stay where
+// the guess puts them (PhysicsStepSettings::pins): Blender drives them, it does not simulate them. One frame is one step by default (Blender takes
 // `quality` substeps, 30 in the generator; two or three here come no closer to it). Blender's frames are not minima of this energy (`layersnet inspect
 // --physics`): a few iterations, not the minimum, are what comes closest to them.
 //
@@ -35,6 +35,9 @@ struct PhysicsStepSettings {
   int substeps = 1;            // implicit steps of 1/substeps frame (Blender takes `quality`)
   int cg_iterations = 60;      // per Newton iteration (stops earlier at a relative residual of 1e-4)
   std::string inertia = "world";  // "world" | "body" (above)
+  // Pinned rows at t+1: "carried" (x_t + c) or "recorded" (the sample's target rows, where the
+  // sequence's simulator drove them; only when SequenceInfo::pins_recorded, else carried).
+  std::string pins = "carried";
   // Contact friction: a free vertex that starts within friction_distance (scene units) of the
   // body along its normal pays (friction · m / 2) |tangential slip from x_t + c|²; 0 = none.
   double friction = 0;

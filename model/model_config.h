@@ -62,6 +62,13 @@ struct ModelConfig {
   int physics_step_cg_iterations = 60;
   int physics_step_substeps = 1;
   std::string physics_step_inertia = "world";
+  // Where the step puts the pinned vertices at t+1. "carried": with the body surface under them,
+  // as the rest of its guess (x_t + c). "recorded": where the sequence says its simulator drove
+  // them (a generator's rig moves them with the torso's bones, which the body surface near them
+  // does not follow); a scene without recorded pins falls back to the carry. Pinned vertices are
+  // driven, not simulated, so they are the step's input like the body (docs/decisions.md,
+  // "Recorded pins").
+  std::string physics_step_pins = "carried";
   double physics_step_collision_stiffness = 1e4;
   bool physics_step_layer_collision = false;
   // Distance the layer term keeps the outer layer from the inner one (scene units).

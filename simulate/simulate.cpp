@@ -366,6 +366,7 @@ Scene build_scene(const SceneInputs& in) {
   dataset::Sequence& seq = scene.sequence;
   dataset::SequenceInfo& info = seq.info;
   info.path = "the simulated scene";
+  info.pins_recorded = false;
   info.fps = body.fps;
   info.scale = kModelScale;
   info.up_axis = 'z';

@@ -49,6 +49,35 @@ TEST(Rollout, ConstantVelocityIsExactOnUniformMotion) {
   EXPECT_EQ(s.error_curve.size(), 6u);
 }
 
+// Recorded pins: every predicted frame takes the pinned rows from the data and leaves the others
+// to the method; a sequence that records none (as `simulate` builds) is left to the method.
+TEST(Rollout, RecordedPinsAreTheDatasForEveryMethod) {
+  dataset::Sequence seq = sequence(2);
+  move_garments(seq, [](int t) { return Eigen::RowVector3f(0.02f * t * t, 0, 0); });  // accelerating
+  auto& outer = seq.info.garments.back();
+  outer.pin.assign(static_cast<size_t>(outer.num_vertices), 0.f);
+  outer.pin[0] = outer.pin[3] = 1.f;
+  const int first_outer = seq.info.garments.front().num_vertices;
+  ConstantVelocity cv;
+  const Rollout free = rollout(cv, seq, 2, 5), driven = rollout(cv, seq, 2, 5, true);
+  for (size_t k = 0; k < driven.frames.size(); ++k) {
+    const dataset::Points truth = garments_at(seq, driven.first_frame + static_cast<int>(k));
+    for (Eigen::Index v = 0; v < truth.rows(); ++v) {
+      const bool pinned = v == first_outer || v == first_outer + 3;
+      const float off_truth = (driven.frames[k].row(v) - truth.row(v)).norm();
+      if (pinned) {
+        EXPECT_LT(off_truth, 1e-6f) << "frame " << k << " pinned row " << v;
+      } else if (k > 0) {
+        EXPECT_GT(off_truth, 1e-3f) << "frame " << k << " free row " << v;  // constant velocity lags
+      }
+    }
+    EXPECT_GT((free.frames[k].row(first_outer) - truth.row(first_outer)).norm(), k > 0 ? 1e-3f : -1.f);
+  }
+  seq.info.pins_recorded = false;
+  const Rollout unrecorded = rollout(cv, seq, 2, 5, true);
+  for (size_t k = 0; k < unrecorded.frames.size(); ++k) EXPECT_TRUE(unrecorded.frames[k].isApprox(free.frames[k]));
+}
+
 TEST(Rollout, FollowBodyIsExactWhenTheGarmentMovesWithTheRoot) {
   dataset::Sequence seq = sequence(1);
   const dataset::Points r = seq.info.translation;

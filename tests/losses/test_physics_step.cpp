@@ -1,6 +1,6 @@
 // The physics step (losses/physics_step.h): the exact minimiser where the energy is quadratic,
 // a stationary point of the full energy on a synthetic two-layer scene, pinned rows that keep
-// the guess, the two inertia targets, and the model's zero output taking the step.
+// the guess (carried or recorded), the two inertia targets, and the model's zero output taking the step.
 #include "autodiff/ops_solve.h"
 #include "dataset/sample.h"
 #include "dataset/synthetic.h"
@@ -267,6 +267,47 @@ TEST(PhysicsStep, SubstepsIntegrateGravity) {
   EXPECT_GT(pinned, 0);  // the scene has pinned rows, so both branches ran
   settings.substeps = 0;
   EXPECT_THROW(physics_step_displacement(s, seq.info, settings), std::exception);
+}
+
+// Recorded pins: the step puts the pinned rows where the sequence's frame t+1 has them, and the
+// free cloth hangs from there; a scene that records no pins (as `simulate` builds) carries them.
+TEST(PhysicsStep, RecordedPinsGoWhereTheSequenceDroveThem) {
+  dataset::Sequence seq = two_layers_with_wind();
+  auto& inner = seq.info.garments.front();
+  inner.pin.assign(inner.num_vertices, 0.f);
+  for (int v = 0; v < inner.num_vertices; v += 5) inner.pin[v] = 1.f;
+  ModelConfig m;
+  m.velocity_base = "physics";
+  const auto s = sample_for(seq, 5, m);
+  PhysicsStepSettings carried;
+  PhysicsStepSettings recorded = carried;
+  recorded.pins = "recorded";
+  const dataset::Points d_carried = physics_step_displacement(s, seq.info, carried);
+  const dataset::Points d_recorded = physics_step_displacement(s, seq.info, recorded);
+  const PhysicsInput<float> in = physics_input_from_sample(s, seq.info, carried.energy);
+  int pinned = 0;
+  float pins_apart = 0, free_moved = 0;
+  for (int64_t v = 0; v < s.num_vertices(); ++v) {
+    const Eigen::RowVector3f data_step = s.target.row(v).head<3>() - s.state.row(v).head<3>();
+    if (in.inertia_weight[v] == 0) {
+      ++pinned;
+      EXPECT_LT((d_recorded.row(v) - data_step).cwiseAbs().maxCoeff(), 1e-5f) << "pinned row " << v;
+      EXPECT_LT((d_carried.row(v) - s.body_carry.row(v)).cwiseAbs().maxCoeff(), 1e-5f) << "pinned row " << v;
+      pins_apart = std::max(pins_apart, (data_step - s.body_carry.row(v)).norm());
+    } else {
+      free_moved = std::max(free_moved, (d_recorded.row(v) - d_carried.row(v)).norm());
+    }
+  }
+  ASSERT_GT(pinned, 0);
+  ASSERT_GT(pins_apart, 1e-3f);       // the data's pins are not where the body carries them
+  EXPECT_GT(free_moved, 1e-4f);       // so the cloth hanging from them moves too
+  seq.info.pins_recorded = false;     // a simulated scene: nothing recorded to take
+  const dataset::Points d_fallback = physics_step_displacement(s, seq.info, recorded);
+  EXPECT_LT((d_fallback - d_carried).cwiseAbs().maxCoeff(), 1e-6f);
+  recorded.pins = "data";
+  EXPECT_THROW(physics_step_displacement(s, seq.info, recorded), std::exception);
+  m.physics_step_pins = "recorded";
+  EXPECT_EQ(physics_step_settings(m).pins, "recorded");
 }
 
 // The model's input takes the step as its velocity base, and refuses a sample without it.
