@@ -79,9 +79,9 @@ int run_export(const ExportCliOptions& o) {
   start.start_after_ramp = o.start_frame < 2;
   start.start_frame = o.start_frame >= 2 ? o.start_frame : std::max(2, base.data.first_frame);
   const int t0 = eval::rollout_start(manifest.sequence_path(id), start).input_frame;
-  // As `layersnet eval` rolls it out: a step that takes the recorded pins gets them every frame.
-  const bool recorded_pins = base.model.velocity_base == "physics" && base.model.physics_step_pins == "recorded";
-  const eval::Rollout r = eval::rollout(*predictor, seq, t0, frames, recorded_pins);
+  Config rolled = base;  // as `layersnet eval` rolls it out
+  for (const auto& a : o.settings) apply_rollout_override(rolled, a);
+  const eval::Rollout r = eval::rollout(*predictor, seq, t0, frames, rolled.eval.recorded_pins);
   const int files = eval::export_rollout(o.out, seq, r, o.exp);
   std::printf("export: %s (%s), frames %d..%d predicted by %s: %d %s files", id.c_str(), split.c_str(), r.first_frame,
               r.first_frame + static_cast<int>(r.frames.size()) - 1, predictor->name().c_str(), files,

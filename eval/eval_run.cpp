@@ -73,8 +73,11 @@ void run_evaluation(EvalRunOptions o) {
       for (const auto& a : o.settings) apply_rollout_override(stepped, a);
       step_settings = stepped.model;
     }
-    // A model whose step takes the recorded pins is compared with methods that get them too.
-    if (c.model.velocity_base == "physics" && c.model.physics_step_pins == "recorded") eo.recorded_pins = true;
+    Config rolled = c;  // its rollouts as --set leaves them
+    for (const auto& a : o.settings) apply_rollout_override(rolled, a);
+    if (c.model.velocity_base == "physics" && c.model.physics_step_pins == "recorded" && !rolled.eval.recorded_pins)
+      std::fprintf(stderr, "eval: warning: %s's step takes the recorded pins but its rollouts do not "
+                           "(eval.recorded_pins = false); set it so that every method gets them\n", o.checkpoints[i].c_str());
     const std::string name = i < o.names.size() ? o.names[i] : default_name(o.checkpoints[i], c);
     const std::vector<double> tethers = o.tethers.empty() ? std::vector<double>{c.eval.patch_tether} : o.tethers;
     std::vector<bool> constrained;
@@ -114,6 +117,7 @@ void run_evaluation(EvalRunOptions o) {
   // with baselines that get the same.
   Config post = base;
   for (const auto& a : o.settings) apply_rollout_override(post, a);
+  eo.recorded_pins = post.eval.recorded_pins;  // every method alike, as the first model rolls out
   std::vector<bool> baseline_post = model_post;
   if (baseline_post.empty())  // no model: --constraints alone says how the baselines run
     for (const auto& setting : o.constraints) baseline_post.push_back(setting == "on");
@@ -141,7 +145,7 @@ void run_evaluation(EvalRunOptions o) {
   std::vector<Predictor*> predictors;
   for (auto& p : owned) predictors.push_back(p.get());
   if (eo.recorded_pins)
-    std::printf("eval: every method's pinned vertices are the data's at every frame (a model's step takes them)\n");
+    std::printf("eval: every method's pinned vertices are the data's at every frame (eval.recorded_pins)\n");
   std::printf("eval: baseline 'one physics step' is %s\n",
               step_from.empty() ? "the step with its default settings" : ("the step of " + step_from).c_str());
 

@@ -383,7 +383,7 @@ std::string report_markdown(const std::vector<MethodResult>& methods, const Repo
     << kBodyDistanceBandEdgesM.back()
     << " m of the body. "
     << (c.options.recorded_pins ? "Pinned vertices: every method, the ground truth included, takes them from the data "
-                                  "at every frame (driven like the body; a model's step takes them). "
+                                  "at every frame (driven like the body; `eval.recorded_pins`). "
                                 : "")
     << "Crumple: mean dihedral angle between adjacent triangles (0° = flat). *One physics step*: "
     << (c.physics_step_from.empty() ? std::string("the step with its default settings")

@@ -86,11 +86,23 @@ void PostProcessed::begin(const dataset::Sequence& seq) {
   constraints_ = make_cloth_constraints(seq, settings_);
 }
 
+// The data's garments at t+1 when the settings take recorded pins and the sequence records
+// them (the constraints put the pinned rows there); else empty.
+Points recorded_pins_next(const dataset::Sequence& seq, int t, const EvalConfig& settings) {
+  return settings.recorded_pins && seq.info.pins_recorded ? garments_at(seq, t + 1) : Points();
+}
+
+void apply_constraints(const ClothConstraints& constraints, const EvalConfig& settings, const dataset::Sequence& seq, int t,
+                       Points& x, const Points& x_now) {
+  const Points pins = recorded_pins_next(seq, t, settings);
+  constraints.apply(seq.body_at(t + 1), x, seq.body_at(t), x_now, pins.rows() ? &pins : nullptr);
+}
+
 Points PostProcessed::step(const dataset::Sequence& seq, int t, const Points& x_prev2, const Points& x_prev,
                            const Points& x_now) {
   if (!constraints_) begin(seq);
   Points x = inner_->step(seq, t, x_prev2, x_prev, x_now);
-  constraints_->apply(seq.body_at(t + 1), x, seq.body_at(t), x_now);
+  apply_constraints(*constraints_, settings_, seq, t, x, x_now);
   return x;
 }
 
@@ -172,7 +184,7 @@ Points NetworkPredictor<T>::step(const dataset::Sequence& seq, int t, const Poin
     x = 0.5f * (x + image(predict_positions(tape_, params_, config_, mirrored_sample, stats_)));
   }
   if (!tether_limit_.empty()) apply_tether(structure_->all, tether_limit_, x);
-  if (constraints_) constraints_->apply(seq.body_at(t + 1), x, seq.body_at(t), x_now);
+  if (constraints_) apply_constraints(*constraints_, config_.eval, seq, t, x, x_now);
   return x;
 }
 

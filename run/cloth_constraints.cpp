@@ -221,17 +221,18 @@ ClothConstraints::ClothConstraints(const dataset::SequenceInfo& info, const data
 }
 
 ConstraintMoves ClothConstraints::apply(const Eigen::Ref<const dataset::Points>& body, dataset::Points& x) const {
-  return project(body, x, nullptr, nullptr);
+  return project(body, x, nullptr, nullptr, nullptr);
 }
 
 ConstraintMoves ClothConstraints::apply(const Eigen::Ref<const dataset::Points>& body, dataset::Points& x,
                                         const Eigen::Ref<const dataset::Points>& body_before,
-                                        const Eigen::Ref<const dataset::Points>& x_before) const {
-  return project(body, x, &body_before, &x_before);
+                                        const Eigen::Ref<const dataset::Points>& x_before, const dataset::Points* pins_next) const {
+  return project(body, x, &body_before, &x_before, pins_next);
 }
 
 ConstraintMoves ClothConstraints::project(const Eigen::Ref<const dataset::Points>& body, dataset::Points& x,
-                                          const Eigen::Ref<const dataset::Points>* body_before, const Eigen::Ref<const dataset::Points>* x_before) const {
+                                          const Eigen::Ref<const dataset::Points>* body_before, const Eigen::Ref<const dataset::Points>* x_before,
+                                          const dataset::Points* pins_next) const {
   ConstraintMoves moves;
   if (!x.allFinite()) return moves;
   const auto shell = static_cast<float>(settings_.collision_shell);
@@ -247,7 +248,15 @@ ConstraintMoves ClothConstraints::project(const Eigen::Ref<const dataset::Points
     body_index = std::make_unique<dataset::NearestVertexIndex>(body);
     body_normals = dataset::vertex_normals(body, body_faces_);
   }
-  if (!pin_groups_.empty() && have_before) moves.pinned += carry_pinned(body, x, *body_before, *x_before);
+  if (pins_next && pins_next->rows() == x.rows()) {
+    for (const PinGroup& group : pin_groups_)
+      for (int32_t r : group.rows) {
+        x.row(r) = pins_next->row(r);
+        ++moves.pinned;
+      }
+  } else if (!pin_groups_.empty() && have_before) {
+    moves.pinned += carry_pinned(body, x, *body_before, *x_before);
+  }
   if (friction) {
     const auto within = static_cast<float>(settings_.friction_distance);
     if (mu > 0)

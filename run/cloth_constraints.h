@@ -20,7 +20,8 @@
 // (the body vertices inside the loop the pinned vertices draw, in frame 0) from frame t to t+1.
 // The data's simulator skins pinned cloth to the torso bones, so a free network prediction of
 // them is wasted; no later step moves them (inverse mass 0 in the edge and fold steps; the
-// friction and collision steps skip them).
+// friction and collision steps skip them). When the caller gives the pinned rows' recorded
+// positions (eval.recorded_pins), they are put there instead of carried.
 // Then, when body_friction μ > 0, contact friction:
 //   0. every garment vertex whose nearest body vertex h (frame t+1) lies within `reach` and
 //      (x − h)·n < friction_distance loses μ of its displacement relative to h's, tangentially:
@@ -69,14 +70,17 @@ class ClothConstraints {
   // with a non-finite value is left as it is (the rollout reports the divergence).
   ConstraintMoves apply(const Eigen::Ref<const dataset::Points>& body, dataset::Points& x) const;
   // The same with the frame before (body_before (B, 3), x_before (N, 3), world), which the pins
-  // and the contact friction need; without it there is neither step.
+  // and the contact friction need; without it there is neither step. pins_next (N, 3), when
+  // given: where the pinned rows are at this frame (recorded pins, eval.recorded_pins), taken
+  // instead of the rigid carry.
   ConstraintMoves apply(const Eigen::Ref<const dataset::Points>& body, dataset::Points& x,
                         const Eigen::Ref<const dataset::Points>& body_before,
-                        const Eigen::Ref<const dataset::Points>& x_before) const;
+                        const Eigen::Ref<const dataset::Points>& x_before, const dataset::Points* pins_next = nullptr) const;
 
  private:
   ConstraintMoves project(const Eigen::Ref<const dataset::Points>& body, dataset::Points& x,
-                          const Eigen::Ref<const dataset::Points>* body_before, const Eigen::Ref<const dataset::Points>* x_before) const;
+                          const Eigen::Ref<const dataset::Points>* body_before, const Eigen::Ref<const dataset::Points>* x_before,
+                          const dataset::Points* pins_next) const;
   // Carries every pinned row of x from x_before with its body region; returns how many.
   int64_t carry_pinned(const Eigen::Ref<const dataset::Points>& body, dataset::Points& x,
                        const Eigen::Ref<const dataset::Points>& body_before,

@@ -107,6 +107,10 @@ struct EvalConfig {
   double friction_distance = 0.3;  // scene units
   // Pinned vertices (the file's pin weights) move rigidly with the body under them.
   bool pins = true;
+  // Pinned vertices are the data's at every predicted frame, for every method, when the sequence
+  // records them (SequenceInfo::pins_recorded): driven like the body, not predicted. Inside the
+  // constraints they then replace the rigid carry above.
+  bool recorded_pins = false;
   // Factor on the network's correction of its velocity base in rollouts (1 = as trained, 0 = the
   // base alone, e.g. the physics step): a rollout's own frames drift from what training showed it.
   double correction_scale = 1.0;

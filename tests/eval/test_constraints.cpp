@@ -262,6 +262,31 @@ TEST(ClothConstraints, PinnedVerticesMoveRigidlyWithTheBodyUnderThem) {
   EXPECT_GT((free - x).norm(), 0.1f);
 }
 
+// Recorded pins replace the rigid carry: the pinned rows end where the caller says, and the
+// edge, collision and friction steps leave them there.
+TEST(ClothConstraints, RecordedPinsAreHeldWhereTheyAreGiven) {
+  const dataset::Sequence seq = pinned_tubes();
+  const Points body_before = seq.body_at(2), x_before = garments_at(seq, 2);
+  const Points body = turned_torso_swung_legs(body_before);
+  EvalConfig s;
+  s.body_friction = 1.0;
+  Points recorded = x_before;
+  recorded.rowwise() += Eigen::RowVector3f(0.05f, 0.3f, -0.2f);  // not where the torso carries them
+  Points x = crumpled(seq);
+  const ConstraintMoves moves = ClothConstraints(seq.info, rest_garments(seq), seq.body_at(0), garments_at(seq, 0), s)
+                                    .apply(body, x, body_before, x_before, &recorded);
+  EXPECT_EQ(moves.pinned, 2 * 16);
+  EXPECT_GT(moves.edges, 0);
+  Eigen::Index offset = 0;
+  for (const dataset::GarmentMesh& g : seq.info.garments) {
+    for (int v = 0; v < g.num_vertices; ++v) {
+      if (!g.pinned(v)) continue;
+      EXPECT_EQ(x.row(offset + v), recorded.row(offset + v)) << "row " << offset + v;
+    }
+    offset += g.num_vertices;
+  }
+}
+
 // The body under the pins is chosen in the frame given, not against the rest shape: the same
 // scene laid on its side and moved away (a stress sequence starts in a pose), with the rest
 // shape still upright, carries the pinned rows just as the upright scene does.
