@@ -109,7 +109,7 @@ LAYERSNET_COMMAND(eval, "Roll out checkpoints and baselines over a split; error,
                         ->delimiter(',')
                         ->check(CLI::IsMember({"on", "off"}));
                     sub.add_option("--set", o->settings,
-                                   "rollout setting for every model, e.g. --set eval.strain_limit=0.2 (eval.* keys and model.physics_step_cg_iterations; "
+                                   "rollout setting for every model, e.g. --set eval.strain_limit=0.2 (eval.* keys, model.physics_step_cg_iterations and model.physics_step_pins; "
                                    "`layersnet config --keys` lists them)");
                     sub.add_option("--threads", args->threads, "OpenMP threads of the evaluation rollouts (0 = all; speed is measured at 1 and 2)");
                     sub.add_option("--out", o->out, "output folder for eval.json, eval.md and plots");

@@ -107,7 +107,7 @@ LAYERSNET_COMMAND(export, "Write a rollout's predicted and ground-truth meshes (
                     sub.add_option("--strip-frames", o->exp.strip_frames, "panels in strip.png (0 = no strip)");
                     sub.add_option("--out", o->out, "output folder");
                     sub.add_option("--set", o->settings,
-                                   "rollout setting of the checkpoint, e.g. --set eval.constraints=false (eval.* keys, model.physics_step_cg_iterations)");
+                                   "rollout setting of the checkpoint, e.g. --set eval.constraints=false (eval.* keys, model.physics_step_cg_iterations, model.physics_step_pins)");
                     return [o] {
                       if (!o->model.given() && o->dataset.empty()) {
                         std::fprintf(stderr, "layersnet export: give --checkpoint, --run or --dataset\n");

@@ -66,7 +66,7 @@ LAYERSNET_COMMAND(pack, "Write a checkpoint's weights, statistics and config wit
                     o->model.add_to(sub, "checkpoint to pack (e.g. runs/medium/best.h5)");
                     sub.add_option("--out", o->out, "model file to write (e.g. models/medium/model.h5)")->required();
                     sub.add_option("--set", o->settings,
-                                   "rollout setting stored with the model, e.g. --set eval.constraints=true (eval.* keys and model.physics_step_cg_iterations only)");
+                                   "rollout setting stored with the model, e.g. --set eval.constraints=true (eval.* keys, model.physics_step_cg_iterations and model.physics_step_pins only)");
                     sub.add_option("--average", o->averaged,
                                    "another checkpoint of the same model and data whose weights are averaged with --checkpoint's "
                                    "(repeat it; e.g. a run's last epochs)")

@@ -91,7 +91,10 @@ int run_simulate(SimulateCliOptions& o) {
   Eigen::setNbThreads(1);  // the model's ops own the threads; nested GEMM threads only contend
   if (o.threads > 0) omp_set_num_threads(o.threads);
   auto model = eval::load_model_predictor(checkpoint, checkpoint, nullptr);
-  model->apply_eval_settings(o.settings);
+  if (model->config().eval.recorded_pins)
+    std::fprintf(stderr, "simulate: the scene records no pins, so the model runs with its cloth constraints "
+                         "(--set eval.constraints=false: without)\n");
+  model->apply_eval_settings(eval::simulate_rollout_settings(model->config().eval, o.settings));
   // bf16 products cost no measurable accuracy and save a quarter of the step with the AMX or the
   // AVX-512 BF16 kernel (docs/decisions.md, "AMX tiles for the bf16 products"); the scalar
   // reference would be slower than float32.

@@ -59,7 +59,7 @@ LAYERSNET_COMMAND(stress, "Long rollouts at extreme wind and body speed, and flo
                                    "patch tether factor for these rollouts (0 = off; default: the checkpoint's eval.patch_tether)")
                         ->check(layersnet::cli::kFiniteNonNegative);
                     sub.add_option("--set", o->settings,
-                                   "rollout setting, e.g. --set eval.constraints=false (eval.* keys and model.physics_step_cg_iterations; default: the checkpoint's)");
+                                   "rollout setting, e.g. --set eval.constraints=false (eval.* keys, model.physics_step_cg_iterations and model.physics_step_pins; default: the checkpoint's)");
                     sub.add_option("--json", o->json_path, "write the results as JSON to this file");
                     return [args] { return run_stress(*args); };
                   });

@@ -75,7 +75,7 @@ void run_evaluation(EvalRunOptions o) {
     }
     Config rolled = c;  // its rollouts as --set leaves them
     for (const auto& a : o.settings) apply_rollout_override(rolled, a);
-    if (c.model.velocity_base == "physics" && c.model.physics_step_pins == "recorded" && !rolled.eval.recorded_pins)
+    if (rolled.model.velocity_base == "physics" && rolled.model.physics_step_pins == "recorded" && !rolled.eval.recorded_pins)
       std::fprintf(stderr, "eval: warning: %s's step takes the recorded pins but its rollouts do not "
                            "(eval.recorded_pins = false); set it so that every method gets them\n", o.checkpoints[i].c_str());
     const std::string name = i < o.names.size() ? o.names[i] : default_name(o.checkpoints[i], c);

@@ -103,7 +103,8 @@ bool run_stress(const StressOptions& o) {
                 "within %g units, %d pinned vertices %s (run/cloth_constraints.h)\n",
                 config.eval.strain_limit, config.eval.collision_shell, config.eval.constraint_iterations,
                 config.eval.body_friction, config.eval.friction_distance, pinned,
-                config.eval.pins ? "carried with the body" : "left free (eval.pins = false)");
+                !config.eval.pins ? "left free (eval.pins = false)"
+                : config.eval.recorded_pins ? "taken from the data (eval.recorded_pins)" : "carried with the body");
   } else
     std::printf("cloth constraints off (eval.constraints = false)\n");
   // The strain limit comes from the whole data set's ground truth, not the one source: any

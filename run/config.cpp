@@ -423,10 +423,12 @@ void apply_rollout_override(Config& config, const std::string& assignment) {
   const std::string key = override_key(assignment);
   // The step's conjugate-gradient count belongs to the solver, not to the weights: fewer
   // iterations trade accuracy for speed (docs/decisions.md, "Fewer conjugate-gradient iterations
-  // on the softer step").
-  if (key.rfind("eval.", 0) != 0 && key != "model.physics_step_cg_iterations")
-    throw ConfigError("--set " + assignment + ": only rollout settings (eval.* and model.physics_step_cg_iterations) "
-                      "can change for a trained model; the other keys are fixed by its weights and training");
+  // on the softer step"). Where its pins come from belongs to the scene: a model trained on
+  // recorded pins meets carried ones wherever a scene records none.
+  if (key.rfind("eval.", 0) != 0 && key != "model.physics_step_cg_iterations" && key != "model.physics_step_pins")
+    throw ConfigError("--set " + assignment + ": only rollout settings (eval.*, model.physics_step_cg_iterations and "
+                      "model.physics_step_pins) can change for a trained model; the other keys are fixed by its weights "
+                      "and training");
   apply_override(config, assignment);
 }
 

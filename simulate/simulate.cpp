@@ -535,6 +535,13 @@ struct TemporaryFolder {
 
 }  // namespace
 
+std::vector<std::string> simulate_rollout_settings(const EvalConfig& model_eval, const std::vector<std::string>& user) {
+  std::vector<std::string> settings;
+  if (model_eval.recorded_pins) settings.push_back("eval.constraints=true");
+  settings.insert(settings.end(), user.begin(), user.end());
+  return settings;
+}
+
 Rollout simulate_scene(Predictor& model, Scene& scene, const ProgressFn& progress) {
   ScenePredictor driver(model, scene, progress);
   const int t0 = kSceneRestFrames - 1;

@@ -92,6 +92,13 @@ Scene build_scene(const SceneInputs& inputs);
 Points estimated_root_translation(const Points& body, int num_body_vertices);
 
 // Called after each predicted frame with (frames done, frames in all).
+// The rollout settings simulate gives a model, the user's `--set` last. A scene records no pins,
+// so a model whose rollouts were chosen with recorded ones (eval.recorded_pins: the large model,
+// without post-processing) runs with its cloth constraints, which carry the pins with the torso:
+// with carried pins that model is at 40.7 mm on large val post-processed against 42.2 alone
+// (docs/decisions.md, "Recorded pins").
+std::vector<std::string> simulate_rollout_settings(const EvalConfig& model_eval, const std::vector<std::string>& user);
+
 using ProgressFn = std::function<void(int, int)>;
 
 // Rolls `model` over the scene from rest (eval::rollout, with the pins held) and writes the

@@ -331,20 +331,26 @@ TEST_F(ConfigTest, SelfFedTruthOffNeedsThePhysicsEnergy) {
   EXPECT_THROW(load_config({}, {"loss.self_fed_truth=1.5"}), ConfigError);
 }
 
-// A trained model's rollout may change its eval.* settings and the step's conjugate-gradient
-// count (the solver's, not the weights'); any other model key is refused, naming the ones allowed.
-TEST(RolloutOverride, TakesEvalKeysAndTheStepsSolverIterationsOnly) {
+// A trained model's rollout may change its eval.* settings, the step's conjugate-gradient count
+// (the solver's, not the weights') and where the step's pins come from (the scene's); any other
+// model key is refused, naming the ones allowed.
+TEST(RolloutOverride, TakesEvalKeysTheStepsSolverIterationsAndPinsOnly) {
   Config c;
   apply_rollout_override(c, "eval.strain_limit=0.2");
   EXPECT_DOUBLE_EQ(c.eval.strain_limit, 0.2);
   apply_rollout_override(c, "model.physics_step_cg_iterations = 40");
   EXPECT_EQ(c.model.physics_step_cg_iterations, 40);
+  apply_rollout_override(c, "model.physics_step_pins=recorded");
+  EXPECT_EQ(c.model.physics_step_pins, "recorded");
+  EXPECT_THROW(apply_rollout_override(c, "model.physics_step_pins=rigid"), ConfigError);  // not a choice
   for (const char* fixed : {"model.width=64", "model.physics_step_bending=0.5", "model.physics_step_cg_iterations_x=1"}) {
     try {
       apply_rollout_override(c, fixed);
       ADD_FAILURE() << fixed << ": no ConfigError";
     } catch (const ConfigError& e) {
-      EXPECT_NE(std::string(e.what()).find("eval.* and model.physics_step_cg_iterations"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("eval.*, model.physics_step_cg_iterations and model.physics_step_pins"),
+                std::string::npos)
+          << e.what();
     }
   }
   EXPECT_EQ(c.model.width, Config{}.model.width);

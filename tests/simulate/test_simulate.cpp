@@ -121,6 +121,21 @@ dataset::Sequence Simulate::seq_;
 // The internal road: the source sequence started from rest by hand (its first body frame three
 // times, the garments at their frame-0 positions, which are also the rest shapes), rolled out by
 // eval::rollout. simulate must give the same positions from the OBJ files.
+// A model chosen with recorded pins gets its cloth constraints in simulate, where no scene records
+// pins; the user's --set comes last and wins; other models get only the user's settings.
+TEST(SimulateSettings, ConstraintsOnWhereRecordedPinsWereChosen) {
+  EvalConfig recorded;
+  recorded.recorded_pins = true;
+  recorded.constraints = false;
+  Config c;
+  c.eval = recorded;
+  for (const auto& a : simulate_rollout_settings(recorded, {})) apply_rollout_override(c, a);
+  EXPECT_TRUE(c.eval.constraints);
+  for (const auto& a : simulate_rollout_settings(recorded, {"eval.constraints=false"})) apply_rollout_override(c, a);
+  EXPECT_FALSE(c.eval.constraints);
+  EXPECT_EQ(simulate_rollout_settings(EvalConfig{}, {"eval.strain_limit=0.1"}), std::vector<std::string>{"eval.strain_limit=0.1"});
+}
+
 TEST_F(Simulate, SameAnswerAsTheInternalRolloutFromRest) {
   int code = 0;
   const fs::path out = root_ / "out_roads";
