@@ -55,7 +55,7 @@ run_stress() {  # data set, then test sequence ids
     for mode in post network; do
       local json=$out/stress/${id}_${mode}.json
       [ -f "$json.gz" ] && continue
-      local set_args=()
+      local set_args=(--set eval.constraints=true)   # whatever the model's own default
       [ "$mode" = network ] && set_args=(--set eval.constraints=false)
       "$bin" stress --checkpoint "$model" --dataset "$data" --sequence "$id" --tether 0 "${set_args[@]}" \
         --json "$json" > "$out/stress/${id}_${mode}.log" 2>&1 || true  # a broken bound is a result
