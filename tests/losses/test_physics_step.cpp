@@ -228,14 +228,20 @@ TEST(PhysicsStep, InertiaTargets) {
   EXPECT_GT((expected_body - expected_world).cwiseAbs().maxCoeff(), 1e-2f);  // the two targets differ here
 }
 
-// S implicit substeps under inertia and gravity alone: each adds h·g to the velocity and h·v to
-// the position, so the frame's displacement is v_t + g (S + 1) / 2S: g for one step (implicit
-// Euler), tending to g/2 (the exact parabola). Pinned rows take the whole body carry either way.
-TEST(PhysicsStep, SubstepsIntegrateGravity) {
+// The two-layer scene with every fifth vertex of the inner garment pinned.
+dataset::Sequence two_layers_with_pinned_inner() {
   dataset::Sequence seq = two_layers_with_wind();
   auto& inner = seq.info.garments.front();
   inner.pin.assign(inner.num_vertices, 0.f);
   for (int v = 0; v < inner.num_vertices; v += 5) inner.pin[v] = 1.f;
+  return seq;
+}
+
+// S implicit substeps under inertia and gravity alone: each adds h·g to the velocity and h·v to
+// the position, so the frame's displacement is v_t + g (S + 1) / 2S: g for one step (implicit
+// Euler), tending to g/2 (the exact parabola). Pinned rows take the whole body carry either way.
+TEST(PhysicsStep, SubstepsIntegrateGravity) {
+  dataset::Sequence seq = two_layers_with_pinned_inner();
   ModelConfig m;
   m.velocity_base = "physics";
   const int t = 5;
@@ -272,10 +278,7 @@ TEST(PhysicsStep, SubstepsIntegrateGravity) {
 // Recorded pins: the step puts the pinned rows where the sequence's frame t+1 has them, and the
 // free cloth hangs from there; a scene that records no pins (as `simulate` builds) carries them.
 TEST(PhysicsStep, RecordedPinsGoWhereTheSequenceDroveThem) {
-  dataset::Sequence seq = two_layers_with_wind();
-  auto& inner = seq.info.garments.front();
-  inner.pin.assign(inner.num_vertices, 0.f);
-  for (int v = 0; v < inner.num_vertices; v += 5) inner.pin[v] = 1.f;
+  dataset::Sequence seq = two_layers_with_pinned_inner();
   ModelConfig m;
   m.velocity_base = "physics";
   const auto s = sample_for(seq, 5, m);
