@@ -66,12 +66,11 @@ int run_export(const ExportCliOptions& o) {
     throw std::runtime_error("--baseline '" + o.baseline +
                              "' is unknown: use constant-velocity, follow-body, nearest-body, skinned or physics-step");
   }
+  Config rolled = base;  // the rollout settings as --set leaves them, as `layersnet eval` rolls out
+  for (const auto& a : o.settings) apply_rollout_override(rolled, a);
   // A baseline gets the same post-processing as a model when asked: --set eval.constraints=true.
-  if (checkpoint.empty()) {
-    Config post = base;
-    for (const auto& a : o.settings) apply_rollout_override(post, a);
-    if (post.eval.constraints) predictor = std::make_unique<eval::PostProcessed>(std::move(predictor), post.eval);
-  }
+  if (checkpoint.empty() && rolled.eval.constraints)
+    predictor = std::make_unique<eval::PostProcessed>(std::move(predictor), rolled.eval);
   const dataset::Sequence seq = dataset::read_sequence(manifest.sequence_path(id));
   const int frames = o.frames > 0 ? o.frames : base.eval.frames;
   // The same start as `layersnet eval`: after the file's ramp unless a frame is given.
@@ -79,8 +78,6 @@ int run_export(const ExportCliOptions& o) {
   start.start_after_ramp = o.start_frame < 2;
   start.start_frame = o.start_frame >= 2 ? o.start_frame : std::max(2, base.data.first_frame);
   const int t0 = eval::rollout_start(manifest.sequence_path(id), start).input_frame;
-  Config rolled = base;  // as `layersnet eval` rolls it out
-  for (const auto& a : o.settings) apply_rollout_override(rolled, a);
   const eval::Rollout r = eval::rollout(*predictor, seq, t0, frames, rolled.eval.recorded_pins);
   const int files = eval::export_rollout(o.out, seq, r, o.exp);
   std::printf("export: %s (%s), frames %d..%d predicted by %s: %d %s files", id.c_str(), split.c_str(), r.first_frame,

@@ -294,6 +294,17 @@ int64_t SequenceInfo::total_garment_vertices() const {
   return n;
 }
 
+std::vector<Eigen::Index> SequenceInfo::pinned_rows() const {
+  std::vector<Eigen::Index> rows;
+  Eigen::Index offset = 0;
+  for (const GarmentMesh& g : garments) {
+    for (int v = 0; v < g.num_vertices; ++v)
+      if (g.pinned(v)) rows.push_back(offset + v);
+    offset += g.num_vertices;
+  }
+  return rows;
+}
+
 int64_t SequenceInfo::bytes_per_frame() const {
   return (num_body_vertices + total_garment_vertices()) * 3 * static_cast<int64_t>(sizeof(float));
 }

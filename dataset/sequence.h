@@ -100,6 +100,8 @@ struct SequenceInfo {
   int settled_frame() const { return rest_frames + ramp_frames; }
   int num_garments() const { return static_cast<int>(garments.size()); }
   int64_t total_garment_vertices() const;
+  // Rows of the pinned vertices among the garments' vertices in layer order (ascending).
+  std::vector<Eigen::Index> pinned_rows() const;
   // Bytes of per-frame positions (body + garments) of one frame in memory.
   int64_t bytes_per_frame() const;
 };

@@ -67,14 +67,12 @@ void run_evaluation(EvalRunOptions o) {
   ModelConfig step_settings;
   for (size_t i = 0; i < o.checkpoints.size(); ++i) {
     const Config c = parse_config_text(read_checkpoint_config(o.checkpoints[i]), o.checkpoints[i]);
+    Config rolled = c;  // its rollouts (and its step) as --set leaves them
+    for (const auto& a : o.settings) apply_rollout_override(rolled, a);
     if (step_from.empty() && c.model.velocity_base == "physics") {
       step_from = o.checkpoints[i];
-      Config stepped = c;  // the model's step as --set leaves it
-      for (const auto& a : o.settings) apply_rollout_override(stepped, a);
-      step_settings = stepped.model;
+      step_settings = rolled.model;
     }
-    Config rolled = c;  // its rollouts as --set leaves them
-    for (const auto& a : o.settings) apply_rollout_override(rolled, a);
     if (rolled.model.velocity_base == "physics" && rolled.model.physics_step_pins == "recorded" && !rolled.eval.recorded_pins)
       std::fprintf(stderr, "eval: warning: %s's step takes the recorded pins but its rollouts do not "
                            "(eval.recorded_pins = false); set it so that every method gets them\n", o.checkpoints[i].c_str());

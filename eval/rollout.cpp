@@ -236,15 +236,9 @@ Rollout rollout(Predictor& predictor, const dataset::Sequence& seq, int t0, int 
   r.first_frame = t0 + 1;
   predictor.begin(seq);
   Points a = garments_at(seq, t0 - 2), b = garments_at(seq, t0 - 1), c = garments_at(seq, t0);
-  std::vector<Eigen::Index> driven;  // rows taken from the data every frame
-  if (recorded_pins && seq.info.pins_recorded) {
-    Eigen::Index offset = 0;
-    for (const dataset::GarmentMesh& g : seq.info.garments) {
-      for (int v = 0; v < g.num_vertices; ++v)
-        if (g.pinned(v)) driven.push_back(offset + v);
-      offset += g.num_vertices;
-    }
-  }
+  // Rows taken from the data every frame.
+  const std::vector<Eigen::Index> driven =
+      recorded_pins && seq.info.pins_recorded ? seq.info.pinned_rows() : std::vector<Eigen::Index>{};
   for (int k = 0; k < n; ++k) {
     const int t = t0 + k;
     if (r.diverged_at >= 0) {  // nothing sensible to feed back

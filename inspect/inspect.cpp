@@ -191,13 +191,7 @@ std::vector<float> carried_pin_errors(const Sequence& seq, int first) {
   pins_only.layer_friction = 0;
   pins_only.pins = true;
   const ClothConstraints carry(seq.info, rest_garments(seq), seq.body_at(0), garments_at(seq, 0), pins_only);
-  std::vector<Eigen::Index> rows;
-  Eigen::Index offset = 0;
-  for (const GarmentMesh& g : seq.info.garments) {
-    for (int v = 0; v < g.num_vertices; ++v)
-      if (g.pinned(v)) rows.push_back(offset + v);
-    offset += g.num_vertices;
-  }
+  const std::vector<Eigen::Index> rows = seq.info.pinned_rows();
   std::vector<float> errors;
   if (rows.empty()) return errors;
   Points carried = garments_at(seq, first);
