@@ -87,6 +87,10 @@ LAYERSNET_COMMAND(eval, "Roll out checkpoints and baselines over a split; error,
                                    "factor on the data's wind strengths as the models see them; the ground truth "
                                    "is unchanged (0: how much a model's error owes to its response to the wind)")
                         ->check(layersnet::cli::kFiniteNonNegative);
+                    sub.add_flag("--rig-pins", o->rig_pins,
+                                 "the methods see the pinned vertices rigged from the body (moved from the rollout's "
+                                 "input frame with the body inside their loop), as simulate rigs a scene, instead of "
+                                 "the data's; the ground truth and the error stay the data's");
                     sub.add_flag("--mirror", o->mirror,
                                  "evaluate the mirror images of the sequences (x -> -x) instead: the simulator and the "
                                  "model-free baselines are symmetric under it, so a model that learned the cloth rather "

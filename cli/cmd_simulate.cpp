@@ -91,9 +91,6 @@ int run_simulate(SimulateCliOptions& o) {
   Eigen::setNbThreads(1);  // the model's ops own the threads; nested GEMM threads only contend
   if (o.threads > 0) omp_set_num_threads(o.threads);
   auto model = eval::load_model_predictor(checkpoint, checkpoint, nullptr);
-  if (model->config().eval.recorded_pins)
-    std::fprintf(stderr, "simulate: the scene records no pins, so the model runs with its cloth constraints "
-                         "(--set eval.constraints=false: without)\n");
   model->apply_eval_settings(eval::simulate_rollout_settings(model->config().eval, o.settings));
   // bf16 products cost no measurable accuracy and save a quarter of the step with the AMX or the
   // AVX-512 BF16 kernel (docs/decisions.md, "AMX tiles for the bf16 products"); the scalar
@@ -102,13 +99,14 @@ int run_simulate(SimulateCliOptions& o) {
   model->set_matmul_precision(ad::parse_matmul_precision(o.precision));
   const auto& garments = scene.sequence.info.garments;
   const bool any_pins = std::any_of(garments.begin(), garments.end(), [](const auto& g) { return g.num_pinned() > 0; });
-  if (any_pins && !(model->config().eval.constraints && model->config().eval.pins))
+  const EvalConfig& rolled = model->config().eval;
+  if (any_pins && !rolled.recorded_pins && !(rolled.constraints && rolled.pins))
     std::fprintf(stderr, "simulate: warning: the pinned vertices stay free, because the model's rollouts have %s; "
-                         "add --set eval.constraints=true --set eval.pins=true to hold them\n",
-                 model->config().eval.constraints ? "eval.pins = false" : "no cloth constraints (eval.constraints = false)");
+                         "add --set eval.recorded_pins=true (or --set eval.constraints=true --set eval.pins=true) to hold them\n",
+                 rolled.constraints ? "eval.pins = false" : "neither recorded pins nor cloth constraints");
   std::fprintf(stderr, "simulate: %d garments, %d body frames at %g fps, model %s\n",
                scene.sequence.info.num_garments(), scene.body_frames, scene.sequence.info.fps, checkpoint.c_str());
-  const eval::Rollout r = eval::simulate_scene(*model, scene, progress_reporter());
+  const eval::Rollout r = eval::simulate_scene(*model, scene, progress_reporter(), rolled.recorded_pins);
   const int files = eval::write_simulation(o.out, scene, o.outputs);
   // The first step also builds the patch structure and the caches every later step reuses, so
   // the rate a user sees over a long motion is the later steps' median.

@@ -56,6 +56,7 @@ void run_evaluation(EvalRunOptions o) {
   eo.wind_scale = o.wind_scale;
   eo.wind_twins = o.wind_twins;
   eo.mirror = o.mirror;
+  eo.rig_pins = o.rig_pins;
 
   const bool any_bf16 = std::count(o.precisions.begin(), o.precisions.end(), ad::MatmulPrecision::kBFloat16) > 0;
   std::vector<std::unique_ptr<Predictor>> owned;
@@ -142,7 +143,10 @@ void run_evaluation(EvalRunOptions o) {
   paths.push_back("");
   std::vector<Predictor*> predictors;
   for (auto& p : owned) predictors.push_back(p.get());
-  if (eo.recorded_pins)
+  if (eo.rig_pins)
+    std::printf("eval: every method's pinned vertices are rigged from the body (--rig-pins)%s; the ground truth's are the data's\n",
+                eo.recorded_pins ? " at every frame (eval.recorded_pins)" : ", for the step and the constraints to take or not");
+  else if (eo.recorded_pins)
     std::printf("eval: every method's pinned vertices are the data's at every frame (eval.recorded_pins)\n");
   std::printf("eval: baseline 'one physics step' is %s\n",
               step_from.empty() ? "the step with its default settings" : ("the step of " + step_from).c_str());

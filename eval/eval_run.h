@@ -28,6 +28,7 @@ struct EvalRunOptions {
   double wind_scale = 1.0;               // EvalOptions::wind_scale
   std::string wind_twins;                // EvalOptions::wind_twins
   bool mirror = false;                   // EvalOptions::mirror
+  bool rig_pins = false;                 // EvalOptions::rig_pins
   int speed_frames = 10;
   std::string out = "eval_out";
   std::vector<ad::MatmulPrecision> precisions = {ad::MatmulPrecision::kFloat32};  // every model once per entry

@@ -3,6 +3,7 @@
 
 #include "dataset/h5.h"
 #include "dataset/neighbours.h"
+#include "dataset/pin_carry.h"
 #include "eval/machine.h"
 #include "eval/stress.h"
 
@@ -232,13 +233,19 @@ std::vector<MethodResult> evaluate(const dataset::DatasetManifest& manifest, std
       if (o.mirror) dataset::mirror(read);
       return read;
     }();
+    const RolloutStart start = rollout_start(manifest.sequence_path(id), o);
+    dataset::Sequence rigged;  // what every method but the ground truth sees under --rig-pins
+    if (o.rig_pins) {
+      rigged = seq;
+      dataset::rig_pins(rigged, start.input_frame);
+    }
+    const dataset::Sequence& seen = o.rig_pins ? rigged : seq;
     dataset::Sequence scaled_wind;  // what the models see under --wind-scale
     const bool rescale = seq.info.has_wind && o.wind_scale != 1.0;
     if (rescale) {
-      scaled_wind = seq;
+      scaled_wind = seen;
       scaled_wind.info.wind_strength *= static_cast<float>(o.wind_scale);
     }
-    const RolloutStart start = rollout_start(manifest.sequence_path(id), o);
     CollisionOptions co;
     co.max_body_distance = o.max_body_distance_m * seq.info.scale;
     co.max_layer_distance = o.max_layer_distance_m * seq.info.scale;
@@ -260,10 +267,12 @@ std::vector<MethodResult> evaluate(const dataset::DatasetManifest& manifest, std
     }
     for (size_t p = 0; p < predictors.size(); ++p) {
       const bool scaled = rescale && predictors[p]->takes_scaled_wind();
-      const Rollout r = rollout(*predictors[p], scaled ? scaled_wind : seq, start.input_frame, o.frames, o.recorded_pins);
+      const bool truth_itself = dynamic_cast<const GroundTruth*>(predictors[p]) != nullptr;
+      const dataset::Sequence& given = truth_itself ? seq : seen;
+      const Rollout r = rollout(*predictors[p], scaled ? scaled_wind : given, start.input_frame, o.frames, o.recorded_pins);
       SequenceResult s = score_rollout(seq, r, co, o.mark_frames);
       if (scaled) {
-        const Rollout data_wind = rollout(*predictors[p], seq, start.input_frame, o.frames, o.recorded_pins);
+        const Rollout data_wind = rollout(*predictors[p], given, start.input_frame, o.frames, o.recorded_pins);
         s.wind_moved = mean_distance(r, data_wind);
         if (!twin.frames.empty() && twin.frames.size() == r.frames.size()) {
           s.twin_moved = twin_moved;

@@ -126,6 +126,10 @@ struct EvalOptions {
   bool mirror = false;
   // Every method's pinned vertices are the data's each frame (eval::rollout's recorded_pins).
   bool recorded_pins = false;
+  // Every method but the ground truth sees the pins rigged from the body (dataset::rig_pins from
+  // the rollout's input frame), as `simulate` rigs a user's scene, instead of the data's; the
+  // error is still against the data.
+  bool rig_pins = false;
 };
 
 // Table-1 subsets of a data set: id -> subset names, from dataset.json "subsets" (written by

@@ -160,9 +160,10 @@ std::string start_description(const EvalOptions& o) {
   // A changed wind is part of what the rollouts were, so every place that says where they start says it too.
   const std::string wind = o.wind_scale == 1.0 ? "" : "; the models saw the data's wind strengths x " + fmt("%g", o.wind_scale);
   const std::string mirror = o.mirror ? "; on the sequences' mirror images (x -> -x)" : "";
+  const std::string rigged = o.rig_pins ? "; the methods saw the pins rigged from the body, not the data's" : "";
   return (o.start_after_ramp ? "input frame rest_frames + ramp_frames - 1 of each file, the first predicted frame "
                                "following the generator's ramp (" + fixed + " for files without them)"
-                             : fixed) + wind + mirror;
+                             : fixed) + wind + mirror + rigged;
 }
 
 std::string summary_table(const std::vector<MethodResult>& methods, const ReportContext& c) {
@@ -239,6 +240,7 @@ std::string report_json(const std::vector<MethodResult>& methods, const ReportCo
   j["wind_twins"] = c.options.wind_twins;  // "" = none
   j["mirror"] = c.options.mirror;  // true: the sequences' mirror images were evaluated
   j["recorded_pins"] = c.options.recorded_pins;  // true: every method's pinned vertices were the data's
+  j["rig_pins"] = c.options.rig_pins;  // true: ... rigged from the body instead (dataset::rig_pins)
   j["h_collision_max_distance_m"] = c.options.max_body_distance_m;
   j["l_collision_near_max_distance_m"] = c.options.max_layer_distance_m;
   j["blender_s_per_frame"] = c.blender_s_per_frame;
@@ -382,9 +384,12 @@ std::string report_markdown(const std::vector<MethodResult>& methods, const Repo
        "vertex-frames whose ground truth lies within / beyond "
     << kBodyDistanceBandEdgesM.back()
     << " m of the body. "
-    << (c.options.recorded_pins ? "Pinned vertices: every method, the ground truth included, takes them from the data "
-                                  "at every frame (driven like the body; `eval.recorded_pins`). "
-                                : "")
+    << (c.options.rig_pins ? "Pinned vertices: every method but the ground truth sees them rigged from the body "
+                             "(moved from the input frame with the body inside their loop, `--rig-pins`), as `simulate` "
+                             "rigs a scene; the error is against the data. "
+        : c.options.recorded_pins ? "Pinned vertices: every method, the ground truth included, takes them from the data "
+                                    "at every frame (driven like the body; `eval.recorded_pins`). "
+                                  : "")
     << "Crumple: mean dihedral angle between adjacent triangles (0° = flat). *One physics step*: "
     << (c.physics_step_from.empty() ? std::string("the step with its default settings")
                                     : "the step of `" + c.physics_step_from + "` (its zero output)")

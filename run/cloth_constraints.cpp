@@ -2,8 +2,7 @@
 
 #include "dataset/garments.h"
 #include "dataset/neighbours.h"
-
-#include <Eigen/SVD>
+#include "dataset/pin_carry.h"
 
 #include <algorithm>
 #include <cmath>
@@ -39,77 +38,6 @@ bool project_pair(dataset::Points& x, std::pair<int32_t, int32_t> pair, float mi
   x.row(a) += free_a * correction;
   x.row(b) -= free_b * correction;
   return true;
-}
-
-// Rigid motion (rotation R, translation c; y ≈ R x + c) that carries the points `from` onto `to`
-// in the least-squares sense (Kabsch; no reflection), in double for the 3×3 SVD.
-struct RigidMotion {
-  Eigen::Matrix3d rotation = Eigen::Matrix3d::Identity();
-  Eigen::Vector3d translation = Eigen::Vector3d::Zero();
-};
-RigidMotion fit_rigid_motion(const Eigen::Ref<const dataset::Points>& from, const Eigen::Ref<const dataset::Points>& to,
-                             const std::vector<int32_t>& rows) {
-  Eigen::Vector3d mean_from = Eigen::Vector3d::Zero(), mean_to = Eigen::Vector3d::Zero();
-  for (int32_t r : rows) {
-    mean_from += from.row(r).transpose().cast<double>();
-    mean_to += to.row(r).transpose().cast<double>();
-  }
-  mean_from /= static_cast<double>(rows.size());
-  mean_to /= static_cast<double>(rows.size());
-  Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();
-  for (int32_t r : rows)
-    covariance += (from.row(r).transpose().cast<double>() - mean_from) * (to.row(r).cast<double>() - mean_to.transpose());
-  const Eigen::JacobiSVD<Eigen::Matrix3d> svd(covariance, Eigen::ComputeFullU | Eigen::ComputeFullV);
-  Eigen::Matrix3d flip = Eigen::Matrix3d::Identity();
-  flip(2, 2) = (svd.matrixV() * svd.matrixU().transpose()).determinant() < 0 ? -1.0 : 1.0;
-  RigidMotion m;
-  m.rotation = svd.matrixV() * flip * svd.matrixU().transpose();
-  m.translation = mean_to - m.rotation * mean_from;
-  return m;
-}
-
-// Body vertices that carry garment g's pinned vertices P (rows of `garments`, the same frame as
-// `body`): those inside the loop P draws around the body (within the loop's mean radius of its
-// centre, perpendicular to the up axis, and within kPinBandMetres of its heights). A
-// waistband's loop holds the torso and leaves out the arms and hands, which the skinning of
-// pinned cloth ignores. When fewer than 3 lie inside (P is no loop), those within
-// kPinBandMetres of P; failing that, the whole body.
-constexpr float kPinBandMetres = 0.05f;
-std::vector<int32_t> pin_carriers(const std::vector<int32_t>& pinned_rows, const Eigen::Ref<const dataset::Points>& garments,
-                                  const Eigen::Ref<const dataset::Points>& body, char up_axis, float scale) {
-  const int up = up_axis == 'y' ? 1 : 2;
-  const float band = kPinBandMetres * scale;
-  Eigen::RowVector3f centre = Eigen::RowVector3f::Zero();
-  float low = std::numeric_limits<float>::infinity(), high = -low;
-  for (int32_t r : pinned_rows) {
-    centre += garments.row(r);
-    low = std::min(low, garments(r, up));
-    high = std::max(high, garments(r, up));
-  }
-  centre /= static_cast<float>(pinned_rows.size());
-  const auto across = [&](const Eigen::RowVector3f& p) {
-    Eigen::RowVector3f d = p - centre;
-    d[up] = 0.f;
-    return d.norm();
-  };
-  float radius = 0.f;
-  for (int32_t r : pinned_rows) radius += across(garments.row(r));
-  radius /= static_cast<float>(pinned_rows.size());
-  std::vector<int32_t> inside;
-  for (Eigen::Index b = 0; b < body.rows(); ++b) {
-    const Eigen::RowVector3f p = body.row(b);
-    if (p[up] >= low - band && p[up] <= high + band && across(p) < radius) inside.push_back(static_cast<int32_t>(b));
-  }
-  if (inside.size() >= 3) return inside;
-  std::vector<int32_t> near;
-  for (Eigen::Index b = 0; b < body.rows(); ++b)
-    if (std::any_of(pinned_rows.begin(), pinned_rows.end(),
-                    [&](int32_t r) { return (body.row(b) - garments.row(r)).norm() <= band; }))
-      near.push_back(static_cast<int32_t>(b));
-  if (near.size() >= 3) return near;
-  std::vector<int32_t> all(static_cast<size_t>(body.rows()));
-  std::iota(all.begin(), all.end(), 0);
-  return all;
 }
 
 // Calls f(v, a) for each vertex v in rows [begin, end) of x, not pinned (pinned (N,): 1 =
@@ -204,20 +132,9 @@ ClothConstraints::ClothConstraints(const dataset::SequenceInfo& info, const data
   if (layout.layered()) inner_faces_ = dataset::inner_faces(layout);
   pinned_.assign(static_cast<size_t>(rest.rows()), 0);
   if (!settings_.pins) return;
-  offset = 0;
-  for (const dataset::GarmentMesh& mesh : info.garments) {
-    PinGroup group;
-    for (int v = 0; v < mesh.num_vertices; ++v)
-      if (mesh.pinned(v)) {
-        group.rows.push_back(static_cast<int32_t>(offset + v));
-        pinned_[static_cast<size_t>(offset + v)] = 1;
-      }
-    if (!group.rows.empty()) {
-      group.carriers = pin_carriers(group.rows, garments_first, body_first, info.up_axis, info.scale);
-      pin_groups_.push_back(std::move(group));
-    }
-    offset += mesh.num_vertices;
-  }
+  pin_groups_ = dataset::pin_groups(info, garments_first, body_first);
+  for (const dataset::PinGroup& group : pin_groups_)
+    for (int32_t r : group.rows) pinned_[static_cast<size_t>(r)] = 1;
 }
 
 ConstraintMoves ClothConstraints::apply(const Eigen::Ref<const dataset::Points>& body, dataset::Points& x) const {
@@ -249,13 +166,13 @@ ConstraintMoves ClothConstraints::project(const Eigen::Ref<const dataset::Points
     body_normals = dataset::vertex_normals(body, body_faces_);
   }
   if (pins_next && pins_next->rows() == x.rows()) {
-    for (const PinGroup& group : pin_groups_)
+    for (const dataset::PinGroup& group : pin_groups_)
       for (int32_t r : group.rows) {
         x.row(r) = pins_next->row(r);
         ++moves.pinned;
       }
   } else if (!pin_groups_.empty() && have_before) {
-    moves.pinned += carry_pinned(body, x, *body_before, *x_before);
+    moves.pinned += dataset::carry_pins(pin_groups_, *body_before, body, *x_before, x);
   }
   if (friction) {
     const auto within = static_cast<float>(settings_.friction_distance);
@@ -287,20 +204,6 @@ ConstraintMoves ClothConstraints::project(const Eigen::Ref<const dataset::Points
     }
   }
   return moves;
-}
-
-int64_t ClothConstraints::carry_pinned(const Eigen::Ref<const dataset::Points>& body, dataset::Points& x,
-                                       const Eigen::Ref<const dataset::Points>& body_before,
-                                       const Eigen::Ref<const dataset::Points>& x_before) const {
-  int64_t moved = 0;
-  for (const PinGroup& group : pin_groups_) {
-    const RigidMotion m = fit_rigid_motion(body_before, body, group.carriers);
-    for (int32_t r : group.rows) {
-      x.row(r) = (m.rotation * x_before.row(r).transpose().cast<double>() + m.translation).transpose().cast<float>();
-      ++moved;
-    }
-  }
-  return moved;
 }
 
 }  // namespace layersnet

@@ -17,7 +17,8 @@
 // Before the passes, when the frame before is given and eval.pins is set, pins: the vertices the
 // file pins (a waistband, a top edge; GarmentMesh::pinned) move rigidly with the body under
 // them, x_{t+1} = R x_t + c, where (R, c) is the least-squares rigid motion of that body region
-// (the body vertices inside the loop the pinned vertices draw, in frame 0) from frame t to t+1.
+// (the body vertices inside the loop the pinned vertices draw, in frame 0: dataset/pin_carry.h)
+// from frame t to t+1.
 // The data's simulator skins pinned cloth to the torso bones, so a free network prediction of
 // them is wasted; no later step moves them (inverse mass 0 in the edge and fold steps; the
 // friction and collision steps skip them). When the caller gives the pinned rows' recorded
@@ -33,6 +34,7 @@
 // barely stretches and stays outside. Only positions change: the next step's velocities are
 // differences of positions, so a projected frame also feeds back consistent velocities.
 // Deterministic for any thread count (sequential passes).
+#include "dataset/pin_carry.h"
 #include "dataset/sequence.h"
 #include "run/config.h"
 
@@ -81,14 +83,6 @@ class ClothConstraints {
   ConstraintMoves project(const Eigen::Ref<const dataset::Points>& body, dataset::Points& x,
                           const Eigen::Ref<const dataset::Points>* body_before, const Eigen::Ref<const dataset::Points>* x_before,
                           const dataset::Points* pins_next) const;
-  // Carries every pinned row of x from x_before with its body region; returns how many.
-  int64_t carry_pinned(const Eigen::Ref<const dataset::Points>& body, dataset::Points& x,
-                       const Eigen::Ref<const dataset::Points>& body_before,
-                       const Eigen::Ref<const dataset::Points>& x_before) const;
-  struct PinGroup {
-    std::vector<int32_t> rows;      // pinned rows of x of one garment
-    std::vector<int32_t> carriers;  // body vertices whose rigid motion carries them
-  };
   EvalConfig settings_;
   float reach_ = 0;                                 // scene units
   std::vector<std::pair<int32_t, int32_t>> edges_;  // rows of x
@@ -99,7 +93,7 @@ class ClothConstraints {
   int32_t outer_begin_ = 0;                         // first outer-layer row; N when not layered
   dataset::Faces inner_faces_;                      // inner garments' faces, rows [0, outer_begin_)
   std::vector<uint8_t> pinned_;                     // (N,) 1 = pinned (eval.pins only): no other step moves it
-  std::vector<PinGroup> pin_groups_;                // one per garment with pinned vertices
+  std::vector<dataset::PinGroup> pin_groups_;       // one per garment with pinned vertices
 };
 
 }  // namespace layersnet

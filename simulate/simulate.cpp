@@ -7,6 +7,7 @@
 #include "dataset/mesh_io.h"
 #include "dataset/neighbours.h"
 #include "dataset/patches.h"
+#include "dataset/pin_carry.h"
 #include "eval/render.h"
 
 #include <Eigen/Geometry>
@@ -453,6 +454,10 @@ Scene build_scene(const SceneInputs& in) {
       info.wind_strength[t] = strength;
     }
   }
+  // The pins are driven, like the body: rigged from it, as the data's rig drives them, they are
+  // the scene's record for the step and the rollout (docs/decisions.md, "Pins rigged from the body").
+  if (std::any_of(info.garments.begin(), info.garments.end(), [](const dataset::GarmentMesh& g) { return g.num_pinned() > 0; }))
+    dataset::rig_pins(seq, 0);
   dataset::validate_sequence(seq, info.path);
   return scene;
 }
@@ -537,15 +542,17 @@ struct TemporaryFolder {
 
 std::vector<std::string> simulate_rollout_settings(const EvalConfig& model_eval, const std::vector<std::string>& user) {
   std::vector<std::string> settings;
-  if (model_eval.recorded_pins) settings.push_back("eval.constraints=true");
+  if (model_eval.recorded_pins)
+    settings = {"eval.constraints=true", "eval.strain_limit=0", "eval.fold_limit=0", "eval.body_friction=0",
+                "eval.layer_friction=0"};
   settings.insert(settings.end(), user.begin(), user.end());
   return settings;
 }
 
-Rollout simulate_scene(Predictor& model, Scene& scene, const ProgressFn& progress) {
+Rollout simulate_scene(Predictor& model, Scene& scene, const ProgressFn& progress, bool recorded_pins) {
   ScenePredictor driver(model, scene, progress);
   const int t0 = kSceneRestFrames - 1;
-  Rollout r = rollout(driver, scene.sequence, t0, scene.body_frames - 1);
+  Rollout r = rollout(driver, scene.sequence, t0, scene.body_frames - 1, recorded_pins);
   if (r.diverged_at >= 0)
     throw SimulateError("the prediction of body frame " + std::to_string(r.diverged_at + 1) +
                         " is not finite: the model left the motion it knows (check the units with --scale, the up axis "

@@ -40,9 +40,10 @@ class SimulateError : public std::runtime_error {
 // How a garment's vertices are held: none, the vertices of a file (0-based indices separated by
 // spaces, commas or new lines; '#' starts a comment), or the rule "top-ring" (the open border
 // loop highest along the up axis, e.g. a skirt's waist). The pinned vertices become the
-// garment's pin weights (also in scene.h5) and move rigidly with the body inside their loop, as
-// the data's pinned waistbands do, through the model's cloth constraints (eval.constraints and
-// eval.pins; run/cloth_constraints.h).
+// garment's pin weights (also in scene.h5) and are rigged from the body: at every frame, their
+// rest positions moved rigidly with the body inside their loop (dataset::rig_pins), as the data's
+// rig drives its pinned waistbands. A model whose rollouts take recorded pins (eval.recorded_pins)
+// holds them there; another carries them through its cloth constraints (eval.pins).
 struct GarmentInput {
   std::string obj;   // OBJ with vt, posed on the body's first frame
   std::string name;  // empty: the file's stem (made unique)
@@ -92,19 +93,20 @@ Scene build_scene(const SceneInputs& inputs);
 Points estimated_root_translation(const Points& body, int num_body_vertices);
 
 // Called after each predicted frame with (frames done, frames in all).
-// The rollout settings simulate gives a model, the user's `--set` last. A scene records no pins,
-// so a model whose rollouts were chosen with recorded ones (eval.recorded_pins: the large model,
-// without post-processing) runs with its cloth constraints, which carry the pins with the torso:
-// with carried pins that model is at 40.7 mm on large val post-processed against 42.2 alone
-// (docs/decisions.md, "Recorded pins").
-std::vector<std::string> simulate_rollout_settings(const EvalConfig& model_eval, const std::vector<std::string>& user);
-
 using ProgressFn = std::function<void(int, int)>;
 
-// Rolls `model` over the scene from rest (eval::rollout, with the pins held) and writes the
-// predictions into the scene's garment frames. A rollout that leaves the finite numbers
-// throws SimulateError naming the frame.
-Rollout simulate_scene(Predictor& model, Scene& scene, const ProgressFn& progress = {});
+// The rollout settings simulate gives a model, the user's `--set` last. A model whose rollouts take
+// recorded pins (eval.recorded_pins: the large model, on data without post-processing) gets the
+// collision steps of its cloth constraints and nothing else: with the scene's rigged pins, on large
+// val, 39.7 mm and 0.01 % of outer vertices inside the inner layer, against 39.2 mm and 7 % alone,
+// and 44.4 mm with the edge limits and contact friction too (docs/decisions.md, "Pins rigged from
+// the body").
+std::vector<std::string> simulate_rollout_settings(const EvalConfig& model_eval, const std::vector<std::string>& user);
+
+// Rolls `model` over the scene from rest (eval::rollout; recorded_pins: the pinned rows held where
+// the scene's rig puts them, as eval.recorded_pins) and writes the predictions into the scene's
+// garment frames. A rollout that leaves the finite numbers throws SimulateError naming the frame.
+Rollout simulate_scene(Predictor& model, Scene& scene, const ProgressFn& progress = {}, bool recorded_pins = false);
 
 struct SimulateOutputs {
   int strip_frames = 4;   // panels of strip.png (0 = none)

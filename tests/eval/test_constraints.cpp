@@ -2,6 +2,7 @@
 // edges come back within the limit; vertices inside the body or the inner layer are pushed onto
 // the shell; and a model's rollout with eval.constraints keeps every frame within them.
 #include "dataset/neighbours.h"
+#include "dataset/pin_carry.h"
 #include "dataset/synthetic.h"
 #include "run/cloth_constraints.h"
 #include "eval/metrics.h"
@@ -260,6 +261,44 @@ TEST(ClothConstraints, PinnedVerticesMoveRigidlyWithTheBodyUnderThem) {
   Points free = crumpled(seq);
   EXPECT_EQ(ClothConstraints(seq.info, rest_garments(seq), seq.body_at(0), garments_at(seq, 0), s).apply(body, free, body_before, x_before).pinned, 0);
   EXPECT_GT((free - x).norm(), 0.1f);
+}
+
+// Rigged pins (what simulate gives a scene, eval --rig-pins measures on data): from the reference
+// frame on, every frame's pinned rows are the reference's moved with the torso, the legs' swing
+// ignored; the frames before it and every free row stay as they were.
+TEST(ClothConstraints, RiggedPinsFollowTheTorsoFromTheReferenceFrame) {
+  const dataset::Sequence original = [] {
+    dataset::Sequence seq = pinned_tubes();
+    seq.info.pins_recorded = false;
+    const int B = seq.info.num_body_vertices;
+    const Points moved = turned_torso_swung_legs(seq.body_at(3));
+    for (int t = 4; t < seq.info.num_frames; ++t) seq.frames.body.middleRows(static_cast<Eigen::Index>(t) * B, B) = moved;
+    return seq;
+  }();
+  dataset::Sequence seq = original;
+  dataset::rig_pins(seq, 3);
+  EXPECT_TRUE(seq.info.pins_recorded);
+  const Points reference = garments_at(original, 3);
+  int pinned = 0;
+  for (int t = 0; t < seq.info.num_frames; ++t) {
+    const Points x = garments_at(seq, t), before = garments_at(original, t);
+    Eigen::Index offset = 0;
+    for (const dataset::GarmentMesh& g : seq.info.garments) {
+      for (int v = 0; v < g.num_vertices; ++v) {
+        const Eigen::Index r = offset + v;
+        if (!g.pinned(v) || t <= 3) {
+          EXPECT_EQ(x.row(r), before.row(r)) << "row " << r << ", frame " << t;
+          continue;
+        }
+        const Eigen::RowVector3f carried = reference.row(r) * kTorsoTurn.transpose() + kTorsoShift;
+        EXPECT_LT((x.row(r) - carried).norm(), 1e-4f) << "row " << r << ", frame " << t;
+        ++pinned;
+      }
+      offset += g.num_vertices;
+    }
+  }
+  EXPECT_EQ(pinned, 4 * 2 * 16);
+  EXPECT_THROW(dataset::rig_pins(seq, seq.info.num_frames), std::exception);
 }
 
 // Recorded pins replace the rigid carry: the pinned rows end where the caller says, and the

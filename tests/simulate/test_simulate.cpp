@@ -121,9 +121,10 @@ dataset::Sequence Simulate::seq_;
 // The internal road: the source sequence started from rest by hand (its first body frame three
 // times, the garments at their frame-0 positions, which are also the rest shapes), rolled out by
 // eval::rollout. simulate must give the same positions from the OBJ files.
-// A model chosen with recorded pins gets its cloth constraints in simulate, where no scene records
-// pins; the user's --set comes last and wins; other models get only the user's settings.
-TEST(SimulateSettings, ConstraintsOnWhereRecordedPinsWereChosen) {
+// A model chosen with recorded pins gets the collision steps of its cloth constraints in simulate
+// and none of the others; the user's --set comes last and wins; other models get only the user's
+// settings.
+TEST(SimulateSettings, CollisionStepsOnlyWhereRecordedPinsWereChosen) {
   EvalConfig recorded;
   recorded.recorded_pins = true;
   recorded.constraints = false;
@@ -131,6 +132,11 @@ TEST(SimulateSettings, ConstraintsOnWhereRecordedPinsWereChosen) {
   c.eval = recorded;
   for (const auto& a : simulate_rollout_settings(recorded, {})) apply_rollout_override(c, a);
   EXPECT_TRUE(c.eval.constraints);
+  EXPECT_GT(c.eval.collision_shell, 0);
+  EXPECT_EQ(c.eval.strain_limit, 0);
+  EXPECT_EQ(c.eval.fold_limit, 0);
+  EXPECT_EQ(c.eval.body_friction, 0);
+  EXPECT_EQ(c.eval.layer_friction, 0);
   for (const auto& a : simulate_rollout_settings(recorded, {"eval.constraints=false"})) apply_rollout_override(c, a);
   EXPECT_FALSE(c.eval.constraints);
   EXPECT_EQ(simulate_rollout_settings(EvalConfig{}, {"eval.strain_limit=0.1"}), std::vector<std::string>{"eval.strain_limit=0.1"});
@@ -445,10 +451,25 @@ TEST_F(Simulate, WindCsvAndPinsShapeTheScene) {
   const int segments = scene_options().segments;
   ASSERT_EQ(scene.pins[1].size(), static_cast<size_t>(segments));
   EXPECT_EQ(scene.pins[1].front(), info.garments[1].num_vertices - segments);
-  // They are the garment's pin weights, which the cloth constraints carry with the body.
+  // They are the garment's pin weights, rigged from the body: the scene records them at every
+  // frame, moved from the rest shape, while every free row keeps the rest shape.
   EXPECT_TRUE(info.garments[0].pin.empty());
   EXPECT_EQ(info.garments[1].num_pinned(), segments);
   EXPECT_TRUE(info.garments[1].pinned(info.garments[1].num_vertices - segments));
+  EXPECT_TRUE(info.pins_recorded);
+  const dataset::GarmentMesh& outer = info.garments[1];
+  const int last = info.num_frames - 1;
+  const Points first = scene.sequence.garment_at(1, 0), end = scene.sequence.garment_at(1, last);
+  float pins_moved = 0;
+  for (int v = 0; v < outer.num_vertices; ++v) {
+    if (outer.pinned(v))
+      pins_moved = std::max(pins_moved, (end.row(v) - first.row(v)).norm());
+    else
+      EXPECT_EQ(end.row(v), outer.rest.row(v)) << "free row " << v;
+  }
+  const float body_moved = (scene.sequence.body_at(last) - scene.sequence.body_at(0)).rowwise().norm().maxCoeff();
+  EXPECT_GT(body_moved, 1e-3f);
+  EXPECT_GT(pins_moved, 0.1f * body_moved);
 }
 
 TEST_F(Simulate, ABadInputLeavesNoOutputBehind) {
