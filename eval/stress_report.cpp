@@ -99,9 +99,11 @@ bool run_stress(const StressOptions& o) {
   if (config.eval.constraints) {
     int pinned = 0;
     for (const dataset::GarmentMesh& g : source.info.garments) pinned += g.num_pinned();
-    std::printf("cloth constraints on: edge strain <= %g, collision shell %g units, %d passes per frame, body friction %g "
+    char strain[64] = "no edge limit";
+    if (config.eval.strain_limit > 0) std::snprintf(strain, sizeof strain, "edge strain <= %g", config.eval.strain_limit);
+    std::printf("cloth constraints on: %s, collision shell %g units, %d passes per frame, body friction %g "
                 "within %g units, %d pinned vertices %s (run/cloth_constraints.h)\n",
-                config.eval.strain_limit, config.eval.collision_shell, config.eval.constraint_iterations,
+                strain, config.eval.collision_shell, config.eval.constraint_iterations,
                 config.eval.body_friction, config.eval.friction_distance, pinned,
                 !config.eval.pins ? "left free (eval.pins = false)"
                 : config.eval.recorded_pins ? "taken from the data (eval.recorded_pins)" : "carried with the body");

@@ -413,6 +413,13 @@ TEST(ClothConstraints, OffInThePapersConfigOnInTheProjectsModels) {
   EXPECT_EQ(load_config({configs + "paper.toml"}).eval.body_friction, 0.0);
   EXPECT_EQ(load_config({configs + "default.toml"}).eval.body_friction, 1.0);
   EXPECT_EQ(load_config({configs + "medium.toml"}).eval.body_friction, 1.0);
+  // The large recipe, whose pins are recorded, keeps the collision steps alone.
+  const Config large = load_config({configs + "large.toml"});
+  EXPECT_TRUE(large.eval.constraints);
+  EXPECT_GT(large.eval.collision_shell, 0.0);
+  EXPECT_EQ(large.eval.strain_limit, 0.0);
+  EXPECT_EQ(large.eval.body_friction, 0.0);
+  EXPECT_EQ(large.eval.layer_friction, 0.0);
 }
 
 }  // namespace
