@@ -1,5 +1,7 @@
 #include "dataset/pin_carry.h"
 
+#include "dataset/garments.h"
+
 #include <Eigen/SVD>
 
 #include <algorithm>
@@ -77,8 +79,10 @@ std::vector<PinGroup> pin_groups(const SequenceInfo& info, const Eigen::Ref<cons
                                  const Eigen::Ref<const Points>& body) {
   std::vector<PinGroup> groups;
   int64_t offset = 0;
-  for (const GarmentMesh& mesh : info.garments) {
+  for (size_t g = 0; g < info.garments.size(); ++g) {
+    const GarmentMesh& mesh = info.garments[g];
     PinGroup group;
+    group.garment = static_cast<int32_t>(g);
     for (int v = 0; v < mesh.num_vertices; ++v)
       if (mesh.pinned(v)) group.rows.push_back(static_cast<int32_t>(offset + v));
     if (!group.rows.empty()) {
@@ -108,24 +112,19 @@ void rig_pins(Sequence& seq, int reference) {
   if (reference < seq.frames.first || reference >= seq.frames.first + seq.frames.count)
     throw std::runtime_error(info.path + ": cannot rig the pins from frame " + std::to_string(reference) +
                              ", which is not among the frames loaded");
-  Points garments(info.total_garment_vertices(), 3);
-  Eigen::Index offset = 0;
-  for (size_t g = 0; g < info.garments.size(); ++g) {
-    garments.middleRows(offset, info.garments[g].num_vertices) = seq.garment_at(static_cast<int>(g), reference);
-    offset += info.garments[g].num_vertices;
-  }
+  const Points garments = garments_at(info, seq.frames, reference);
   const Points body_reference = seq.body_at(reference);
   const std::vector<PinGroup> groups = pin_groups(info, garments, body_reference);
+  std::vector<Eigen::Index> first_row(info.garments.size(), 0);  // of each garment in the concatenation
+  for (size_t g = 1; g < info.garments.size(); ++g) first_row[g] = first_row[g - 1] + info.garments[g - 1].num_vertices;
   Points carried = garments;
   for (int t = reference + 1; t < seq.frames.first + seq.frames.count; ++t) {
     carry_pins(groups, body_reference, seq.body_at(t), garments, carried);
-    offset = 0;
-    for (size_t g = 0; g < info.garments.size(); ++g) {
-      const int n = info.garments[g].num_vertices;
-      for (int v = 0; v < n; ++v)
-        if (info.garments[g].pinned(v))
-          seq.frames.garments[g].row(static_cast<Eigen::Index>(t - seq.frames.first) * n + v) = carried.row(offset + v);
-      offset += n;
+    for (const PinGroup& group : groups) {
+      const Eigen::Index n = info.garments[static_cast<size_t>(group.garment)].num_vertices;
+      Points& frames = seq.frames.garments[static_cast<size_t>(group.garment)];
+      for (int32_t r : group.rows)
+        frames.row((t - seq.frames.first) * n + r - first_row[static_cast<size_t>(group.garment)]) = carried.row(r);
     }
   }
   seq.info.pins_recorded = true;

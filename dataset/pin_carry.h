@@ -29,6 +29,7 @@ RigidMotion fit_rigid_motion(const Eigen::Ref<const Points>& from, const Eigen::
 
 // One garment's pinned rows and the body vertices whose rigid motion carries them.
 struct PinGroup {
+  int32_t garment = 0;            // its index in SequenceInfo::garments
   std::vector<int32_t> rows;      // rows of the concatenated garments (N, 3)
   std::vector<int32_t> carriers;  // body vertices
 };
