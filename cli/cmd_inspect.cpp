@@ -42,7 +42,8 @@ LAYERSNET_COMMAND(inspect, "Summarise a D-LAYERS-H5 data set (sequences, garment
                                  "each term's gradient at Blender's next frame against the inertia's, and the term "
                                  "weights that fit best");
                     sub.add_flag("--pins", opts->options.pins,
-                                 "measure how closely pinned vertices carried with the body (eval.pins) follow the ground truth");
+                                 "measure how closely pinned vertices carried with the body (eval.pins), and rigged from "
+                                 "it as simulate rigs them, follow the ground truth");
                     sub.add_flag("--motion", opts->options.motion,
                                  "per split: body speed and turn rate, share of frames with wind, garment speed "
                                  "against the body on calm and windy frames (reads every frame after the ramp)");

@@ -114,7 +114,10 @@ void rig_pins(Sequence& seq, int reference) {
                              ", which is not among the frames loaded");
   const Points garments = garments_at(info, seq.frames, reference);
   const Points body_reference = seq.body_at(reference);
-  const std::vector<PinGroup> groups = pin_groups(info, garments, body_reference);
+  // The body under the pins is chosen at the first frame loaded (a rest pose where the data has
+  // one): at a later frame a hand or an arm may pass through the loop and be taken for the torso.
+  const int choose = seq.frames.first;
+  const std::vector<PinGroup> groups = pin_groups(info, garments_at(info, seq.frames, choose), seq.body_at(choose));
   std::vector<Eigen::Index> first_row(info.garments.size(), 0);  // of each garment in the concatenation
   for (size_t g = 1; g < info.garments.size(); ++g) first_row[g] = first_row[g - 1] + info.garments[g - 1].num_vertices;
   Points carried = garments;

@@ -49,9 +49,11 @@ int64_t carry_pins(const std::vector<PinGroup>& groups, const Eigen::Ref<const P
                    const Eigen::Ref<const Points>& body, const Eigen::Ref<const Points>& x_before, Points& x);
 
 // Rigs a scene's pins from its body: every frame's pinned rows from `reference` on become their rows
-// at `reference` moved by the rigid motion of their carriers (chosen at `reference`) from that
-// frame's body to this frame's, and the sequence says it records its pins. One fit from a fixed
-// frame, not a chain of frame-to-frame fits, so the fits' misses do not add up over a rollout.
+// at `reference` moved by the rigid motion of their carriers from that frame's body to this
+// frame's, and the sequence says it records its pins. The carriers are chosen at the first frame
+// loaded (a rest pose in generated data and in `simulate`'s scenes), where no hand reaches into the
+// loop. One fit from a fixed frame, not a chain of frame-to-frame fits, so the fits' misses do not
+// add up over a rollout.
 // What `simulate` gives a user's scene, and what eval measures it by on data (--rig-pins).
 void rig_pins(Sequence& seq, int reference);
 

@@ -205,6 +205,20 @@ std::vector<float> carried_pin_errors(const Sequence& seq, int first) {
   return errors;
 }
 
+// Pinned vertices rigged from the body from `first` on (dataset::rig_pins), against the ground
+// truth's at every later frame: distances in scene units, one per pinned vertex-frame.
+std::vector<float> rigged_pin_errors(const Sequence& seq, int first) {
+  Sequence rigged = seq;
+  rig_pins(rigged, first);
+  const std::vector<Eigen::Index> rows = seq.info.pinned_rows();
+  std::vector<float> errors;
+  for (int t = first + 1; t < seq.info.num_frames && !rows.empty(); ++t) {
+    const Points truth = garments_at(seq, t), x = garments_at(rigged, t);
+    for (Eigen::Index r : rows) errors.push_back((x.row(r) - truth.row(r)).norm());
+  }
+  return errors;
+}
+
 // Normal equations of the stationarity fit: ‖g_inertia + Σ_k w_k g_k‖² over the free vertices of
 // many frames, g the terms' gradients at Blender's x_{t+1}.
 struct PhysicsBalance {
@@ -478,34 +492,41 @@ void inspect_dataset(const InspectOptions& o, const SampleOptions& sample_option
       balance.print(sequences);
   }
   if (o.pins) {
-    std::printf("pinned vertices carried with the body (eval.pins) from the first frame after the ramp to the last, "
-                "distance from the ground truth's, mm:\n");
-    for (const char* split : {"train", "val", "test"}) {
-      std::vector<float> all;
-      int sequences = 0;
-      for (const auto& id : m.split(split)) {
-        const Sequence seq = read_sequence(m.sequence_path(id));
-        const std::vector<float> e = carried_pin_errors(seq, std::max(2, std::min(seq.info.settled_frame(), seq.info.num_frames - 2)));
-        if (e.empty()) continue;
-        ++sequences;
-        const double mm = 1000.0 / seq.info.scale;
-        for (float d : e) all.push_back(static_cast<float>(d * mm));
-        if (!o.brief) {
-          double sum = 0;
-          for (float d : e) sum += d;
-          std::printf("    %-12s %-5s mean %.1f  max %.1f\n", id.c_str(), split, sum / static_cast<double>(e.size()) * mm,
-                      *std::max_element(e.begin(), e.end()) * mm);
+    using ErrorsOf = std::vector<float> (*)(const Sequence&, int);
+    const std::pair<const char*, ErrorsOf> ways[] = {
+        {"carried with the body from frame to frame (eval.pins)", carried_pin_errors},
+        {"rigged from the body (simulate, eval --rig-pins)", rigged_pin_errors}};
+    for (const auto& [what, errors_of] : ways) {
+      std::printf("pinned vertices %s, from the first frame after the ramp to the last, distance from the ground "
+                  "truth's, mm:\n", what);
+      for (const char* split : {"train", "val", "test"}) {
+        std::vector<float> all;
+        int sequences = 0;
+        for (const auto& id : m.split(split)) {
+          const Sequence seq = read_sequence(m.sequence_path(id));
+          const std::vector<float> e =
+              errors_of(seq, std::max(2, std::min(seq.info.settled_frame(), seq.info.num_frames - 2)));
+          if (e.empty()) continue;
+          ++sequences;
+          const double mm = 1000.0 / seq.info.scale;
+          for (float d : e) all.push_back(static_cast<float>(d * mm));
+          if (!o.brief) {
+            double sum = 0;
+            for (float d : e) sum += d;
+            std::printf("    %-12s %-5s mean %.1f  max %.1f\n", id.c_str(), split, sum / static_cast<double>(e.size()) * mm,
+                        *std::max_element(e.begin(), e.end()) * mm);
+          }
         }
+        if (all.empty()) {
+          std::printf("  %-5s no pinned vertices\n", split);
+          continue;
+        }
+        double sum = 0;
+        for (float d : all) sum += d;
+        std::sort(all.begin(), all.end());
+        std::printf("  %-5s %d sequences: mean %.1f, p50 %.1f, p99 %.1f, max %.1f\n", split, sequences,
+                    sum / static_cast<double>(all.size()), all[all.size() / 2], all[all.size() * 99 / 100], all.back());
       }
-      if (all.empty()) {
-        std::printf("  %-5s no pinned vertices\n", split);
-        continue;
-      }
-      double sum = 0;
-      for (float d : all) sum += d;
-      std::sort(all.begin(), all.end());
-      std::printf("  %-5s %d sequences: mean %.1f, p50 %.1f, p99 %.1f, max %.1f\n", split, sequences,
-                  sum / static_cast<double>(all.size()), all[all.size() / 2], all[all.size() * 99 / 100], all.back());
     }
   }
 }

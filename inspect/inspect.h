@@ -8,7 +8,8 @@
 // to choose loss.collision_eps and eval.collision_shell from the data, and the ground truth's
 // edge strain, to choose eval.strain_limit. --pins carries each sequence's pinned vertices with
 // the body as the cloth constraints do (eval.pins), from the first frame after the ramp to the
-// last, and measures how far they end up from the ground truth's. --motion reads every frame
+// last, and measures how far they end up from the ground truth's, beside the pins rigged from the
+// body from that frame on (dataset::rig_pins: what `simulate` and eval --rig-pins give). --motion reads every frame
 // after the ramp and prints, per split, what the data can teach about dynamics: the body's
 // speed and turn rate, the share of frames with wind, and how fast the garments move against
 // the body on calm and on windy frames. --physics asks whether the physics energy describes the

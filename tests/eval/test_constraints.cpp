@@ -301,6 +301,44 @@ TEST(ClothConstraints, RiggedPinsFollowTheTorsoFromTheReferenceFrame) {
   EXPECT_THROW(dataset::rig_pins(seq, seq.info.num_frames), std::exception);
 }
 
+// A hand that reaches into the loop at the reference frame and then leaves is not torso: the
+// rig chooses the body under the pins at the first frame, where the hand is down by the legs.
+TEST(ClothConstraints, RiggedPinsIgnoreAHandInTheirLoopAtTheReferenceFrame) {
+  dataset::Sequence seq = pinned_tubes();
+  seq.info.pins_recorded = false;
+  const int B = seq.info.num_body_vertices;
+  const Points first = seq.body_at(0);
+  const float lowest = first.col(2).minCoeff();
+  std::vector<Eigen::Index> hand;
+  for (Eigen::Index b = 0; b < B; ++b)
+    if (first(b, 2) < lowest + 0.5f) hand.push_back(b);
+  ASSERT_GE(hand.size(), 8u);
+  const Points pinned_rows_at_3 = garments_at(seq, 3);
+  Eigen::RowVector3f loop_centre = Eigen::RowVector3f::Zero();
+  const std::vector<Eigen::Index> pinned = seq.info.pinned_rows();
+  for (Eigen::Index r : pinned) loop_centre += pinned_rows_at_3.row(r);
+  loop_centre /= static_cast<float>(pinned.size());
+  const Points at_3 = seq.body_at(3);
+  for (int t = 3; t < seq.info.num_frames; ++t) {
+    Points body = t == 3 ? at_3 : Points((at_3 * kTorsoTurn.transpose()).rowwise() + kTorsoShift);
+    for (size_t k = 0; k < hand.size(); ++k) {
+      const float angle = 6.2831853f * static_cast<float>(k) / static_cast<float>(hand.size());
+      body.row(hand[k]) = loop_centre + Eigen::RowVector3f(0.3f * std::cos(angle), 0.3f * std::sin(angle), 0.f);
+      if (t > 3) body(hand[k], 0) += 3.f;  // the hand leaves the loop sideways
+    }
+    seq.frames.body.middleRows(static_cast<Eigen::Index>(t) * B, B) = body;
+  }
+  const Points reference = garments_at(seq, 3);
+  dataset::rig_pins(seq, 3);
+  for (int t = 4; t < seq.info.num_frames; ++t) {
+    const Points x = garments_at(seq, t);
+    for (Eigen::Index r : pinned) {
+      const Eigen::RowVector3f carried = reference.row(r) * kTorsoTurn.transpose() + kTorsoShift;
+      EXPECT_LT((x.row(r) - carried).norm(), 1e-4f) << "row " << r << ", frame " << t;
+    }
+  }
+}
+
 // Recorded pins replace the rigid carry: the pinned rows end where the caller says, and the
 // edge, collision and friction steps leave them there.
 TEST(ClothConstraints, RecordedPinsAreHeldWhereTheyAreGiven) {
