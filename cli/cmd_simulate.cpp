@@ -33,7 +33,7 @@ struct SimulateCliOptions {
   std::string out;
   eval::MotionInput motion;  // --motion: a BVH clip retargeted by Blender
   std::string precision = "auto";  // of the model's linear products: auto | float32 | bf16
-  int threads = 0;                    // OpenMP threads of the rollout (0 = all)
+  int threads = 0;                    // OpenMP threads of the rollout (0 = chosen by timing, eval::ThreadChoice)
 };
 
 constexpr const char* kShippedModel = "models/large/model.h5";
@@ -106,15 +106,20 @@ int run_simulate(SimulateCliOptions& o) {
                  rolled.constraints ? "eval.pins = false" : "neither recorded pins nor cloth constraints");
   std::fprintf(stderr, "simulate: %d garments, %d body frames at %g fps, model %s\n",
                scene.sequence.info.num_garments(), scene.body_frames, scene.sequence.info.fps, checkpoint.c_str());
-  const eval::Rollout r = eval::simulate_scene(*model, scene, progress_reporter(), rolled.recorded_pins);
+  // Without --threads the steps time all the threads against one and keep the faster.
+  std::unique_ptr<eval::ThreadChoice> choice;
+  if (o.threads == 0) choice = std::make_unique<eval::ThreadChoice>(omp_get_max_threads());
+  const eval::Rollout r = eval::simulate_scene(*model, scene, progress_reporter(), rolled.recorded_pins, choice.get());
   const int files = eval::write_simulation(o.out, scene, o.outputs);
   // The first step also builds the patch structure and the caches every later step reuses, so
   // the rate a user sees over a long motion is the later steps' median.
   const double first_ms = r.step_ms.empty() ? 0.0 : r.step_ms.front();
   const double median_ms = r.step_ms.size() > 1 ? eval::median({r.step_ms.begin() + 1, r.step_ms.end()}) : first_ms;
-  std::printf("simulate: %d frames, first step %.0f ms, then %.1f ms/frame (median) = %.1f frames per second "
-              "(%d threads, %s products) -> %d files in %s\n",
-              scene.body_frames, first_ms, median_ms, 1000.0 / median_ms, omp_get_max_threads(), o.precision.c_str(), files,
+  const std::string threads =
+      choice ? choice->summary() : std::to_string(o.threads) + (o.threads == 1 ? " thread" : " threads") + " (--threads)";
+  std::printf("simulate: %d frames, first step %.0f ms, then %.1f ms/frame (median) = %.1f frames per second, "
+              "%s products, %s -> %d files in %s\n",
+              scene.body_frames, first_ms, median_ms, 1000.0 / median_ms, o.precision.c_str(), threads.c_str(), files,
               o.out.c_str());
   return 0;
 }
@@ -168,7 +173,7 @@ LAYERSNET_COMMAND(
                      "same accuracy within 0.1 %), or auto = bf16 where this CPU runs the AMX or AVX-512 BF16 kernel")
           ->check(CLI::IsMember({"auto", "float32", "fp32", "bf16", "bfloat16"}))
           ->default_val("auto");
-      sub.add_option("--threads", o->threads, "OpenMP threads of the rollout (0 = all)")->check(CLI::NonNegativeNumber)->default_val(0);
+      sub.add_option("--threads", o->threads, "OpenMP threads of the rollout (0 = all of them against 1, timed on the first steps and again every 100, the faster kept; the positions are the same at any count)")->check(CLI::NonNegativeNumber)->default_val(0);
       sub.add_option("--strip-frames", o->outputs.strip_frames, "panels in strip.png (0 = no strip)")->default_val(4);
       sub.add_option("--out", o->out, "output folder")->required();
       return [o] { return run_simulate(*o); };  // errors: reported by cli/main.cpp

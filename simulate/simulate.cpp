@@ -13,6 +13,7 @@
 #include <Eigen/Geometry>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -20,6 +21,7 @@
 #include <map>
 #include <set>
 #include <sstream>
+#include <omp.h>
 #include <unistd.h>
 
 namespace layersnet::eval {
@@ -467,13 +469,17 @@ namespace {
 // The model with progress reported (the pins act inside the model's cloth constraints).
 class ScenePredictor : public Predictor {
  public:
-  ScenePredictor(Predictor& model, const Scene& scene, const ProgressFn& progress)
-      : model_(model), scene_(scene), progress_(progress) {}
+  ScenePredictor(Predictor& model, const Scene& scene, const ProgressFn& progress, ThreadChoice* threads)
+      : model_(model), scene_(scene), progress_(progress), threads_(threads) {}
   std::string name() const override { return model_.name(); }
   void begin(const dataset::Sequence& seq) override { model_.begin(seq); }
   Points step(const dataset::Sequence& seq, int t, const Points& x_prev2, const Points& x_prev,
               const Points& x_now) override {
+    if (threads_) omp_set_num_threads(threads_->threads_for_step(done_));
+    const auto start = std::chrono::steady_clock::now();
     Points x = model_.step(seq, t, x_prev2, x_prev, x_now);
+    if (threads_)
+      threads_->record(done_, std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
     ++done_;
     if (progress_) progress_(done_, scene_.body_frames - 1);
     return x;
@@ -483,6 +489,7 @@ class ScenePredictor : public Predictor {
   Predictor& model_;
   const Scene& scene_;
   const ProgressFn& progress_;
+  ThreadChoice* threads_;
   int done_ = 0;
 };
 
@@ -549,8 +556,9 @@ std::vector<std::string> simulate_rollout_settings(const EvalConfig& model_eval,
   return settings;
 }
 
-Rollout simulate_scene(Predictor& model, Scene& scene, const ProgressFn& progress, bool recorded_pins) {
-  ScenePredictor driver(model, scene, progress);
+Rollout simulate_scene(Predictor& model, Scene& scene, const ProgressFn& progress, bool recorded_pins,
+                       ThreadChoice* threads) {
+  ScenePredictor driver(model, scene, progress, threads);
   const int t0 = kSceneRestFrames - 1;
   Rollout r = rollout(driver, scene.sequence, t0, scene.body_frames - 1, recorded_pins);
   if (r.diverged_at >= 0)

@@ -20,6 +20,7 @@
 // its own; for OBJ and PC2 bodies it is the mean of the frame's body vertices
 // (estimated_root_translation).
 #include "eval/rollout.h"
+#include "simulate/thread_choice.h"
 
 #include <functional>
 #include <stdexcept>
@@ -98,15 +99,17 @@ using ProgressFn = std::function<void(int, int)>;
 // The rollout settings simulate gives a model, the user's `--set` last. A model whose rollouts take
 // recorded pins (eval.recorded_pins: the large model, on data without post-processing) gets the
 // collision steps of its cloth constraints and nothing else: with the scene's rigged pins, on large
-// val, 39.7 mm and 0.01 % of outer vertices inside the inner layer, against 39.2 mm and 7 % alone,
-// and 44.4 mm with the edge limits and contact friction too (docs/decisions.md, "Pins rigged from
-// the body").
+// val, 36.4 mm and no outer vertex near the inner layer inside it, against 35.8 mm and 7 % alone;
+// the edge limits and contact friction cost more than they give (docs/decisions.md, "Pins rigged
+// from the body" and "Pins rigged from the body, chosen at rest").
 std::vector<std::string> simulate_rollout_settings(const EvalConfig& model_eval, const std::vector<std::string>& user);
 
 // Rolls `model` over the scene from rest (eval::rollout; recorded_pins: the pinned rows held where
 // the scene's rig puts them, as eval.recorded_pins) and writes the predictions into the scene's
-// garment frames. A rollout that leaves the finite numbers throws SimulateError naming the frame.
-Rollout simulate_scene(Predictor& model, Scene& scene, const ProgressFn& progress = {}, bool recorded_pins = false);
+// garment frames; `threads`, when given, sets each step's OpenMP thread count (the positions do not
+// depend on it). A rollout that leaves the finite numbers throws SimulateError naming the frame.
+Rollout simulate_scene(Predictor& model, Scene& scene, const ProgressFn& progress = {}, bool recorded_pins = false,
+                       ThreadChoice* threads = nullptr);
 
 struct SimulateOutputs {
   int strip_frames = 4;   // panels of strip.png (0 = none)
