@@ -118,8 +118,7 @@ void rig_pins(Sequence& seq, int reference) {
   // one): at a later frame a hand or an arm may pass through the loop and be taken for the torso.
   const int choose = seq.frames.first;
   const std::vector<PinGroup> groups = pin_groups(info, garments_at(info, seq.frames, choose), seq.body_at(choose));
-  std::vector<Eigen::Index> first_row(info.garments.size(), 0);  // of each garment in the concatenation
-  for (size_t g = 1; g < info.garments.size(); ++g) first_row[g] = first_row[g - 1] + info.garments[g - 1].num_vertices;
+  const std::vector<int32_t> first_row = garment_layout(info).offsets;  // of each garment in the concatenation
   Points carried = garments;
   for (int t = reference + 1; t < seq.frames.first + seq.frames.count; ++t) {
     carry_pins(groups, body_reference, seq.body_at(t), garments, carried);

@@ -496,38 +496,51 @@ void inspect_dataset(const InspectOptions& o, const SampleOptions& sample_option
     const std::pair<const char*, ErrorsOf> ways[] = {
         {"carried with the body from frame to frame (eval.pins)", carried_pin_errors},
         {"rigged from the body (simulate, eval --rig-pins)", rigged_pin_errors}};
-    for (const auto& [what, errors_of] : ways) {
-      std::printf("pinned vertices %s, from the first frame after the ramp to the last, distance from the ground "
-                  "truth's, mm:\n", what);
-      for (const char* split : {"train", "val", "test"}) {
-        std::vector<float> all;
-        int sequences = 0;
-        for (const auto& id : m.split(split)) {
-          const Sequence seq = read_sequence(m.sequence_path(id));
-          const std::vector<float> e =
-              errors_of(seq, std::max(2, std::min(seq.info.settled_frame(), seq.info.num_frames - 2)));
+    constexpr size_t W = std::size(ways);
+    const char* const splits[] = {"train", "val", "test"};
+    // Each sequence is read once for both ways; their reports are printed one after the other.
+    std::string report[W];
+    const auto add = [&report](size_t w, const char* format, auto... values) {
+      char line[160];
+      std::snprintf(line, sizeof line, format, values...);
+      report[w] += line;
+    };
+    for (const char* split : splits) {
+      std::vector<float> all[W];
+      int sequences[W] = {};
+      for (const auto& id : m.split(split)) {
+        const Sequence seq = read_sequence(m.sequence_path(id));
+        const int first = std::max(2, std::min(seq.info.settled_frame(), seq.info.num_frames - 2));
+        const double mm = 1000.0 / seq.info.scale;
+        for (size_t w = 0; w < W; ++w) {
+          const std::vector<float> e = ways[w].second(seq, first);
           if (e.empty()) continue;
-          ++sequences;
-          const double mm = 1000.0 / seq.info.scale;
-          for (float d : e) all.push_back(static_cast<float>(d * mm));
+          ++sequences[w];
+          for (float d : e) all[w].push_back(static_cast<float>(d * mm));
           if (!o.brief) {
             double sum = 0;
             for (float d : e) sum += d;
-            std::printf("    %-12s %-5s mean %.1f  max %.1f\n", id.c_str(), split, sum / static_cast<double>(e.size()) * mm,
-                        *std::max_element(e.begin(), e.end()) * mm);
+            add(w, "    %-12s %-5s mean %.1f  max %.1f\n", id.c_str(), split, sum / static_cast<double>(e.size()) * mm,
+                *std::max_element(e.begin(), e.end()) * mm);
           }
         }
-        if (all.empty()) {
-          std::printf("  %-5s no pinned vertices\n", split);
+      }
+      for (size_t w = 0; w < W; ++w) {
+        if (all[w].empty()) {
+          add(w, "  %-5s no pinned vertices\n", split);
           continue;
         }
         double sum = 0;
-        for (float d : all) sum += d;
-        std::sort(all.begin(), all.end());
-        std::printf("  %-5s %d sequences: mean %.1f, p50 %.1f, p99 %.1f, max %.1f\n", split, sequences,
-                    sum / static_cast<double>(all.size()), all[all.size() / 2], all[all.size() * 99 / 100], all.back());
+        for (float d : all[w]) sum += d;
+        std::sort(all[w].begin(), all[w].end());
+        const std::vector<float>& a = all[w];
+        add(w, "  %-5s %d sequences: mean %.1f, p50 %.1f, p99 %.1f, max %.1f\n", split, sequences[w],
+            sum / static_cast<double>(a.size()), a[a.size() / 2], a[a.size() * 99 / 100], a.back());
       }
     }
+    for (size_t w = 0; w < W; ++w)
+      std::printf("pinned vertices %s, from the first frame after the ramp to the last, distance from the ground "
+                  "truth's, mm:\n%s", ways[w].first, report[w].c_str());
   }
 }
 
