@@ -90,6 +90,21 @@ int64_t drag_along(dataset::Points& x, const Eigen::Ref<const dataset::Points>& 
   });
 }
 
+// The inner layer's vertices as the layer steps see them, with their k-d tree and normals, rebuilt
+// only when the vertices changed: the steps after the body's rarely move the inner layer, and the
+// tree costs about as much as the queries it answers.
+struct InnerLayer {
+  dataset::Points points;  // (outer_begin, 3)
+  std::unique_ptr<dataset::NearestVertexIndex> index;
+  dataset::Points normals;
+  void update(const Eigen::Ref<const dataset::Points>& now, const dataset::Faces& faces) {
+    if (index && points == now) return;
+    points = now;
+    index = std::make_unique<dataset::NearestVertexIndex>(points);
+    normals = dataset::vertex_normals(points, faces);
+  }
+};
+
 }  // namespace
 
 std::vector<std::pair<int32_t, int32_t>> far_corners(const dataset::Faces& faces) {
@@ -165,6 +180,8 @@ ConstraintMoves ClothConstraints::project(const Eigen::Ref<const dataset::Points
     body_index = std::make_unique<dataset::NearestVertexIndex>(body);
     body_normals = dataset::vertex_normals(body, body_faces_);
   }
+  const bool layered = outer_begin_ > 0 && outer_begin_ < x.rows();
+  InnerLayer inner_layer;
   if (pins_next && pins_next->rows() == x.rows()) {
     for (const dataset::PinGroup& group : pin_groups_)
       for (int32_t r : group.rows) {
@@ -180,28 +197,32 @@ ConstraintMoves ClothConstraints::project(const Eigen::Ref<const dataset::Points
       moves.friction +=
           drag_along(x, *x_before, 0, x.rows(), pinned_, *body_index, body, *body_before, body_normals, within, mu, reach_);
     const auto mu_layer = static_cast<float>(settings_.layer_friction);
-    if (mu_layer > 0 && outer_begin_ > 0 && outer_begin_ < x.rows()) {
-      const dataset::Points inner = x.topRows(outer_begin_);  // already carried by the body
-      moves.friction += drag_along(x, *x_before, outer_begin_, x.rows(), pinned_, dataset::NearestVertexIndex(inner), inner,
-                                   x_before->topRows(outer_begin_), dataset::vertex_normals(inner, inner_faces_), within,
-                                   mu_layer, reach_);
+    if (mu_layer > 0 && layered) {
+      inner_layer.update(x.topRows(outer_begin_), inner_faces_);  // already carried by the body
+      moves.friction += drag_along(x, *x_before, outer_begin_, x.rows(), pinned_, *inner_layer.index, inner_layer.points,
+                                   x_before->topRows(outer_begin_), inner_layer.normals, within, mu_layer, reach_);
     }
   }
   const auto s = static_cast<float>(settings_.strain_limit), f = static_cast<float>(settings_.fold_limit);
   for (int pass = 0; pass < settings_.constraint_iterations; ++pass) {
+    const int64_t moved_before = moves.edges + moves.folds + moves.body + moves.layer;
     if (s > 0)
       for (size_t e = 0; e < edges_.size(); ++e)
         moves.edges += project_pair(x, edges_[e], (1.f - s) * rest_[e], (1.f + s) * rest_[e], rest_[e], pinned_);
     if (f > 0)
       for (size_t q = 0; q < folds_.size(); ++q)
         moves.folds += project_pair(x, folds_[q], (1.f - f) * fold_rest_[q], kUnbounded, fold_rest_[q], pinned_);
-    if (shell <= 0) continue;
-    moves.body += push_out(x, 0, x.rows(), pinned_, *body_index, body, body_normals, shell, reach_);
-    if (outer_begin_ > 0 && outer_begin_ < x.rows()) {
-      const dataset::Points inner = x.topRows(outer_begin_);  // moved by this pass: a fresh tree
-      moves.layer += push_out(x, outer_begin_, x.rows(), pinned_, dataset::NearestVertexIndex(inner), inner,
-                              dataset::vertex_normals(inner, inner_faces_), shell, reach_);
+    if (shell > 0) {
+      moves.body += push_out(x, 0, x.rows(), pinned_, *body_index, body, body_normals, shell, reach_);
+      if (layered) {
+        inner_layer.update(x.topRows(outer_begin_), inner_faces_);
+        moves.layer += push_out(x, outer_begin_, x.rows(), pinned_, *inner_layer.index, inner_layer.points,
+                                inner_layer.normals, shell, reach_);
+      }
     }
+    ++moves.passes;
+    // A pass that moved nothing left x as it found it, and so would every later one.
+    if (moves.edges + moves.folds + moves.body + moves.layer == moved_before) break;
   }
   return moves;
 }

@@ -13,7 +13,8 @@
 //      normal n) lies within `reach` and (x − h)·n < shell along n onto (x − h)·n = shell;
 //   4. does the same for every outer-layer vertex against the nearest inner-layer vertex and
 //      the inner mesh's normal there.
-// The collision steps come last, so a frame ends outside the body and the inner layer.
+// The collision steps come last, so a frame ends outside the body and the inner layer. The passes
+// stop after one that moves nothing: it left x as it found it, and so would the rest.
 // Before the passes, when the frame before is given and eval.pins is set, pins: the vertices the
 // file pins (a waistband, a top edge; GarmentMesh::pinned) move rigidly with the body under
 // them, x_{t+1} = R x_t + c, where (R, c) is the least-squares rigid motion of that body region
@@ -52,6 +53,7 @@ struct ConstraintMoves {
   int64_t layer = 0;         // outer vertices pushed out of the inner layer (over all passes)
   int64_t friction = 0;      // vertices the contact friction moved
   int64_t pinned = 0;        // pinned vertices carried with the body
+  int32_t passes = 0;        // passes run: they stop after the first that moves nothing
 };
 
 // The two far corners (local indices) of every pair of triangles sharing an edge, each pair once.

@@ -278,7 +278,7 @@ const Schema& schema() {
     k.add("eval.friction_distance", [](Config& c) -> double& { return c.eval.friction_distance; }, "constraints: scene units from the body surface (along its normal) within which eval.body_friction acts", {0, 10, {}});
     k.add("eval.mirror_average", [](Config& c) -> bool& { return c.eval.mirror_average; }, "rollouts: each frame the mean of the network's prediction and the mirror image of its prediction on the mirrored scene (symmetric under mirrors as the cloth is; twice the time per frame)");
     k.add("eval.correction_scale", [](Config& c) -> double& { return c.eval.correction_scale; }, "rollouts: factor on the network's output, the correction of its velocity base (1 = as trained, 0 = the base alone)", {0, 10, {}});
-    k.add("eval.constraint_iterations", [](Config& c) -> int& { return c.eval.constraint_iterations; }, "constraints: projection passes per predicted frame", {1, 1000, {}});
+    k.add("eval.constraint_iterations", [](Config& c) -> int& { return c.eval.constraint_iterations; }, "constraints: at most this many projection passes per predicted frame (they stop after one that moves nothing)", {1, 1000, {}});
     return k;
   }();
   return s;

@@ -99,7 +99,7 @@ struct EvalConfig {
   double strain_limit = 0.05;      // largest |edge length / rest length − 1| kept
   double fold_limit = 0.0;         // largest shortening of the far-corner distance of two adjacent triangles (0 = none)
   double collision_shell = 0.05;   // scene units kept outside the body and the inner layer (0 = none)
-  int constraint_iterations = 8;   // projection passes per frame
+  int constraint_iterations = 8;   // at most this many projection passes per frame
   // Contact friction: a garment vertex within friction_distance of the body (along its normal)
   // keeps (1 − body_friction) of its motion relative to the body, tangentially. 0 = off.
   double body_friction = 0.0;
