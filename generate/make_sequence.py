@@ -91,10 +91,12 @@ DEFAULTS = {
     # Procedural overlays on the mocap (spins and turns, hops, arm swings); None: off. Keys:
     # motion_blocks.PROCEDURAL_DEFAULTS.
     "procedural": None,
-    # Garment kinds only the test split draws (unseen outfits); test draws an outfit with one
-    # of them with probability heldout_probability, train and val never do.
+    # Garment kinds training never sees (unseen outfits): a sequence of a split listed in
+    # heldout_splits draws an outfit with one of them with probability heldout_probability;
+    # train never does. Listing val lets validation choose settings for unseen outfits.
     "heldout_kinds": [],
     "heldout_probability": 0.5,
+    "heldout_splits": ["test"],
     # "blender": the cloth solver (ground truth). "surface": no solver; the outfit is carried by
     # the body through a Surface Deform bound in the rest pose (cheap starting states for
     # physics-only pretraining, never supervised targets; file attr cloth_source).
@@ -181,8 +183,9 @@ def sample_motion(rng, cfg, split):
 
 
 def sample_outfit_kinds(rng, cfg, split):
-    """(inner, outer) kinds. Train and val draw only from the kinds not held out; test draws
-    an outfit with at least one held-out kind with probability heldout_probability."""
+    """(inner, outer) kinds. A split in heldout_splits draws an outfit with at least one held-out
+    kind with probability heldout_probability; otherwise, and always for train, only kinds not
+    held out."""
     held = set(cfg["heldout_kinds"])
     unknown = held - set(cfg["inner_kinds"]) - set(cfg["outer_kinds"])
     if unknown:
@@ -191,7 +194,11 @@ def sample_outfit_kinds(rng, cfg, split):
     seen_outer = [k for k in cfg["outer_kinds"] if k not in held]
     if not seen_inner or not seen_outer:
         raise SystemExit("make_sequence.py: heldout_kinds leave no inner or no outer kind for training")
-    if split == "test" and rng.random() < cfg["heldout_probability"]:
+    bad = set(cfg["heldout_splits"]) - {"val", "test"}
+    if bad:
+        raise SystemExit(f"make_sequence.py: heldout_splits {sorted(bad)}: list val and/or test (a kind "
+                         "train draws is not held out)")
+    if split in cfg["heldout_splits"] and rng.random() < cfg["heldout_probability"]:
         pairs = [(i, o) for i in cfg["inner_kinds"] for o in cfg["outer_kinds"] if i in held or o in held]
         i, o = pairs[int(rng.integers(len(pairs)))]
         return str(i), str(o)

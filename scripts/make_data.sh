@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Makes (or resumes) every data set the validation and test figures in docs/decisions.md use, in
 # the order in which the work needs them: data/default, the validation splits that choose
-# (medium_choice, large), the large test split (small beside the training split, so that a model
+# (medium_choice, large, and large_unseen_val for outfits the large set holds out), the large test split (small beside the training split, so that a model
 # trained on the part of the training split made so far can already be evaluated), the large
 # training split (the shipped large model's first LARGE_TRAIN sequences first), then the sleeves test set.
 # Each step keeps the sequences already made, so the script can be stopped and run again; the
@@ -22,6 +22,7 @@ gen --recipe generate/recipes/default.json --out data/default
 "$bin" prepare data/default
 gen --recipe generate/recipes/medium_choice.json --out data/medium_choice --splits val
 gen --recipe generate/recipes/large.json --out data/large --splits val
+gen --recipe generate/recipes/large_unseen_val.json --out data/large_unseen_val --splits val
 gen --recipe generate/recipes/large.json --out data/large --splits test
 # The shipped large model's training sequences first (scripts/train_shipped.sh large), then the rest.
 gen --recipe generate/recipes/large.json --out data/large --splits train --train-limit "${LARGE_TRAIN:-112}"

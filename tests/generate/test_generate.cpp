@@ -156,6 +156,11 @@ TEST(GenerateCloth, SceneKeyClothIsValidatedAndSkinnedRecipeIsAllTrain) {
   EXPECT_EQ(run("/usr/bin/python3 " + kSource + "/tests/generate/test_cloth_mode.py"), 0);
 }
 
+TEST(GenerateGarments, HeldOutKindsOnlyWhereTheRecipeListsTheSplit) {
+  if (run("/usr/bin/python3 -c 'import numpy' > /dev/null 2>&1") != 0) GTEST_SKIP() << "no numpy";
+  EXPECT_EQ(run("/usr/bin/python3 " + kSource + "/tests/generate/test_heldout_outfits.py"), 0);
+}
+
 // About 15 s: a 12-frame "surface" sequence and its "blender" twin.
 TEST(GenerateCloth, SurfaceCarriesGarmentsOnTheSameBody) {
   if (!have_blender()) GTEST_SKIP() << "blender not installed";
