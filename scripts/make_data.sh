@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # Makes (or resumes) every data set the validation and test figures in docs/decisions.md use, in
 # the order in which the work needs them: data/default, the validation splits that choose
-# (medium_choice, large, and large_unseen_val for outfits the large set holds out), the large test split (small beside the training split, so that a model
-# trained on the part of the training split made so far can already be evaluated), the large
-# training split (the shipped large model's first LARGE_TRAIN sequences first), then the sleeves test set.
+# (medium_choice, large, and large_unseen_val for the outfits the large set holds out), the large
+# test split (small beside the training split, so that a model trained on the part of the
+# training split made so far can already be evaluated), the large training split (the shipped
+# large model's first LARGE_TRAIN sequences first), then the sleeves test set.
 # Each step keeps the sequences already made, so the script can be stopped and run again; the
 # data sets are not in the repository (about 5.5 MB per 100-frame sequence).
 #
