@@ -383,10 +383,17 @@ Var<T> smooth_over_vertex_mesh(ad::Tape<T>& tape, const ModelInput<T>& in, Var<T
   return u;
 }
 
+// The decoder's outputs in each row's local frame: per patch (P, 3) and per candidate row (Ec, 3),
+// scaled by opt.correction_scale.
 template <class T>
-Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfig& cfg, const ModelDims& m,
-                      const ModelInput<T>& in, const Var<T>& emb, const Var<T>& body_x, const ForwardOptions& opt,
-                      const StateDelta<T>& delta) {
+struct Correction {
+  Var<T> patch, candidate;
+};
+
+template <class T>
+Correction<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfig& cfg, const ModelDims& m,
+                     const ModelInput<T>& in, const Var<T>& emb, const Var<T>& body_x, const ForwardOptions& opt,
+                     const StateDelta<T>& delta) {
   const int64_t N = in.N, P = in.P, d = m.d, U = in.U;
   const bool ret = cfg.rotation_equivalent;
   // Body features with a zero row for "no body vertex within R_b" (index U).
@@ -568,6 +575,20 @@ Predictions<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfi
     a_p = ad::scale(tape, a_p, static_cast<T>(opt.correction_scale));
     a_e = ad::scale(tape, a_e, static_cast<T>(opt.correction_scale));
   }
+  return {a_p, a_e};
+}
+
+// The next state from the decoder's outputs a (zero: the velocity base alone), each integrated in
+// its row's frame.
+template <class T>
+Predictions<T> predict(ad::Tape<T>& tape, const ModelConfig& cfg, const ModelInput<T>& in, const Correction<T>& a,
+                       const StateDelta<T>& delta) {
+  const int64_t N = in.N, P = in.P;
+  const bool ret = cfg.rotation_equivalent;
+  const Var<T>& a_p = a.patch;
+  const Var<T>& a_e = a.candidate;
+  const Var<T> Rp = constant(tape, frames_of(in, in.patch_body), P, 9);
+  const Var<T> Rv = constant(tape, frames_of(in, in.vertex_body), N, 9);
   // Velocity bases: the cloth's own velocity (inertia), or in.body_carry (c, or c + v_t − c_t).
   // The vertex base is then c_v − c̄_p (c̄_p the patch mean), so x_v = x_t + c_v + a_p + a_v. c and
   // c_t are held constant under StateDelta (their dependence on the state is the body's rotation),
@@ -646,6 +667,11 @@ Predictions<T> forward(ad::Tape<T>& tape, ad::ParamStore<T>& params, const Model
   StageClock total_clock(times, &StageTimes::total_ms);
   const ModelDims m = model_dims(cfg);
   const ParamView<T> p{params};
+  if (options.correction_scale == 0.0) {
+    // The velocity base alone: a zero correction needs no network (and reads no weight).
+    const Correction<T> none{tape.zeros(in.P, 3), tape.zeros(static_cast<int64_t>(in.cand_patches.size()), 3)};
+    return predict(tape, cfg, in, none, state_delta(tape, in, garment_state));
+  }
   StageClock graph_clock(times, &StageTimes::graph_ms);
   const Graph<T> gr = build_graph(in, m.groups);
   graph_clock.stop();
@@ -700,7 +726,7 @@ Predictions<T> forward(ad::Tape<T>& tape, ad::ParamStore<T>& params, const Model
 
   // ---- decoder ---------------------------------------------------------------------------------------------
   StageClock decoder_clock(times, &StageTimes::decoder_ms);
-  return decode(tape, p, cfg, m, in, rows_of(st.X, 0, P), body_x, options, delta);
+  return predict(tape, cfg, in, decode(tape, p, cfg, m, in, rows_of(st.X, 0, P), body_x, options, delta), delta);
 }
 
 template <class T>

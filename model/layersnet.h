@@ -80,7 +80,8 @@ struct ForwardOptions {
   // Both compute eq. 7; they differ only in how eps enters the distance (fused:
   // sqrt(‖r−s‖² + eps²), composite: ‖r−s‖ + eps), i.e. by O(eps / ‖r−s‖) relative.
   bool fused_attention = true;
-  // Factor on the decoder's outputs, i.e. on the correction of the velocity base (eval.correction_scale).
+  // Factor on the decoder's outputs, i.e. on the correction of the velocity base (eval.correction_scale);
+  // 0 skips the network: the prediction is the base alone.
   double correction_scale = 1.0;
   // When set, forward() fills it (see StageTimes); null: the clock is never read.
   StageTimes* times = nullptr;

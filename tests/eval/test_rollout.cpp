@@ -529,6 +529,27 @@ TEST(Rollout, CorrectionScaleScalesTheNetworksCorrectionOfTheStep) {
   EXPECT_LT((half.frames[0] - 0.5f * (r0.frames[0] + r1.frames[0])).cwiseAbs().maxCoeff(), 1e-4f * std::max(1.0f, moved));
 }
 
+// At eval.correction_scale = 0 the network is not run: weights that are all NaN still roll out
+// the step itself, where any other scale spreads the NaN.
+TEST(Rollout, CorrectionScaleZeroRunsNoNetwork) {
+  const dataset::Sequence seq = sequence(2);
+  auto nan_model = [&](const std::string& scale) {
+    Config c = load_config({std::string(LAYERSNET_SOURCE_DIR) + "/configs/tiny.toml"},
+                           {"model.velocity_base=physics", "eval.correction_scale=" + scale});
+    ad::ParamStore<float> ps;
+    model::register_params(ps, c.model);
+    std::ranges::fill(ps.values(), std::numeric_limits<float>::quiet_NaN());
+    return std::make_unique<ModelPredictor>("NaN weights", c, std::move(ps), dataset::NormalisationStats{});
+  };
+  PhysicsStep physics;
+  const Rollout step = rollout(physics, seq, 2, 3), none = rollout(*nan_model("0"), seq, 2, 3);
+  for (size_t f = 0; f < 3; ++f) {
+    ASSERT_TRUE(none.frames[f].allFinite()) << f;
+    EXPECT_LT((none.frames[f] - step.frames[f]).cwiseAbs().maxCoeff(), 1e-4f) << f;
+  }
+  EXPECT_FALSE(rollout(*nan_model("0.5"), seq, 2, 1).frames[0].allFinite());
+}
+
 // eval.mirror_average makes the network symmetric under mirrors as the cloth is: its rollout of
 // a scene's mirror image is the mirror image of its rollout, where the plain network's is not;
 // and its first frame is the mean of the plain network's prediction and the image of its
