@@ -15,9 +15,11 @@ S = SCENE_SCALE
 INNER_KINDS = ("pants_tight", "skirt", "dress_strapless")
 OUTER_KINDS = ("coat_sleeveless", "jacket_sleeveless")
 # Opt-in families (a scene's inner_kinds / outer_kinds): skirts and dresses to the calf or
-# ankle, wide trousers, a coat to the calf (the large recipe); a top and a jacket with sleeves.
+# ankle, wide trousers, a coat to the calf (the large recipe); a top and a jacket with sleeves;
+# a long skirt from the waist worn over the inner layer (an outer layer below the knee that is
+# not a coat).
 EXTRA_INNER_KINDS = ("skirt_long", "dress_long", "pants_loose", "top_sleeved")
-EXTRA_OUTER_KINDS = ("coat_long", "jacket_sleeved")
+EXTRA_OUTER_KINDS = ("coat_long", "jacket_sleeved", "overskirt_long")
 TIGHT_INNER = ("pants_tight",)
 GAP = 0.02          # metres between the inner layer and the outer one at rest
 SPACING = 0.045     # metres between garment rows (about the ring edge length)
@@ -143,10 +145,12 @@ def _outer(profile, kind, rng, inner_fn, inner_top, spacing, cols, inner_sleeve=
         hem, panels = rng.uniform(0.76, 0.88), int(rng.choice([2, 4]))
     elif kind == "coat_long":
         hem, panels = rng.uniform(0.15, 0.35), 4
+    elif kind == "overskirt_long":
+        hem, panels, top = rng.uniform(0.15, 0.35), int(rng.choice([4, 8])), Z_WAIST
     else:
         raise ValueError(f"outfits.py: unknown outer garment kind '{kind}' (use one of {OUTER_KINDS + EXTRA_OUTER_KINDS})")
     rings = tube_rings(profile, _rows(top * S, hem * S, spacing * S), fn, cols, Z_HIP * S)
-    name = "coat" if kind in ("coat_sleeveless", "coat_long") else "jacket"
+    name = {"coat_sleeveless": "coat", "coat_long": "coat", "overskirt_long": "skirt"}.get(kind, "jacket")
     return tube_garment(name, kind, rings, panels)
 
 

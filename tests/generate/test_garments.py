@@ -121,6 +121,11 @@ def main():
     for inner in ("skirt_long", "dress_long"):
         g = outfits.build_outfit(prof, inner, "coat_long", rng)
         assert g[0].verts[:, 2].min() < 0.40 * S and g[1].verts[:, 2].min() < 0.36 * S, inner
+    # The long overskirt hangs from the waist to below the knee, over every unsleeved inner kind.
+    for i, inner in enumerate(("pants_tight", "pants_loose", "skirt", "dress_strapless")):
+        g = outfits.build_outfit(prof, inner, "overskirt_long", np.random.default_rng(30 + i))[1]
+        z = g.verts[:, 2] / S
+        assert g.name.startswith("skirt") and abs(z.max() - outfits.Z_WAIST) < 1e-6 and z.min() < 0.36, (inner, z.max(), z.min())
     # Loose trousers stand farther off the legs than tight ones (same draw otherwise).
     tight = outfits.build_outfit(prof, "pants_tight", "jacket_sleeveless", np.random.default_rng(2))[0]
     loose = outfits.build_outfit(prof, "pants_loose", "jacket_sleeveless", np.random.default_rng(2))[0]

@@ -4,7 +4,9 @@
 By default only test draws held-out kinds, and val and train draw exactly as before the key
 heldout_splits existed (no extra random number), so the large set's files stay reproducible.
 The large_unseen_val recipe is the large recipe's scene on its val motion blocks with every val
-outfit holding a held-out kind, and heldout_splits refuses train."""
+outfit holding a held-out kind, and heldout_splits refuses train. The large_overskirt recipe is
+its scene on its training blocks whose every outfit is a seen inner kind under a long overskirt,
+never a held-out kind."""
 import json
 import os
 import sys
@@ -55,6 +57,17 @@ def main():
         assert "heldout_splits" in str(e) and "train" in str(e), str(e)
     else:
         raise AssertionError("heldout_splits with train must be refused")
+    over = json.load(open(os.path.join(RECIPES, "large_overskirt.json")))
+    assert over["seed"] not in (large["seed"], unseen["seed"], 4) and over["split_ranges"] == {}
+    assert over["scene"]["motion_blocks"] == {"train": large["scene"]["motion_blocks"]["train"]}
+    for k, v in large["scene"].items():
+        if k not in ("motion_blocks", "outer_kinds"):
+            assert over["scene"][k] == v, k
+    assert over["gates"] == large["gates"]
+    ocfg = parse(ms, over["scene"])
+    pairs = draws(ms, ocfg, "train")
+    assert all(o == "overskirt_long" and i not in held for i, o in pairs), pairs[:5]
+    assert len({i for i, _ in pairs}) == len([k for k in ocfg["inner_kinds"] if k not in held])
     print("test_heldout_outfits: ok")
 
 
