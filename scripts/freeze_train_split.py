@@ -9,9 +9,12 @@ is evaluated on DATA itself once complete), and links
 every kept sequence file (and scene.json, if present) into OUT. The training split's statistics then come
 from `layersnet prepare OUT`; a run trained on OUT keeps the same data when DATA grows. With
 --max-train N only the first N of them (in the manifest's order) are kept, so that a frozen set
-can be made again later, when more files exist.
+can be made again later, when more files exist. Each --add OTHER[:N] also links the training
+sequences of another data set (those whose files exist, or the first N of them) into the training
+split, named OTHER's folder name, an underscore and their own name, with their tags: one run then
+trains on both (validation and test stay DATA's).
 
-Usage: freeze_train_split.py DATA OUT [--max-train N]
+Usage: freeze_train_split.py DATA OUT [--max-train N] [--add OTHER[:N]]...
 """
 import json
 import os
@@ -23,26 +26,44 @@ def fail(message):
     sys.exit(1)
 
 
-def main(argv):
-    max_train = None
-    if len(argv) == 5 and argv[3] == "--max-train":
-        if not argv[4].isdigit() or int(argv[4]) < 1:
-            fail(f"--max-train {argv[4]}: give a positive whole number of training sequences")
-        max_train = int(argv[4])
-    elif len(argv) != 3:
-        fail("usage: freeze_train_split.py DATA OUT [--max-train N]")
-    data, out = (os.path.realpath(a) for a in argv[1:3])
-    manifest_path = os.path.join(data, "dataset.json")
+def positive_count(text, what):
+    if not text.isdigit() or int(text) < 1:
+        fail(f"{what}: give a positive whole number of training sequences")
+    return int(text)
+
+
+def read_manifest(folder):
+    path = os.path.join(folder, "dataset.json")
     try:
-        with open(manifest_path) as f:
+        with open(path) as f:
             manifest = json.load(f)
     except (OSError, ValueError) as e:
-        fail(f"{manifest_path}: cannot read the manifest ({e}); DATA must be a data-set folder")
-    splits = manifest.get("splits")
-    if not isinstance(splits, dict) or "train" not in splits:
-        fail(f"{manifest_path}: no splits.train list; is this a data set written by layersnet generate?")
-    def present(sid):
-        return os.path.isfile(os.path.join(data, sid + ".h5"))
+        fail(f"{path}: cannot read the manifest ({e}); it must be a data-set folder")
+    if not isinstance(manifest.get("splits"), dict) or "train" not in manifest["splits"]:
+        fail(f"{path}: no splits.train list; is this a data set written by layersnet generate?")
+    return manifest
+
+
+def main(argv):
+    usage = "usage: freeze_train_split.py DATA OUT [--max-train N] [--add OTHER[:N]]..."
+    if len(argv) < 3 or argv[1].startswith("--") or argv[2].startswith("--"):
+        fail(usage)
+    max_train, added = None, []
+    rest = argv[3:]
+    while rest:
+        if len(rest) < 2 or rest[0] not in ("--max-train", "--add"):
+            fail(usage)
+        flag, value, rest = rest[0], rest[1], rest[2:]
+        if flag == "--max-train":
+            max_train = positive_count(value, "--max-train")
+        else:
+            path, _, count = value.partition(":")
+            added.append((os.path.realpath(path), positive_count(count, f"--add {value}") if count else None))
+    data, out = (os.path.realpath(a) for a in argv[1:3])
+    manifest = read_manifest(data)
+    splits = manifest["splits"]
+    def present(sid, folder=data):
+        return os.path.isfile(os.path.join(folder, sid + ".h5"))
 
     dropped = []
     for name, ids in list(splits.items()):
@@ -64,17 +85,40 @@ def main(argv):
         fail(f"{data}: no training sequence exists yet")
     if os.path.exists(os.path.join(out, "dataset.json")):
         fail(f"{out}/dataset.json exists; freeze into a new folder (a run's data must not change under it)")
+    links = {sid: os.path.join(data, sid + ".h5") for name, ids in splits.items() if name != "train" for sid in ids}
+    links.update({sid: os.path.join(data, sid + ".h5") for sid in kept_train})
+    added_record = []
+    for other, count in added:
+        other_ids = [sid for sid in read_manifest(other)["splits"]["train"] if present(sid, other)][:count]
+        if count is not None and len(other_ids) < count:
+            fail(f"--add {other}:{count}: only {len(other_ids)} training sequences exist there yet")
+        if not other_ids:
+            fail(f"--add {other}: no training sequence exists there yet")
+        prefix = os.path.basename(other) + "_"
+        tags = manifest.setdefault("tags", {})
+        for sid, tag in read_manifest(other).get("tags", {}).items():
+            if sid in other_ids:
+                tags[prefix + sid] = tag
+        for sid in other_ids:
+            if prefix + sid in links:
+                fail(f"--add {other}: the name {prefix + sid} is taken twice; add each data set once")
+            links[prefix + sid] = os.path.join(other, sid + ".h5")
+            kept_train.append(prefix + sid)
+        added_record.append({"data": other, "train_sequences": len(other_ids)})
     os.makedirs(out, exist_ok=True)
     manifest["splits"]["train"] = kept_train
-    manifest["frozen_from"] = {"data": data, "train_sequences": len(kept_train),
+    manifest["frozen_from"] = {"data": data, "train_sequences": len(kept_train) - sum(a["train_sequences"] for a in added_record),
                                "train_sequences_listed": listed}
-    for sid in sorted({s for ids in manifest["splits"].values() for s in ids}):
-        os.symlink(os.path.join(data, sid + ".h5"), os.path.join(out, sid + ".h5"))
+    if added_record:
+        manifest["frozen_from"]["added"] = added_record
+    for sid in sorted(links):
+        os.symlink(links[sid], os.path.join(out, sid + ".h5"))
     if os.path.isfile(os.path.join(data, "scene.json")):
         os.symlink(os.path.join(data, "scene.json"), os.path.join(out, "scene.json"))
     with open(os.path.join(out, "dataset.json"), "w") as f:
         json.dump(manifest, f, indent=2)
-    print(f"freeze_train_split: {out}: {len(kept_train)} of the {listed} listed training sequences, "
+    print(f"freeze_train_split: {out}: {manifest['frozen_from']['train_sequences']} of the {listed} listed training sequences, "
+          + "".join(f"{a['train_sequences']} added from {a['data']}, " for a in added_record)
           + ", ".join(f"{n} {len(ids)}" for n, ids in manifest["splits"].items() if n != "train")
           + "".join(f"; {n}: not all of its files exist yet, emptied" for n in dropped)
           + f"; next: layersnet prepare {out}")

@@ -60,6 +60,21 @@ TEST(FreezeTrainSplit, KeepsTheTrainingSequencesThatExistAndTheWholeOtherSplits)
   EXPECT_TRUE(read_manifest((dir / "no_test").string()).test.empty());
   EXPECT_EQ(read_manifest((dir / "no_test").string()).val, growing.val);
 
+  // --add links another set's training sequences under its folder's name, with their tags; its
+  // validation and test stay out, and asking for more than exist is refused.
+  DatasetManifest extra = write_synthetic_dataset((dir / "extra").string(), 3, 1, 1);
+  extra.extra["tags"] = {{"s0001", {{"wind", "windy"}}}, {"s0003", {{"wind", "calm"}}}};
+  write_manifest(extra);
+  ASSERT_EQ(freeze(dir / "growing", dir / "both", "--max-train 1 --add " + (dir / "extra").string() + ":2"), 0);
+  const DatasetManifest both = read_manifest((dir / "both").string());
+  EXPECT_EQ(both.train, (std::vector<std::string>{"s0000", "extra_" + extra.train[0], "extra_" + extra.train[1]}));
+  EXPECT_EQ(both.val, growing.val);
+  EXPECT_EQ(both.extra.at("tags").at("extra_s0001").at("wind"), "windy");
+  EXPECT_FALSE(both.extra.at("tags").contains("extra_s0003"));
+  EXPECT_EQ(both.extra.at("frozen_from").at("added").at(0).at("train_sequences"), 2);
+  EXPECT_TRUE(fs::exists(both.sequence_path("extra_" + extra.train[1])));
+  EXPECT_NE(freeze(dir / "growing", dir / "too_many", "--add " + (dir / "extra").string() + ":4"), 0);
+
   // A folder that already holds a manifest is not overwritten; an incomplete validation split is refused.
   EXPECT_NE(freeze(dir / "growing", dir / "frozen"), 0);
   fs::remove(growing.sequence_path(growing.val.front()));
