@@ -87,16 +87,18 @@ def main(argv):
         fail(f"{out}/dataset.json exists; freeze into a new folder (a run's data must not change under it)")
     links = {sid: os.path.join(data, sid + ".h5") for name, ids in splits.items() if name != "train" for sid in ids}
     links.update({sid: os.path.join(data, sid + ".h5") for sid in kept_train})
+    own_train = len(kept_train)
     added_record = []
     for other, count in added:
-        other_ids = [sid for sid in read_manifest(other)["splits"]["train"] if present(sid, other)][:count]
+        other_manifest = read_manifest(other)
+        other_ids = [sid for sid in other_manifest["splits"]["train"] if present(sid, other)][:count]
         if count is not None and len(other_ids) < count:
             fail(f"--add {other}:{count}: only {len(other_ids)} training sequences exist there yet")
         if not other_ids:
             fail(f"--add {other}: no training sequence exists there yet")
         prefix = os.path.basename(other) + "_"
         tags = manifest.setdefault("tags", {})
-        for sid, tag in read_manifest(other).get("tags", {}).items():
+        for sid, tag in other_manifest.get("tags", {}).items():
             if sid in other_ids:
                 tags[prefix + sid] = tag
         for sid in other_ids:
@@ -107,8 +109,7 @@ def main(argv):
         added_record.append({"data": other, "train_sequences": len(other_ids)})
     os.makedirs(out, exist_ok=True)
     manifest["splits"]["train"] = kept_train
-    manifest["frozen_from"] = {"data": data, "train_sequences": len(kept_train) - sum(a["train_sequences"] for a in added_record),
-                               "train_sequences_listed": listed}
+    manifest["frozen_from"] = {"data": data, "train_sequences": own_train, "train_sequences_listed": listed}
     if added_record:
         manifest["frozen_from"]["added"] = added_record
     for sid in sorted(links):
@@ -117,7 +118,7 @@ def main(argv):
         os.symlink(os.path.join(data, "scene.json"), os.path.join(out, "scene.json"))
     with open(os.path.join(out, "dataset.json"), "w") as f:
         json.dump(manifest, f, indent=2)
-    print(f"freeze_train_split: {out}: {manifest['frozen_from']['train_sequences']} of the {listed} listed training sequences, "
+    print(f"freeze_train_split: {out}: {own_train} of the {listed} listed training sequences, "
           + "".join(f"{a['train_sequences']} added from {a['data']}, " for a in added_record)
           + ", ".join(f"{n} {len(ids)}" for n, ids in manifest["splits"].items() if n != "train")
           + "".join(f"; {n}: not all of its files exist yet, emptied" for n in dropped)
