@@ -390,10 +390,26 @@ struct Correction {
   Var<T> patch, candidate;
 };
 
+// The body frames R of the patches (P, 9) and the vertices (N, 9), as host arrays and constants,
+// made once for the decoder and the integration.
+template <class T>
+struct Frames {
+  std::vector<T> patch_host, vertex_host;
+  Var<T> patch, vertex;
+};
+
+template <class T>
+Frames<T> body_frames(ad::Tape<T>& tape, const ModelInput<T>& in) {
+  Frames<T> f{frames_of(in, in.patch_body), frames_of(in, in.vertex_body), {}, {}};
+  f.patch = constant(tape, f.patch_host, in.P, 9);
+  f.vertex = constant(tape, f.vertex_host, in.N, 9);
+  return f;
+}
+
 template <class T>
 Correction<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfig& cfg, const ModelDims& m,
                      const ModelInput<T>& in, const Var<T>& emb, const Var<T>& body_x, const ForwardOptions& opt,
-                     const StateDelta<T>& delta) {
+                     const StateDelta<T>& delta, const Frames<T>& frames) {
   const int64_t N = in.N, P = in.P, d = m.d, U = in.U;
   const bool ret = cfg.rotation_equivalent;
   // Body features with a zero row for "no body vertex within R_b" (index U).
@@ -425,12 +441,12 @@ Correction<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfig
     return rotate_k_blocks(R_host, z, cfg.decoder_ret_channels);
   };
 
-  const std::vector<T> Rp_host = frames_of(in, in.patch_body);
-  const Var<T> Rp = constant(tape, Rp_host, P, 9);
+  const std::vector<T>& Rp_host = frames.patch_host;
+  const Var<T>& Rp = frames.patch;
   const Var<T> phi_p = ad::gather_rows(tape, body_tab, body_index(in.patch_body));
   const Var<T> phi_v = ad::gather_rows(tape, body_tab, body_index(in.vertex_body));
-  std::vector<T> Rv_host = frames_of(in, in.vertex_body);
-  const Var<T> Rv = constant(tape, Rv_host, N, 9);
+  const std::vector<T>& Rv_host = frames.vertex_host;
+  const Var<T>& Rv = frames.vertex;
   // Candidate rows: owning vertex, its frame, and R_v (s_v − s_p) as four 3-vectors (raw units).
   const int64_t Ec = static_cast<int64_t>(in.cand_patches.size());
   std::vector<int32_t> cand_vertex(Ec);
@@ -582,13 +598,13 @@ Correction<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfig
 // its row's frame.
 template <class T>
 Predictions<T> predict(ad::Tape<T>& tape, const ModelConfig& cfg, const ModelInput<T>& in, const Correction<T>& a,
-                       const StateDelta<T>& delta) {
+                       const StateDelta<T>& delta, const Frames<T>& frames) {
   const int64_t N = in.N, P = in.P;
   const bool ret = cfg.rotation_equivalent;
   const Var<T>& a_p = a.patch;
   const Var<T>& a_e = a.candidate;
-  const Var<T> Rp = constant(tape, frames_of(in, in.patch_body), P, 9);
-  const Var<T> Rv = constant(tape, frames_of(in, in.vertex_body), N, 9);
+  const Var<T>& Rp = frames.patch;
+  const Var<T>& Rv = frames.vertex;
   // Velocity bases: the cloth's own velocity (inertia), or in.body_carry (c, or c + v_t − c_t).
   // The vertex base is then c_v − c̄_p (c̄_p the patch mean), so x_v = x_t + c_v + a_p + a_v. c and
   // c_t are held constant under StateDelta (their dependence on the state is the body's rotation),
@@ -670,7 +686,7 @@ Predictions<T> forward(ad::Tape<T>& tape, ad::ParamStore<T>& params, const Model
   if (options.correction_scale == 0.0) {
     // The velocity base alone: a zero correction needs no network (and reads no weight).
     const Correction<T> none{tape.zeros(in.P, 3), tape.zeros(static_cast<int64_t>(in.cand_patches.size()), 3)};
-    return predict(tape, cfg, in, none, state_delta(tape, in, garment_state));
+    return predict(tape, cfg, in, none, state_delta(tape, in, garment_state), body_frames(tape, in));
   }
   StageClock graph_clock(times, &StageTimes::graph_ms);
   const Graph<T> gr = build_graph(in, m.groups);
@@ -726,7 +742,9 @@ Predictions<T> forward(ad::Tape<T>& tape, ad::ParamStore<T>& params, const Model
 
   // ---- decoder ---------------------------------------------------------------------------------------------
   StageClock decoder_clock(times, &StageTimes::decoder_ms);
-  return predict(tape, cfg, in, decode(tape, p, cfg, m, in, rows_of(st.X, 0, P), body_x, options, delta), delta);
+  const Frames<T> frames = body_frames(tape, in);
+  return predict(tape, cfg, in, decode(tape, p, cfg, m, in, rows_of(st.X, 0, P), body_x, options, delta, frames), delta,
+                 frames);
 }
 
 template <class T>
