@@ -67,6 +67,7 @@ PhysicsInput<float> physics_input_from_sample(const dataset::TrainingSample& s, 
   const int t = s.frame;
   PhysicsInput<float> in;
   in.garment_offsets = offsets;
+  in.structure = s.structure;
   // x_t and x_{t−1} in frame t+1's root coordinates: x̃_f + r_f − r_{t+1}.
   const Eigen::Vector3f shift_t = (info.translation.row(t) - info.translation.row(t + 1)).transpose();
   const Eigen::Vector3f shift_tm1 = (info.translation.row(t - 1) - info.translation.row(t + 1)).transpose();

@@ -105,6 +105,9 @@ struct PhysicsInput {
   // A k-d tree over body_pos, for callers that evaluate many x against one body (a Newton
   // solve); null: body_collision_energy builds one per call.
   std::shared_ptr<const dataset::NearestVertexIndex> body_index;
+  // Where the springs and hinges were read from (physics_input_from_sample; null when built by
+  // hand): the physics step finds its Hessian's sparsity once per structure, not once per frame.
+  std::shared_ptr<const dataset::SequenceStructure> structure;
 };
 
 // Rows [r0, r1) of an (R, 3) row-major array as float points (for the nearest-vertex queries).
@@ -163,6 +166,7 @@ PhysicsInput<U> cast_physics_input(const PhysicsInput<T>& in) {
   o.friction_rows = in.friction_rows, o.friction_anchor = cv(in.friction_anchor);
   o.friction_normal = cv(in.friction_normal), o.friction_half_weight = cv(in.friction_half_weight);
   o.body_index = in.body_index;  // built from float positions either way
+  o.structure = in.structure;
   return o;
 }
 

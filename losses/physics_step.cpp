@@ -71,57 +71,118 @@ class EnergyAt {
   ContactsAt contacts_;
 };
 
-// The approximate Hessian of N · E at x (see the header): per-vertex scalars, spring blocks,
-// body-contact blocks and the friction's tangential blocks.
-struct Hessian {
-  Vec diagonal;                                 // (N) mass and drag
-  std::vector<Block> spring;                    // (E)
-  std::vector<int32_t> contact_row;             // vertices in contact
-  std::vector<Eigen::Vector3d> contact_normal;  // their body (or inner layer) normals, scaled by sqrt(k_c)
-  std::vector<Block> diagonal_block;            // (N) each vertex's diagonal block
-  std::vector<Block> preconditioner;            // (N) inverse of each vertex's diagonal block
-  // Bending, Gauss–Newton: k_h u uᵀ with u = ∂θ/∂(x_i, x_j, x_a, x_b), stored as sqrt(k_h) u.
-  std::vector<std::array<int32_t, 4>> hinge_rows;
-  std::vector<std::array<Eigen::Vector3d, 4>> hinge_u;
-  double friction = 0;  // the friction term's weight
+// Where the approximate Hessian's blocks sit in a block-CSR matrix over the N vertices: the
+// sparsity of the springs and hinges, found once per structure (pattern_for) and filled at each
+// Newton iteration.
+struct HessianPattern {
+  std::vector<int32_t> offsets;                 // (N + 1) CSR over block rows
+  std::vector<int32_t> columns;                 // (nnz) ascending within a row
+  std::vector<int32_t> diagonal;                // (N) each row's diagonal block
+  std::vector<std::array<int32_t, 2>> spring;   // (E) blocks (i, j) and (j, i)
+  std::vector<std::array<int32_t, 12>> hinge;   // (H) blocks (p, q), p ≠ q, over the corners (i, j, a, b), p-major
+};
 
-  void multiply(const PhysicsInput<double>& in, const Vec& p, Vec& y) const {
-    const std::size_t N = diagonal.size();
-    for (std::size_t v = 0; v < N; ++v)
-      for (int c = 0; c < 3; ++c) y[3 * v + c] = diagonal[v] * p[3 * v + c];
-    for (std::size_t e = 0; e < spring.size(); ++e) {
-      const int32_t i = in.edge_i[e], j = in.edge_j[e];
-      const Eigen::Vector3d d(p[3 * i] - p[3 * j], p[3 * i + 1] - p[3 * j + 1], p[3 * i + 2] - p[3 * j + 2]);
-      const Eigen::Vector3d f = spring[e] * d;
-      for (int c = 0; c < 3; ++c) y[3 * i + c] += f[c], y[3 * j + c] -= f[c];
-    }
-    for (std::size_t h = 0; h < hinge_rows.size(); ++h) {
-      double up = 0;
-      for (int k = 0; k < 4; ++k)
-        for (int c = 0; c < 3; ++c) up += hinge_u[h][k][c] * p[3 * hinge_rows[h][k] + c];
-      for (int k = 0; k < 4; ++k)
-        for (int c = 0; c < 3; ++c) y[3 * hinge_rows[h][k] + c] += hinge_u[h][k][c] * up;
-    }
-    for (std::size_t k = 0; k < contact_row.size(); ++k) {
-      const int32_t v = contact_row[k];
-      const Eigen::Vector3d& n = contact_normal[k];
-      const double np = n[0] * p[3 * v] + n[1] * p[3 * v + 1] + n[2] * p[3 * v + 2];
-      for (int c = 0; c < 3; ++c) y[3 * v + c] += n[c] * np;
-    }
-    for (std::size_t k = 0; k < in.friction_rows.size(); ++k) {
-      const int32_t v = in.friction_rows[k];
-      const Eigen::Vector3d n(&in.friction_normal[3 * k]), q(p[3 * v], p[3 * v + 1], p[3 * v + 2]);
-      const Eigen::Vector3d t = 2 * friction * in.friction_half_weight[k] * (q - n * n.dot(q));
-      for (int c = 0; c < 3; ++c) y[3 * v + c] += t[c];
+std::array<int32_t, 4> hinge_corners(const PhysicsInput<double>& in, std::size_t k) {
+  return {in.hinge_i[k], in.hinge_j[k], in.hinge_a[k], in.hinge_b[k]};
+}
+
+HessianPattern hessian_pattern(const PhysicsInput<double>& in, int64_t N) {
+  std::vector<std::vector<int32_t>> row(static_cast<std::size_t>(N));
+  for (int64_t v = 0; v < N; ++v) row[v].push_back(static_cast<int32_t>(v));
+  for (std::size_t e = 0; e < in.edge_i.size(); ++e) {
+    row[in.edge_i[e]].push_back(in.edge_j[e]);
+    row[in.edge_j[e]].push_back(in.edge_i[e]);
+  }
+  for (std::size_t k = 0; k < in.hinge_i.size(); ++k) {
+    const std::array<int32_t, 4> c = hinge_corners(in, k);
+    for (int p = 0; p < 4; ++p)
+      for (int q = 0; q < 4; ++q)
+        if (p != q) row[c[p]].push_back(c[q]);
+  }
+  HessianPattern pattern;
+  pattern.offsets.reserve(static_cast<std::size_t>(N) + 1);
+  pattern.offsets.push_back(0);
+  for (auto& r : row) {
+    std::sort(r.begin(), r.end());
+    r.erase(std::unique(r.begin(), r.end()), r.end());
+    pattern.columns.insert(pattern.columns.end(), r.begin(), r.end());
+    pattern.offsets.push_back(static_cast<int32_t>(pattern.columns.size()));
+  }
+  auto at = [&](int32_t r, int32_t c) {
+    const auto first = pattern.columns.begin() + pattern.offsets[r], last = pattern.columns.begin() + pattern.offsets[r + 1];
+    return static_cast<int32_t>(std::lower_bound(first, last, c) - pattern.columns.begin());
+  };
+  pattern.diagonal.resize(static_cast<std::size_t>(N));
+  for (int64_t v = 0; v < N; ++v) pattern.diagonal[v] = at(static_cast<int32_t>(v), static_cast<int32_t>(v));
+  pattern.spring.resize(in.edge_i.size());
+  for (std::size_t e = 0; e < in.edge_i.size(); ++e)
+    pattern.spring[e] = {at(in.edge_i[e], in.edge_j[e]), at(in.edge_j[e], in.edge_i[e])};
+  pattern.hinge.resize(in.hinge_i.size());
+  for (std::size_t k = 0; k < in.hinge_i.size(); ++k) {
+    const std::array<int32_t, 4> c = hinge_corners(in, k);
+    int n = 0;
+    for (int p = 0; p < 4; ++p)
+      for (int q = 0; q < 4; ++q)
+        if (p != q) pattern.hinge[k][n++] = at(c[p], c[q]);
+  }
+  return pattern;
+}
+
+// The pattern of `in`'s springs and hinges: made once per sequence structure and kept for the
+// thread's last few structures (a rollout steps through one, a training thread through a few);
+// made afresh where the input names no structure.
+std::shared_ptr<const HessianPattern> pattern_for(const PhysicsInput<double>& in, int64_t N) {
+  if (!in.structure) return std::make_shared<const HessianPattern>(hessian_pattern(in, N));
+  using Entry = std::pair<std::shared_ptr<const dataset::SequenceStructure>, std::shared_ptr<const HessianPattern>>;
+  thread_local std::vector<Entry> recent;  // most recent first
+  constexpr std::size_t kKept = 8;
+  auto found = std::find_if(recent.begin(), recent.end(), [&](const Entry& e) { return e.first == in.structure; });
+  if (found != recent.end())
+    std::rotate(recent.begin(), found, found + 1);
+  else {
+    recent.insert(recent.begin(), Entry{in.structure, std::make_shared<const HessianPattern>(hessian_pattern(in, N))});
+    if (recent.size() > kKept) recent.pop_back();
+  }
+  const HessianPattern& p = *recent.front().second;
+  LAYERSNET_CHECK(static_cast<int64_t>(p.diagonal.size()) == N && p.spring.size() == in.edge_i.size() &&
+                      p.hinge.size() == in.hinge_i.size(),
+                  "physics step: the input's " << N << " vertices, " << in.edge_i.size() << " springs and "
+                                               << in.hinge_i.size() << " hinges are not its structure's");
+  return recent.front().second;
+}
+
+// The approximate Hessian of N · E at x (see the header) as block-CSR on its pattern: mass and
+// drag, the springs, bending, the body and layer contacts and the friction's tangential part.
+struct Hessian {
+  const HessianPattern* pattern = nullptr;
+  std::vector<double> blocks;         // (nnz · 9) row-major 3×3
+  std::vector<Block> preconditioner;  // (N) inverse of each vertex's diagonal block; 0 on fixed rows
+
+  int64_t rows() const { return static_cast<int64_t>(preconditioner.size()); }
+  // y = H p, one row at a time: a gather, so no row is written twice.
+  void multiply(const Vec& p, Vec& y) const {
+    const int64_t N = rows();
+    for (int64_t v = 0; v < N; ++v) {
+      double y0 = 0, y1 = 0, y2 = 0;
+      for (int32_t k = pattern->offsets[v]; k < pattern->offsets[v + 1]; ++k) {
+        const double* b = &blocks[9 * static_cast<std::size_t>(k)];
+        const double* q = &p[3 * static_cast<std::size_t>(pattern->columns[k])];
+        y0 += b[0] * q[0] + b[1] * q[1] + b[2] * q[2];
+        y1 += b[3] * q[0] + b[4] * q[1] + b[5] * q[2];
+        y2 += b[6] * q[0] + b[7] * q[1] + b[8] * q[2];
+      }
+      y[3 * v] = y0, y[3 * v + 1] = y1, y[3 * v + 2] = y2;
     }
   }
 };
+
+using RowBlock = Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>;
 
 // The layer contacts' blocks k n nᵀ on the outer garment's vertices inside the layer margin, with
 // the nearest inner vertex and its normal held still (as the body contacts hold the body still):
 // without them the Newton step meets the layer term through its gradient alone.
 void add_layer_contacts(const PhysicsInput<double>& in, const Vec& x, const PhysicsSettings& s, const ContactsAt& at_x,
-                        Hessian& h, std::vector<Block>& block) {
+                        std::vector<Block>& block) {
   const int64_t G = static_cast<int64_t>(in.garment_offsets.size()) - 1;
   if (G < 2 || s.collision_layer == 0) return;
   const int32_t o0 = in.garment_offsets[G - 1], o1 = in.garment_offsets[G];
@@ -133,24 +194,23 @@ void add_layer_contacts(const PhysicsInput<double>& in, const Vec& x, const Phys
   for (int32_t v = o0; v < o1; ++v) {
     const Eigen::Vector3d n(&at_x.layer_normal[3 * static_cast<std::size_t>(v - o0)]);
     if ((at(v) - at(at_x.layer_nearest[v - o0])).dot(n) >= s.layer_margin) continue;
-    h.contact_row.push_back(v);
-    h.contact_normal.push_back(root_k * n);
-    block[v] += h.contact_normal.back() * h.contact_normal.back().transpose();
+    const Eigen::Vector3d u = root_k * n;
+    block[v] += u * u.transpose();
   }
 }
 
 // `at_x`: the contacts the energy found at x (EnergyAt's).
-Hessian approximate_hessian(const PhysicsInput<double>& in, const Vec& x, const PhysicsSettings& s,
-                            const std::vector<uint8_t>& fixed, const ContactsAt& at_x) {
+Hessian approximate_hessian(const PhysicsInput<double>& in, const HessianPattern& pattern, const Vec& x,
+                            const PhysicsSettings& s, const std::vector<uint8_t>& fixed, const ContactsAt& at_x) {
   const int64_t N = static_cast<int64_t>(x.size() / 3);
   Hessian h;
-  h.friction = s.friction;
-  h.diagonal.resize(N);
-  for (int64_t v = 0; v < N; ++v)
-    h.diagonal[v] = 2 * s.inertia * in.inertia_weight[v] + (in.drag_weight.empty() ? 0.0 : 2 * s.drag * in.drag_weight[v]);
+  h.pattern = &pattern;
+  h.blocks.assign(9 * pattern.columns.size(), 0.0);
+  auto off_diagonal = [&](int32_t position) { return RowBlock(&h.blocks[9 * static_cast<std::size_t>(position)]); };
   std::vector<Block> block(N, Block::Zero());
-  for (int64_t v = 0; v < N; ++v) block[v].diagonal().setConstant(h.diagonal[v]);
-  h.spring.resize(in.edge_i.size());
+  for (int64_t v = 0; v < N; ++v)
+    block[v].diagonal().setConstant(2 * s.inertia * in.inertia_weight[v] +
+                                    (in.drag_weight.empty() ? 0.0 : 2 * s.drag * in.drag_weight[v]));
   for (std::size_t e = 0; e < in.edge_i.size(); ++e) {
     const int32_t i = in.edge_i[e], j = in.edge_j[e];
     const Eigen::Vector3d d(x[3 * i] - x[3 * j], x[3 * i + 1] - x[3 * j + 1], x[3 * i + 2] - x[3 * j + 2]);
@@ -161,7 +221,8 @@ Hessian approximate_hessian(const PhysicsInput<double>& in, const Vec& x, const 
       const Block along = u * u.transpose();
       K = k * (along + std::max(0.0, 1 - in.edge_rest[e] / l) * (Block::Identity() - along));
     }
-    h.spring[e] = K;
+    off_diagonal(pattern.spring[e][0]) -= K;
+    off_diagonal(pattern.spring[e][1]) -= K;
     block[i] += K, block[j] += K;
   }
   // The dihedral angle's gradient: each far corner moves along its face normal over its height
@@ -195,10 +256,14 @@ Hessian approximate_hessian(const PhysicsInput<double>& in, const Vec& x, const 
     if (degenerate) continue;
     const double root_k = std::sqrt(stiffness);
     for (auto& v : u) v *= root_k;
-    h.hinge_rows.push_back({i, j, a, b});
-    h.hinge_u.push_back(u);
     const int32_t rows[4] = {i, j, a, b};
-    for (int q = 0; q < 4; ++q) block[rows[q]] += u[q] * u[q].transpose();
+    int n = 0;
+    for (int p = 0; p < 4; ++p)
+      for (int q = 0; q < 4; ++q)
+        if (p == q)
+          block[rows[p]] += u[p] * u[p].transpose();
+        else
+          off_diagonal(pattern.hinge[k][n++]) += u[p] * u[q].transpose();
   }
   const int64_t B = static_cast<int64_t>(in.body_pos.size() / 3);
   if (B > 0 && s.collision_body != 0) {
@@ -209,12 +274,11 @@ Hessian approximate_hessian(const PhysicsInput<double>& in, const Vec& x, const 
     for (int64_t v = 0; v < N; ++v) {
       const auto [n, r] = offset_from_body(in, nearest[v], Eigen::Vector3d(x[3 * v], x[3 * v + 1], x[3 * v + 2]));
       if (r.dot(n) >= s.body_margin) continue;
-      h.contact_row.push_back(static_cast<int32_t>(v));
-      h.contact_normal.push_back(root_k * n);
-      block[v] += h.contact_normal.back() * h.contact_normal.back().transpose();
+      const Eigen::Vector3d u = root_k * n;
+      block[v] += u * u.transpose();
     }
   }
-  add_layer_contacts(in, x, s, at_x, h, block);
+  add_layer_contacts(in, x, s, at_x, block);
   for (std::size_t k = 0; k < in.friction_rows.size(); ++k) {
     const Eigen::Vector3d n(&in.friction_normal[3 * k]);
     block[in.friction_rows[k]] += 2 * s.friction * in.friction_half_weight[k] * (Block::Identity() - n * n.transpose());
@@ -223,8 +287,8 @@ Hessian approximate_hessian(const PhysicsInput<double>& in, const Vec& x, const 
   for (int64_t v = 0; v < N; ++v) {
     const bool usable = !fixed[v] && std::fabs(block[v].determinant()) > 1e-300;
     h.preconditioner[v] = usable ? Block(block[v].inverse()) : Block::Zero();
+    off_diagonal(pattern.diagonal[v]) = block[v];
   }
-  h.diagonal_block = std::move(block);
   return h;
 }
 
@@ -233,36 +297,19 @@ Hessian approximate_hessian(const PhysicsInput<double>& in, const Vec& x, const 
 // system moves the cloth when its inertia target moves by a. Fixed rows: identity, scale 0.
 dataset::BlockSystem<float> assemble_system(const PhysicsInput<double>& in, const Hessian& h, const PhysicsSettings& s,
                                             const std::vector<uint8_t>& fixed) {
-  const std::size_t N = h.diagonal.size();
-  std::vector<std::vector<std::pair<int32_t, Block>>> rows(N);
-  auto add = [&](int32_t r, int32_t c, const Block& b) {
-    if (fixed[r] || fixed[c]) return;
-    for (auto& [col, block] : rows[r])
-      if (col == c) {
-        block += b;
-        return;
-      }
-    rows[r].emplace_back(c, b);
-  };
-  for (std::size_t v = 0; v < N; ++v) add(static_cast<int32_t>(v), static_cast<int32_t>(v), h.diagonal_block[v]);
-  for (std::size_t e = 0; e < h.spring.size(); ++e) {
-    add(in.edge_i[e], in.edge_j[e], -h.spring[e]);
-    add(in.edge_j[e], in.edge_i[e], -h.spring[e]);
-  }
-  for (std::size_t k = 0; k < h.hinge_rows.size(); ++k)
-    for (int p = 0; p < 4; ++p)
-      for (int q = 0; q < 4; ++q)
-        if (p != q) add(h.hinge_rows[k][p], h.hinge_rows[k][q], h.hinge_u[k][p] * h.hinge_u[k][q].transpose());
+  const int64_t N = h.rows();
+  const HessianPattern& pattern = *h.pattern;
   dataset::BlockSystem<float> out;
-  out.offsets.reserve(N + 1);
+  out.offsets.reserve(static_cast<std::size_t>(N) + 1);
   out.offsets.push_back(0);
-  out.scale.resize(N);
-  for (std::size_t v = 0; v < N; ++v) {
-    if (fixed[v]) rows[v].emplace_back(static_cast<int32_t>(v), Block::Identity());
-    std::sort(rows[v].begin(), rows[v].end(), [](const auto& a, const auto& b) { return a.first < b.first; });
-    for (const auto& [col, block] : rows[v]) {
-      out.columns.push_back(col);
-      for (int e = 0; e < 9; ++e) out.blocks.push_back(static_cast<float>(block(e / 3, e % 3)));
+  out.scale.resize(static_cast<std::size_t>(N));
+  for (int64_t v = 0; v < N; ++v) {
+    for (int32_t k = pattern.offsets[v]; k < pattern.offsets[v + 1]; ++k) {
+      const int32_t c = pattern.columns[k];
+      if (fixed[v] ? c != v : fixed[c]) continue;
+      out.columns.push_back(c);
+      for (int e = 0; e < 9; ++e)
+        out.blocks.push_back(fixed[v] ? (e % 4 == 0 ? 1.0f : 0.0f) : static_cast<float>(h.blocks[9 * static_cast<std::size_t>(k) + e]));
     }
     out.offsets.push_back(static_cast<int32_t>(out.columns.size()));
     out.scale[v] = fixed[v] ? 0.0f : static_cast<float>(2 * s.inertia * in.inertia_weight[v]);
@@ -271,12 +318,12 @@ dataset::BlockSystem<float> assemble_system(const PhysicsInput<double>& in, cons
 }
 
 // Conjugate gradients on H p = −g over the free rows (fixed rows stay 0).
-Vec solve(const PhysicsInput<double>& in, const Hessian& h, const Vec& g, const std::vector<uint8_t>& fixed, int iterations) {
-  const std::size_t N = h.diagonal.size();
+Vec solve(const Hessian& h, const Vec& g, const std::vector<uint8_t>& fixed, int iterations) {
+  const std::size_t N = static_cast<std::size_t>(h.rows());
   Vec r(3 * N);
   for (std::size_t k = 0; k < 3 * N; ++k) r[k] = fixed[k / 3] ? 0.0 : -g[k];
   auto multiply = [&](const Vec& p, Vec& y) {
-    h.multiply(in, p, y);
+    h.multiply(p, y);
     for (std::size_t k = 0; k < 3 * N; ++k)
       if (fixed[k / 3]) y[k] = 0;
   };
@@ -312,9 +359,11 @@ dataset::Points minimise_step_energy(PhysicsInput<double> in, dataset::Points x0
   if (settings.newton_iterations > 0) at.gradient(g);
   ContactsAt contacts = at.take_contacts();  // at x, for its Hessian
   if (report) report->energy_start = e / std::max<int64_t>(N, 1), report->line_search_halvings = 0;
+  const std::shared_ptr<const HessianPattern> pattern =
+      settings.newton_iterations > 0 || system ? pattern_for(in, N) : nullptr;
   for (int it = 0; it < settings.newton_iterations; ++it) {
-    const Hessian h = approximate_hessian(in, x, s, fixed, contacts);
-    const Vec p = solve(in, h, g, fixed, settings.cg_iterations);
+    const Hessian h = approximate_hessian(in, *pattern, x, s, fixed, contacts);
+    const Vec p = solve(h, g, fixed, settings.cg_iterations);
     const double slope = dot(g, p);
     if (!(slope < 0)) break;  // at a minimum, or no descent direction
     // Backtracking (Armijo): the energy is piecewise (nearest contacts), so a full step may overshoot.
@@ -340,7 +389,7 @@ dataset::Points minimise_step_energy(PhysicsInput<double> in, dataset::Points x0
     contacts = at.take_contacts();
   }
   if (report) report->energy_end = e / std::max<int64_t>(N, 1);
-  if (system) *system = assemble_system(in, approximate_hessian(in, x, s, fixed, contacts), s, fixed);
+  if (system) *system = assemble_system(in, approximate_hessian(in, *pattern, x, s, fixed, contacts), s, fixed);
   for (int64_t v = 0; v < N; ++v)
     for (int c = 0; c < 3; ++c) x0(v, c) = static_cast<float>(x[3 * v + c]);
   return x0;

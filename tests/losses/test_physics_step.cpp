@@ -200,6 +200,58 @@ TEST(PhysicsStep, ReachesAStationaryPointAndKeepsFixedRows) {
   EXPECT_GT(gradient_norm(in, one, settings.energy, fixed), 10 * g1);
 }
 
+// The model's step at frame 5 of `seq`: its settings, input (naming the sample's structure),
+// x_t as the guess and no fixed rows.
+struct StepProblem {
+  PhysicsStepSettings settings;
+  PhysicsInput<double> in;
+  dataset::Points guess;
+  std::vector<uint8_t> fixed;
+};
+
+StepProblem step_problem(const dataset::Sequence& seq) {
+  ModelConfig m;
+  m.velocity_base = "physics";
+  const auto s = sample_for(seq, 5, m);
+  StepProblem p;
+  p.settings = physics_step_settings(m);
+  p.in = cast_physics_input<double>(physics_input_from_sample(s, seq.info, p.settings.energy));
+  const int64_t N = s.num_vertices();
+  p.guess.resize(N, 3);
+  for (int64_t v = 0; v < N; ++v)
+    for (int k = 0; k < 3; ++k) p.guess(v, k) = static_cast<float>(p.in.x_t[3 * v + k]);
+  p.fixed.assign(N, 0);
+  return p;
+}
+
+// The Hessian's sparsity is found once per sequence structure and kept: a step on the kept
+// pattern is bitwise the step on one found afresh (an input that names no structure).
+TEST(PhysicsStep, KeptSparsityGivesTheSameStep) {
+  StepProblem p = step_problem(two_layers_with_wind());
+  ASSERT_NE(p.in.structure, nullptr);
+  const dataset::Points first = minimise_step_energy(p.in, p.guess, p.fixed, p.settings);
+  const dataset::Points kept = minimise_step_energy(p.in, p.guess, p.fixed, p.settings);
+  p.in.structure = nullptr;
+  const dataset::Points fresh = minimise_step_energy(p.in, p.guess, p.fixed, p.settings);
+  EXPECT_GT((first - p.guess).cwiseAbs().maxCoeff(), 1e-4f);  // the step moved the cloth
+  EXPECT_EQ(first, kept);
+  EXPECT_EQ(first, fresh);
+}
+
+// An input whose springs are not those of the structure it names is refused, not solved on the
+// structure's kept sparsity.
+TEST(PhysicsStep, InputThatIsNotItsStructureIsRefused) {
+  StepProblem p = step_problem(two_layers_with_wind());
+  (void)minimise_step_energy(p.in, p.guess, p.fixed, p.settings);  // keeps the structure's sparsity
+  p.in.edge_i.pop_back(), p.in.edge_j.pop_back(), p.in.edge_rest.pop_back(), p.in.edge_half_k.pop_back();
+  try {
+    (void)minimise_step_energy(p.in, p.guess, p.fixed, p.settings);
+    ADD_FAILURE() << "an input with a spring fewer than its structure was solved";
+  } catch (const std::exception& e) {
+    EXPECT_NE(std::string(e.what()).find("not its structure's"), std::string::npos) << e.what();
+  }
+}
+
 // With inertia alone, the step is its inertia target: the cloth keeps its velocity relative to
 // the body surface, c + (v_t − c_t) ("body"), or in the world, v_t minus the root's acceleration
 // (the displacement is root-relative) ("world").
