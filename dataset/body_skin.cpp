@@ -42,7 +42,7 @@ BodyFrames body_frames(const Eigen::Ref<const Points>& body, const Faces& faces,
 
 SkinBinding bind_to_body(const Eigen::Ref<const Points>& x, const Eigen::Ref<const Points>& body,
                          const BodyFrames& frames, const BodyTopology& topology, bool rotate) {
-  const NearestBody nearest = nearest_body(x, body);
+  const NearestBody nearest = NearestVertexIndex::kept(body)->query(x);
   SkinBinding out;
   out.rotate = rotate;
   out.carriers.assign(static_cast<size_t>(x.rows()), {});

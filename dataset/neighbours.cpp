@@ -184,6 +184,23 @@ NearestBody NearestVertexIndex::query_within(const Eigen::Ref<const Points>& que
   return out;
 }
 
+std::shared_ptr<const NearestVertexIndex> NearestVertexIndex::kept(const Eigen::Ref<const Points>& points) {
+  thread_local std::vector<std::shared_ptr<const NearestVertexIndex>> recent;  // most recent first
+  constexpr std::size_t kKept = 4;
+  auto same = [&](const std::shared_ptr<const NearestVertexIndex>& index) {
+    const Points& p = index->tree_->points;
+    return p.rows() == points.rows() && (points.rows() == 0 || p == points);
+  };
+  auto found = std::find_if(recent.begin(), recent.end(), same);
+  if (found != recent.end()) {
+    std::rotate(recent.begin(), found, found + 1);
+  } else {
+    recent.insert(recent.begin(), std::make_shared<const NearestVertexIndex>(points));
+    if (recent.size() > kKept) recent.pop_back();
+  }
+  return recent.front();
+}
+
 NearestBody nearest_body(const Eigen::Ref<const Points>& queries, const Eigen::Ref<const Points>& body) {
   return NearestVertexIndex(body).query(queries);
 }

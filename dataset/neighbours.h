@@ -105,6 +105,11 @@ class NearestVertexIndex {
   // distance +inf. Where it finds one it equals query(); the bound prunes the tree walk, which
   // costs far less when most queries only ask whether a point is near.
   NearestBody query_within(const Eigen::Ref<const Points>& queries, float max_distance) const;
+  // The index of `points` from the calling thread's last few, built only when these points (by
+  // value) are not among them: a rollout asks for each body frame's index several times (the
+  // sample, the physics step, the post-processing, the next frame's sample). A kept index is the
+  // one a build would give.
+  static std::shared_ptr<const NearestVertexIndex> kept(const Eigen::Ref<const Points>& points);
 
  private:
   struct Tree;

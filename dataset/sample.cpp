@@ -243,8 +243,9 @@ TrainingSample build_sample(const SequenceInfo& info, const FrameWindow& w, int 
   s.body_neighbours = body_neighbours(centres, b3, o.neighbours);
   s.body_normals_next = vertex_normals(b3, info.body_faces, info.up_axis == 'y' ? Eigen::Vector3f::UnitY()
                                                                                 : Eigen::Vector3f::UnitZ());
-  s.vertex_nearest_body = nearest_body(g2, b3);
-  s.patch_nearest_body = nearest_body(centres, b3);
+  const auto body_index = NearestVertexIndex::kept(b3);
+  s.vertex_nearest_body = body_index->query(g2);
+  s.patch_nearest_body = body_index->query(centres);
   s.vertex_body_normal.resize(N, 3);
   for (int v = 0; v < N; ++v) s.vertex_body_normal.row(v) = s.body_normals_next.row(s.vertex_nearest_body.index[v]);
   s.patch_body_normal.resize(centres.rows(), 3);

@@ -122,7 +122,7 @@ dataset::Points rows_as_points(const T* xyz, int64_t r0, int64_t r1) {
 // Sets in.body_index from in.body_pos.
 template <class T>
 void index_body(PhysicsInput<T>& in) {
-  in.body_index = std::make_shared<const dataset::NearestVertexIndex>(
+  in.body_index = dataset::NearestVertexIndex::kept(
       rows_as_points(in.body_pos.data(), 0, static_cast<int64_t>(in.body_pos.size() / 3)));
 }
 

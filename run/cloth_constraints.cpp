@@ -174,10 +174,10 @@ ConstraintMoves ClothConstraints::project(const Eigen::Ref<const dataset::Points
                            x_before->allFinite();
   const bool friction = (mu > 0 || settings_.layer_friction > 0) && have_before;
   // The body does not move between passes: its normals and k-d tree serve them all.
-  std::unique_ptr<dataset::NearestVertexIndex> body_index;
+  std::shared_ptr<const dataset::NearestVertexIndex> body_index;
   dataset::Points body_normals;
   if (shell > 0 || friction) {
-    body_index = std::make_unique<dataset::NearestVertexIndex>(body);
+    body_index = dataset::NearestVertexIndex::kept(body);
     body_normals = dataset::vertex_normals(body, body_faces_);
   }
   const bool layered = outer_begin_ > 0 && outer_begin_ < x.rows();

@@ -168,5 +168,22 @@ TEST(NearestBody, BoundedSearchAgreesWithinTheBoundAndFindsNothingBeyond) {
   EXPECT_TRUE(std::isinf(NearestVertexIndex(one).query_within(at, 0.2499f).distance[0]));
 }
 
+// A kept index is handed out again for the same points (by value, not by address), a new one for
+// other points, and either answers as a fresh build does.
+TEST(NearestBody, KeptIndexIsTheSameForTheSamePointsOnly) {
+  const Points body = random_points(2000, 1.f, 7), q = random_points(300, 1.5f, 8);
+  const auto first = NearestVertexIndex::kept(body);
+  const Points copy = body;
+  EXPECT_EQ(NearestVertexIndex::kept(copy), first);
+  Points moved = body;
+  moved(1234, 2) += 1e-3f;
+  const auto other = NearestVertexIndex::kept(moved);
+  EXPECT_NE(other, first);
+  EXPECT_EQ(NearestVertexIndex::kept(body), first);  // still kept beside the other
+  const NearestBody fresh = nearest_body(q, moved), from_kept = other->query(q);
+  EXPECT_EQ(from_kept.index, fresh.index);
+  EXPECT_EQ(from_kept.distance, fresh.distance);
+}
+
 }  // namespace
 }  // namespace layersnet::dataset
