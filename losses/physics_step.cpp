@@ -206,7 +206,9 @@ Hessian approximate_hessian(const PhysicsInput<double>& in, const HessianPattern
   Hessian h;
   h.pattern = &pattern;
   h.blocks.assign(9 * pattern.columns.size(), 0.0);
-  auto off_diagonal = [&](int32_t position) { return RowBlock(&h.blocks[9 * static_cast<std::size_t>(position)]); };
+  // Off-diagonal blocks go to their place at once; the diagonal ones are summed in `block` first,
+  // for their inverses (the preconditioner).
+  auto matrix_block = [&](int32_t position) { return RowBlock(&h.blocks[9 * static_cast<std::size_t>(position)]); };
   std::vector<Block> block(N, Block::Zero());
   for (int64_t v = 0; v < N; ++v)
     block[v].diagonal().setConstant(2 * s.inertia * in.inertia_weight[v] +
@@ -221,8 +223,8 @@ Hessian approximate_hessian(const PhysicsInput<double>& in, const HessianPattern
       const Block along = u * u.transpose();
       K = k * (along + std::max(0.0, 1 - in.edge_rest[e] / l) * (Block::Identity() - along));
     }
-    off_diagonal(pattern.spring[e][0]) -= K;
-    off_diagonal(pattern.spring[e][1]) -= K;
+    matrix_block(pattern.spring[e][0]) -= K;
+    matrix_block(pattern.spring[e][1]) -= K;
     block[i] += K, block[j] += K;
   }
   // The dihedral angle's gradient: each far corner moves along its face normal over its height
@@ -263,7 +265,7 @@ Hessian approximate_hessian(const PhysicsInput<double>& in, const HessianPattern
         if (p == q)
           block[rows[p]] += u[p] * u[p].transpose();
         else
-          off_diagonal(pattern.hinge[k][n++]) += u[p] * u[q].transpose();
+          matrix_block(pattern.hinge[k][n++]) += u[p] * u[q].transpose();
   }
   const int64_t B = static_cast<int64_t>(in.body_pos.size() / 3);
   if (B > 0 && s.collision_body != 0) {
@@ -287,7 +289,7 @@ Hessian approximate_hessian(const PhysicsInput<double>& in, const HessianPattern
   for (int64_t v = 0; v < N; ++v) {
     const bool usable = !fixed[v] && std::fabs(block[v].determinant()) > 1e-300;
     h.preconditioner[v] = usable ? Block(block[v].inverse()) : Block::Zero();
-    off_diagonal(pattern.diagonal[v]) = block[v];
+    matrix_block(pattern.diagonal[v]) = block[v];
   }
   return h;
 }
