@@ -1,6 +1,8 @@
 // Spatial hash grid, k-d tree nearest queries, world edges, body ball queries, normals.
 #include "dataset/neighbours.h"
 
+#include "dataset/kept.h"
+
 #include <nanoflann.hpp>
 
 #include <algorithm>
@@ -185,20 +187,14 @@ NearestBody NearestVertexIndex::query_within(const Eigen::Ref<const Points>& que
 }
 
 std::shared_ptr<const NearestVertexIndex> NearestVertexIndex::kept(const Eigen::Ref<const Points>& points) {
-  thread_local std::vector<std::shared_ptr<const NearestVertexIndex>> recent;  // most recent first
-  constexpr std::size_t kKept = 4;
-  auto same = [&](const std::shared_ptr<const NearestVertexIndex>& index) {
-    const Points& p = index->tree_->points;
-    return p.rows() == points.rows() && (points.rows() == 0 || p == points);
-  };
-  auto found = std::find_if(recent.begin(), recent.end(), same);
-  if (found != recent.end()) {
-    std::rotate(recent.begin(), found, found + 1);
-  } else {
-    recent.insert(recent.begin(), std::make_shared<const NearestVertexIndex>(points));
-    if (recent.size() > kKept) recent.pop_back();
-  }
-  return recent.front();
+  thread_local std::vector<std::shared_ptr<const NearestVertexIndex>> recent;
+  return kept_or_made(
+      recent, 4,
+      [&](const NearestVertexIndex& index) {
+        const Points& p = index.tree_->points;
+        return p.rows() == points.rows() && (points.rows() == 0 || p == points);
+      },
+      [&] { return std::make_shared<const NearestVertexIndex>(points); });
 }
 
 NearestBody nearest_body(const Eigen::Ref<const Points>& queries, const Eigen::Ref<const Points>& body) {

@@ -1,6 +1,7 @@
 #include "losses/physics_step.h"
 
 #include "autodiff/conjugate_gradients.h"
+#include "dataset/kept.h"
 #include "dataset/neighbours.h"
 #include "autodiff/check.h"
 
@@ -75,6 +76,7 @@ class EnergyAt {
 // sparsity of the springs and hinges, found once per structure (pattern_for) and filled at each
 // Newton iteration.
 struct HessianPattern {
+  std::shared_ptr<const dataset::SequenceStructure> structure;  // where it was found; null: not kept
   std::vector<int32_t> offsets;                 // (N + 1) CSR over block rows
   std::vector<int32_t> columns;                 // (nnz) ascending within a row
   std::vector<int32_t> diagonal;                // (N) each row's diagonal block
@@ -100,6 +102,7 @@ HessianPattern hessian_pattern(const PhysicsInput<double>& in, int64_t N) {
         if (p != q) row[c[p]].push_back(c[q]);
   }
   HessianPattern pattern;
+  pattern.structure = in.structure;
   pattern.offsets.reserve(static_cast<std::size_t>(N) + 1);
   pattern.offsets.push_back(0);
   for (auto& r : row) {
@@ -132,23 +135,16 @@ HessianPattern hessian_pattern(const PhysicsInput<double>& in, int64_t N) {
 // thread's last few structures (a rollout steps through one, a training thread through a few);
 // made afresh where the input names no structure.
 std::shared_ptr<const HessianPattern> pattern_for(const PhysicsInput<double>& in, int64_t N) {
-  if (!in.structure) return std::make_shared<const HessianPattern>(hessian_pattern(in, N));
-  using Entry = std::pair<std::shared_ptr<const dataset::SequenceStructure>, std::shared_ptr<const HessianPattern>>;
-  thread_local std::vector<Entry> recent;  // most recent first
-  constexpr std::size_t kKept = 8;
-  auto found = std::find_if(recent.begin(), recent.end(), [&](const Entry& e) { return e.first == in.structure; });
-  if (found != recent.end())
-    std::rotate(recent.begin(), found, found + 1);
-  else {
-    recent.insert(recent.begin(), Entry{in.structure, std::make_shared<const HessianPattern>(hessian_pattern(in, N))});
-    if (recent.size() > kKept) recent.pop_back();
-  }
-  const HessianPattern& p = *recent.front().second;
-  LAYERSNET_CHECK(static_cast<int64_t>(p.diagonal.size()) == N && p.spring.size() == in.edge_i.size() &&
-                      p.hinge.size() == in.hinge_i.size(),
+  auto make = [&] { return std::make_shared<const HessianPattern>(hessian_pattern(in, N)); };
+  if (!in.structure) return make();
+  thread_local std::vector<std::shared_ptr<const HessianPattern>> recent;
+  const std::shared_ptr<const HessianPattern> p =
+      dataset::kept_or_made(recent, 8, [&](const HessianPattern& kept) { return kept.structure == in.structure; }, make);
+  LAYERSNET_CHECK(static_cast<int64_t>(p->diagonal.size()) == N && p->spring.size() == in.edge_i.size() &&
+                      p->hinge.size() == in.hinge_i.size(),
                   "physics step: the input's " << N << " vertices, " << in.edge_i.size() << " springs and "
                                                << in.hinge_i.size() << " hinges are not its structure's");
-  return recent.front().second;
+  return p;
 }
 
 // The approximate Hessian of N · E at x (see the header) as block-CSR on its pattern: mass and
