@@ -1,5 +1,5 @@
 #pragma once
-// Graph, geometry and solver ops (autodiff/ops_graph.h, ops_geometry.h, ops_attention.h, ops_solve.h):
+// Graph, geometry and solver ops (autodiff/ops_graph.h, ops_geometry.h, ops_attention.h, ops_solve.h, ops_cloth.h):
 // X(EnumName, function_stem). Add a line per new op.
 #define LAYERSNET_GRAPH_OPS(X)      \
   X(GatherRows, gather_rows)        \
@@ -13,4 +13,7 @@
   X(Rotate3, rotate3)               \
   X(RotMapApply, rot_map_apply)     \
   X(RotInvAttention, rot_inv_attention) \
-  X(BlockSpdSolve, block_spd_solve)
+  X(BlockSpdSolve, block_spd_solve)  \
+  X(VertexNormals, vertex_normals)   \
+  X(SpringEnergy, spring_energy)     \
+  X(DihedralAlignment, dihedral_alignment)

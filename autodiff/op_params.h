@@ -5,6 +5,7 @@
 // before backward.
 #include "autodiff/var.h"
 
+#include <array>
 #include <cstdint>
 #include <span>
 #include <variant>
@@ -100,9 +101,28 @@ struct BlockSpd {
   T tolerance = T(1e-6);             // stop when the preconditioned residual is this fraction of the start's
 };
 
+// VertexNormals (autodiff/ops_cloth.h): the faces (F · 3).
+struct FaceParams {
+  std::span<const int32_t> faces;
+};
+
+// SpringEnergy: each spring's ends (E) and its rest length and half stiffness (E).
+template <class T>
+struct SpringParams {
+  std::span<const int32_t> i, j;
+  std::span<const T> rest, half_k;
+};
+
+// DihedralAlignment: each hinge's corners i, j, a, p, q, b (H each) and its weights (H).
+template <class T>
+struct DihedralParams {
+  std::array<std::span<const int32_t>, 6> corners;
+  std::span<const T> k_cos, k_sin;
+};
+
 template <class T>
 using OpParams = std::variant<std::monostate, ScaleParams<T>, HingeSqParams<T>, ReduceParams<T>, ConcatColsParams<T>,
                               MlpParams<T>, SliceColsParams, RowIndexParams, SegmentParams, RowNormalizeParams<T>, RotationParams,
-                              RiaParams<T>, BlockSpd<T>>;
+                              RiaParams<T>, BlockSpd<T>, FaceParams, SpringParams<T>, DihedralParams<T>>;
 
 }  // namespace layersnet::ad

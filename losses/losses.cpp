@@ -1,5 +1,7 @@
 #include "losses/losses.h"
 
+#include "autodiff/ops_cloth.h"
+
 #include "dataset/neighbours.h"
 #include "dataset/patches.h"
 #include "model/params_layout.h"
@@ -56,25 +58,6 @@ void set_target_edges(LossInput<T>& L) {
   }
 }
 
-template <class T>
-Var<T> vertex_normals(ad::Tape<T>& tape, const Var<T>& x, const std::vector<int32_t>& faces) {
-  const int64_t F = static_cast<int64_t>(faces.size() / 3);
-  std::vector<int32_t> corner[3];
-  for (int k = 0; k < 3; ++k) {
-    corner[k].resize(F);
-    for (int64_t f = 0; f < F; ++f) corner[k][f] = faces[3 * f + k];
-  }
-  const Var<T> v0 = ad::gather_rows(tape, x, corner[0]), v1 = ad::gather_rows(tape, x, corner[1]),
-               v2 = ad::gather_rows(tape, x, corner[2]);
-  const Var<T> fn = ad::row_normalize(tape, ad::cross3(tape, ad::sub(tape, v2, v1), ad::sub(tape, v0, v1)));
-  // Each face adds its unit normal to its three corners: one scatter over the stacked corners.
-  std::vector<int32_t> idx(corner[0]);
-  idx.insert(idx.end(), corner[1].begin(), corner[1].end());
-  idx.insert(idx.end(), corner[2].begin(), corner[2].end());
-  const Var<T> fn3 = ad::concat_rows(tape, ad::concat_rows(tape, fn, fn), fn);
-  return ad::row_normalize(tape, ad::scatter_add_rows(tape, fn3, idx, x.rows));
-}
-
 // Mean squared error of the zero-output prediction x − a (columns 0–2 minus 6–8 of a (n, 9)
 // prediction) against target (n, 3), floored at (1 mm)² = 1e-4 units² per coordinate; 1 when not relative.
 template <class T>
@@ -113,7 +96,7 @@ LossTerms<T> compute_losses(ad::Tape<T>& tape, ad::ParamStore<T>& params, const 
   const int64_t G = static_cast<int64_t>(tg.garment_offsets.size()) - 1;
   const bool layer_term = lc.collision_layer != 0 && G >= 2;
   Var<T> normals;
-  if (lc.normal != 0 || layer_term) normals = vertex_normals(tape, x, tg.faces);
+  if (lc.normal != 0 || layer_term) normals = ad::vertex_normals(tape, x, std::span<const int32_t>(tg.faces));
   if (lc.normal != 0)
     add_term(ad::mean_all(tape, ad::squared_error(tape, normals, model::constant(tape, tg.target_normals, N, 3))),
              lc.normal, out.normal);
@@ -177,8 +160,6 @@ LossTerms<T> compute_losses(ad::Tape<T>& tape, ad::ParamStore<T>& params, const 
 
 template void set_target_edges(LossInput<float>&);
 template void set_target_edges(LossInput<double>&);
-template Var<float> vertex_normals(ad::Tape<float>&, const Var<float>&, const std::vector<int32_t>&);
-template Var<double> vertex_normals(ad::Tape<double>&, const Var<double>&, const std::vector<int32_t>&);
 template LossTerms<float> compute_losses(ad::Tape<float>&, ad::ParamStore<float>&, const ModelConfig&, const LossConfig&,
                                          const LossInput<float>&, const model::Predictions<float>&);
 template LossTerms<double> compute_losses(ad::Tape<double>&, ad::ParamStore<double>&, const ModelConfig&,

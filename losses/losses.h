@@ -74,9 +74,4 @@ LossTerms<T> compute_losses(ad::Tape<T>& tape, ad::ParamStore<T>& params, const 
                             const LossConfig& loss_config, const LossInput<T>& target,
                             const model::Predictions<T>& pred);
 
-// Vertex normals on the tape: normalised sum of unit face normals cross3(v2 − v1, v0 − v1).
-// x: (N, 3), faces (F, 3) -> (N, 3).
-template <class T>
-ad::Var<T> vertex_normals(ad::Tape<T>& tape, const ad::Var<T>& x, const std::vector<int32_t>& faces);
-
 }  // namespace layersnet::losses

@@ -1,5 +1,6 @@
 #include "losses/physics.h"
 
+#include "autodiff/ops_cloth.h"
 #include "autodiff/ops_dense.h"
 #include "autodiff/ops_geometry.h"
 #include "autodiff/ops_graph.h"
@@ -167,22 +168,14 @@ Var<T> drag_energy(ad::Tape<T>& tape, const Var<T>& x, const PhysicsInput<T>& in
 
 template <class T>
 Var<T> stretch_energy(ad::Tape<T>& tape, const Var<T>& x, const PhysicsInput<T>& in) {
-  const Var<T> length = ad::row_norm(tape, ad::sub(tape, ad::gather_rows(tape, x, in.edge_i), ad::gather_rows(tape, x, in.edge_j)));
-  return weighted_sum(tape, ad::squared_error(tape, length, column(tape, in.edge_rest, 1)), in.edge_half_k);
+  return ad::spring_energy<T>(tape, x, in.edge_i, in.edge_j, in.edge_rest, in.edge_half_k);
 }
 
 template <class T>
 Var<T> bending_energy(ad::Tape<T>& tape, const Var<T>& x, const PhysicsInput<T>& in) {
-  auto at = [&](const std::vector<int32_t>& idx) { return ad::gather_rows(tape, x, idx); };
-  const Var<T> xi = at(in.hinge_i), xj = at(in.hinge_j), xa = at(in.hinge_a);
-  const Var<T> xp = at(in.hinge_p), xq = at(in.hinge_q), xb = at(in.hinge_b);
-  const Var<T> nA = ad::row_normalize(tape, ad::cross3(tape, ad::sub(tape, xj, xi), ad::sub(tape, xa, xi)));
-  const Var<T> nB = ad::row_normalize(tape, ad::cross3(tape, ad::sub(tape, xq, xp), ad::sub(tape, xb, xp)));
-  const Var<T> e = ad::row_normalize(tape, ad::sub(tape, xi, xj));
-  const Var<T> cos_t = ad::row_sum(tape, ad::mul(tape, nA, nB));                          // cos θ
-  const Var<T> sin_t = ad::row_sum(tape, ad::mul(tape, ad::cross3(tape, nA, nB), e));    // sin θ
-  // Σ k (1 − cos θ cos θ0 − sin θ sin θ0) = Σ k − Σ k cos θ0 · cos θ − Σ k sin θ0 · sin θ.
-  const Var<T> aligned = ad::add(tape, weighted_sum(tape, cos_t, in.hinge_k_cos0), weighted_sum(tape, sin_t, in.hinge_k_sin0));
+  // Σ k (1 − cos(θ − θ0)) = Σ k − Σ k cos(θ − θ0).
+  const Var<T> aligned = ad::dihedral_alignment<T>(tape, x, in.hinge_i, in.hinge_j, in.hinge_a, in.hinge_p, in.hinge_q,
+                                                   in.hinge_b, in.hinge_k_cos0, in.hinge_k_sin0);
   const T k_sum = static_cast<T>(in.hinge_k_sum);
   return ad::sub(tape, tape.constant(&k_sum, 1, 1), aligned);
 }
@@ -219,19 +212,7 @@ Var<T> layer_collision_energy(ad::Tape<T>& tape, const Var<T>& x, const PhysicsI
   for (std::size_t f = 0; f < in.faces.size() / 3; ++f)
     if (in.faces[3 * f] < o0) inner_faces.insert(inner_faces.end(), in.faces.begin() + 3 * f, in.faces.begin() + 3 * f + 3);
   const Var<T> inner = model::rows_of(x, 0, o0);
-  // Unit vertex normals: normalised sum of the unit face normals (as losses::vertex_normals).
-  const int64_t F = static_cast<int64_t>(inner_faces.size() / 3);
-  std::vector<int32_t> corner[3];
-  for (int k = 0; k < 3; ++k)
-    for (int64_t f = 0; f < F; ++f) corner[k].push_back(inner_faces[3 * f + k]);
-  const Var<T> v0 = ad::gather_rows(tape, inner, corner[0]), v1 = ad::gather_rows(tape, inner, corner[1]),
-               v2 = ad::gather_rows(tape, inner, corner[2]);
-  const Var<T> fn = ad::row_normalize(tape, ad::cross3(tape, ad::sub(tape, v2, v1), ad::sub(tape, v0, v1)));
-  std::vector<int32_t> all(corner[0]);
-  all.insert(all.end(), corner[1].begin(), corner[1].end());
-  all.insert(all.end(), corner[2].begin(), corner[2].end());
-  const Var<T> normals =
-      ad::row_normalize(tape, ad::scatter_add_rows(tape, ad::concat_rows(tape, ad::concat_rows(tape, fn, fn), fn), all, o0));
+  const Var<T> normals = ad::vertex_normals<T>(tape, inner, inner_faces);
   const Var<T> normal = ad::gather_rows(tape, normals, idx);
   if (nearest_out) *nearest_out = idx;
   if (normal_out) normal_out->assign(normal.value, normal.value + 3 * normal.rows);

@@ -150,24 +150,6 @@ TEST(Losses, EdgeStrainHandCountedAndGradcheck) {
   EXPECT_TRUE(report.ok) << report.failures;
 }
 
-TEST(Losses, VertexNormalsGradcheck) {
-  // A bent 3x3 grid of vertices (8 triangles).
-  std::vector<int32_t> faces;
-  for (int i = 0; i < 2; ++i)
-    for (int j = 0; j < 2; ++j) {
-      const int a = 3 * i + j, b = a + 3, c = a + 4, d = a + 1;
-      faces.insert(faces.end(), {a, b, c, a, c, d});
-    }
-  ad::RowMat<double> x(9, 3);
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j) x.row(3 * i + j) << i, j, 0.3 * std::sin(i + 2.0 * j);
-  const auto f = [&](ad::Tape<double>& tape, const std::vector<ad::Var<double>>& in) {
-    return vertex_normals(tape, in[0], faces);
-  };
-  const auto report = ad::gradcheck(f, {ad::GradcheckInput{x}});
-  EXPECT_TRUE(report.ok) << report.failures;
-}
-
 // With orthonormal columns, ‖W Wᵀ − I_d‖² = d − c and ‖Wᵀ W − I_c‖² = 0 for W (d, c): official
 // sizes give 16·(16 − 3) + (128 − 3) = 333 at initialisation (the official penalty's floor); our default
 // decoder map with k = 8 channels (c = 24) gives 16·13 + (128 − 24) = 312.
