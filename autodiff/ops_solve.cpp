@@ -45,8 +45,8 @@ std::vector<double> solve(const BlockSpd<T>& A, const T* rhs, bool scale_rhs) {
   for (int64_t r = 0; r < N; ++r)
     for (int c = 0; c < 3; ++c)
       rhs_scaled[3 * r + c] = (scale_rhs ? static_cast<double>(A.scale[r]) : 1.0) * static_cast<double>(rhs[3 * r + c]);
-  auto multiply = [&](const std::vector<double>& p, std::vector<double>& y) {
-    for (int64_t r = 0; r < N; ++r) {
+  auto multiply = [&](const std::vector<double>& p, std::vector<double>& y, int64_t r0, int64_t r1) {
+    for (int64_t r = r0; r < r1; ++r) {
       Eigen::Vector3d acc = Eigen::Vector3d::Zero();
       for (int32_t k = A.offsets[r]; k < A.offsets[r + 1]; ++k) {
         const T* b = &A.blocks[9 * k];
@@ -58,8 +58,8 @@ std::vector<double> solve(const BlockSpd<T>& A, const T* rhs, bool scale_rhs) {
       for (int i = 0; i < 3; ++i) y[3 * r + i] = acc[i];
     }
   };
-  auto precondition = [&](const std::vector<double>& from, std::vector<double>& to) {
-    for (int64_t r = 0; r < N; ++r) {
+  auto precondition = [&](const std::vector<double>& from, std::vector<double>& to, int64_t r0, int64_t r1) {
+    for (int64_t r = r0; r < r1; ++r) {
       const Eigen::Vector3d y = inverse_diagonal[r] * Eigen::Vector3d(from[3 * r], from[3 * r + 1], from[3 * r + 2]);
       for (int c = 0; c < 3; ++c) to[3 * r + c] = y[c];
     }

@@ -6,6 +6,7 @@
 #include "autodiff/check.h"
 
 #include <Eigen/Dense>
+#include <omp.h>
 
 #include <algorithm>
 #include <array>
@@ -155,10 +156,9 @@ struct Hessian {
   std::vector<Block> preconditioner;  // (N) inverse of each vertex's diagonal block; 0 on fixed rows
 
   int64_t rows() const { return static_cast<int64_t>(preconditioner.size()); }
-  // y = H p, one row at a time: a gather, so no row is written twice.
-  void multiply(const Vec& p, Vec& y) const {
-    const int64_t N = rows();
-    for (int64_t v = 0; v < N; ++v) {
+  // Rows [r0, r1) of y = H p, one row at a time: a gather, so no row is written twice.
+  void multiply(const Vec& p, Vec& y, int64_t r0, int64_t r1) const {
+    for (int64_t v = r0; v < r1; ++v) {
       double y0 = 0, y1 = 0, y2 = 0;
       for (int32_t k = pattern->offsets[v]; k < pattern->offsets[v + 1]; ++k) {
         const double* b = &blocks[9 * static_cast<std::size_t>(k)];
@@ -315,23 +315,29 @@ dataset::BlockSystem<float> assemble_system(const PhysicsInput<double>& in, cons
   return out;
 }
 
-// Conjugate gradients on H p = −g over the free rows (fixed rows stay 0).
+// Rows a thread of the conjugate gradients takes at least: below that, meeting the other threads
+// three times an iteration costs more than the rows' share of the product.
+constexpr int64_t kSolveRowsPerThread = 1024;
+
+// Conjugate gradients on H p = −g over the free rows (fixed rows stay 0), on the threads OpenMP
+// offers outside a parallel region.
 Vec solve(const Hessian& h, const Vec& g, const std::vector<uint8_t>& fixed, int iterations) {
-  const std::size_t N = static_cast<std::size_t>(h.rows());
-  Vec r(3 * N);
-  for (std::size_t k = 0; k < 3 * N; ++k) r[k] = fixed[k / 3] ? 0.0 : -g[k];
-  auto multiply = [&](const Vec& p, Vec& y) {
-    h.multiply(p, y);
-    for (std::size_t k = 0; k < 3 * N; ++k)
-      if (fixed[k / 3]) y[k] = 0;
+  const int64_t N = h.rows();
+  Vec r(3 * static_cast<std::size_t>(N));
+  for (std::size_t k = 0; k < r.size(); ++k) r[k] = fixed[k / 3] ? 0.0 : -g[k];
+  auto multiply = [&](const Vec& p, Vec& y, int64_t r0, int64_t r1) {
+    h.multiply(p, y, r0, r1);
+    for (int64_t v = r0; v < r1; ++v)
+      if (fixed[v]) y[3 * v] = y[3 * v + 1] = y[3 * v + 2] = 0;
   };
-  auto precondition = [&](const Vec& from, Vec& to) {
-    for (std::size_t v = 0; v < N; ++v) {
+  auto precondition = [&](const Vec& from, Vec& to, int64_t r0, int64_t r1) {
+    for (int64_t v = r0; v < r1; ++v) {
       const Eigen::Vector3d y = h.preconditioner[v] * Eigen::Vector3d(from[3 * v], from[3 * v + 1], from[3 * v + 2]);
       for (int c = 0; c < 3; ++c) to[3 * v + c] = y[c];
     }
   };
-  return ad::conjugate_gradients(std::move(r), multiply, precondition, iterations, 1e-8);  // relative residual 1e-4
+  const int threads = omp_in_parallel() ? 1 : static_cast<int>(std::clamp<int64_t>(N / kSolveRowsPerThread, 1, omp_get_max_threads()));
+  return ad::conjugate_gradients(std::move(r), multiply, precondition, iterations, 1e-8, threads);  // relative residual 1e-4
 }
 
 }  // namespace

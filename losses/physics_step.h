@@ -20,7 +20,8 @@
 // The inertia target is Blender's 2x_t − x_{t−1} ("world", the default), or the cloth's velocity
 // relative to the body surface kept, x_t + c + (v_t − c_t) ("body": cloth in contact moves with
 // the body as friction makes Blender's do; 3–4 % further from Blender over 36 frames).
-// Deterministic: sequential loops, double precision.
+// Deterministic: the same bits on any thread count (the conjugate gradients, the one part on
+// threads, sum in fixed chunks of rows), double precision.
 #include "dataset/sample.h"
 #include "dataset/sequence.h"
 #include "losses/physics.h"
