@@ -153,21 +153,29 @@ std::shared_ptr<const HessianPattern> pattern_for(const PhysicsInput<double>& in
 struct Hessian {
   const HessianPattern* pattern = nullptr;
   std::vector<double> blocks;         // (nnz · 9) row-major 3×3
+  std::vector<double> padded;         // (nnz · 12) the same blocks by columns, each padded to 4 (for the product)
   std::vector<Block> preconditioner;  // (N) inverse of each vertex's diagonal block; 0 on fixed rows
 
   int64_t rows() const { return static_cast<int64_t>(preconditioner.size()); }
-  // Rows [r0, r1) of y = H p, one row at a time: a gather, so no row is written twice.
+  void pad_columns() {
+    const std::size_t nnz = blocks.size() / 9;
+    padded.assign(12 * nnz, 0.0);
+    for (std::size_t k = 0; k < nnz; ++k)
+      for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c) padded[12 * k + 4 * c + r] = blocks[9 * k + 3 * r + c];
+  }
+  // Rows [r0, r1) of y = H p, one row at a time: a gather, so no row is written twice; each block
+  // adds its three columns times p's entries as 4-wide vectors.
   void multiply(const Vec& p, Vec& y, int64_t r0, int64_t r1) const {
+    using V4 = Eigen::Vector4d;
     for (int64_t v = r0; v < r1; ++v) {
-      double y0 = 0, y1 = 0, y2 = 0;
+      V4 acc = V4::Zero();
       for (int32_t k = pattern->offsets[v]; k < pattern->offsets[v + 1]; ++k) {
-        const double* b = &blocks[9 * static_cast<std::size_t>(k)];
+        const double* b = &padded[12 * static_cast<std::size_t>(k)];
         const double* q = &p[3 * static_cast<std::size_t>(pattern->columns[k])];
-        y0 += b[0] * q[0] + b[1] * q[1] + b[2] * q[2];
-        y1 += b[3] * q[0] + b[4] * q[1] + b[5] * q[2];
-        y2 += b[6] * q[0] + b[7] * q[1] + b[8] * q[2];
+        acc += Eigen::Map<const V4>(b) * q[0] + Eigen::Map<const V4>(b + 4) * q[1] + Eigen::Map<const V4>(b + 8) * q[2];
       }
-      y[3 * v] = y0, y[3 * v + 1] = y1, y[3 * v + 2] = y2;
+      y[3 * v] = acc[0], y[3 * v + 1] = acc[1], y[3 * v + 2] = acc[2];
     }
   }
 };
@@ -287,6 +295,7 @@ Hessian approximate_hessian(const PhysicsInput<double>& in, const HessianPattern
     h.preconditioner[v] = usable ? Block(block[v].inverse()) : Block::Zero();
     matrix_block(pattern.diagonal[v]) = block[v];
   }
+  h.pad_columns();
   return h;
 }
 
