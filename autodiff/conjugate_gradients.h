@@ -16,13 +16,13 @@ namespace layersnet::ad {
 // The threads of one parallel region meet here without sleeping. Between the conjugate
 // gradients' steps a wait lasts microseconds, less than waking a thread that sleeps in OpenMP's
 // own barrier (layersnet runs with OMP_WAIT_POLICY=PASSIVE); a waiter that has spun for longer
-// yields its core, so a partner that lost its core gets it back soon.
+// yields its core, so a partner that lost its core gets it back soon. Every caller passes the
+// same team size: the threads OpenMP gave the region, which may be fewer than it was asked for.
 class SpinBarrier {
  public:
-  explicit SpinBarrier(int threads) : threads_(threads) {}
-  void wait() {
+  void wait(int team) {
     const uint32_t generation = generation_.load(std::memory_order_acquire);
-    if (arrived_.fetch_add(1, std::memory_order_acq_rel) + 1 == threads_) {
+    if (arrived_.fetch_add(1, std::memory_order_acq_rel) + 1 == team) {
       arrived_.store(0, std::memory_order_relaxed);
       generation_.fetch_add(1, std::memory_order_release);
       return;
@@ -40,7 +40,6 @@ class SpinBarrier {
 
  private:
   static constexpr int kSpinsBeforeYield = 2000;
-  const int threads_;
   std::atomic<int> arrived_{0};
   std::atomic<uint32_t> generation_{0};
 };
@@ -77,14 +76,14 @@ std::vector<double> conjugate_gradients(std::vector<double> r, Multiply&& multip
     return s;
   };
   threads = static_cast<int>(std::clamp<int64_t>(threads, 1, std::max<int64_t>(chunks, 1)));
-  SpinBarrier barrier(threads);
+  SpinBarrier barrier;
 #pragma omp parallel num_threads(threads) if (threads > 1)
   {
     const int64_t team = omp_get_num_threads(), me = omp_get_thread_num();
     const int64_t c0 = chunks * me / team, c1 = chunks * (me + 1) / team;  // this thread's chunks
     const int64_t r0 = c0 * kConjugateGradientChunkRows, r1 = std::min(rows, c1 * kConjugateGradientChunkRows);
     auto sync = [&] {
-      if (team > 1) barrier.wait();
+      if (team > 1) barrier.wait(static_cast<int>(team));
     };
     precondition(r, z, r0, r1);
     for (int64_t k = 3 * r0; k < 3 * r1; ++k) d[k] = z[k];

@@ -64,6 +64,19 @@ TEST(ConjugateGradients, SolvesTheSystemWithTheSameBitsOnAnyThreadCount) {
   EXPECT_EQ(solve_on(a, b, 2, 7), solve_on(a, b, 1, 7));
 }
 
+// Called from inside a parallel region (training's samples), each call runs on the one thread
+// OpenMP gives it, and gives the one-thread answer.
+TEST(ConjugateGradients, InsideAParallelRegionEachCallIsOneThread) {
+  const BandSystem a(3000, 10);
+  std::vector<double> b(3 * 3000, 1.0);
+  const std::vector<double> one = solve_on(a, b, 1, 40);
+  std::vector<std::vector<double>> inside(2);
+#pragma omp parallel for num_threads(2)
+  for (int k = 0; k < 2; ++k) inside[k] = solve_on(a, b, 2, 40);
+  EXPECT_EQ(inside[0], one);
+  EXPECT_EQ(inside[1], one);
+}
+
 TEST(ConjugateGradients, FewerRowsThanThreadsAndNoRows) {
   const BandSystem a(5, 9);
   std::vector<double> b(15, 1.0);
