@@ -1,7 +1,6 @@
 #include "losses/losses.h"
 
 #include "autodiff/ops_cloth.h"
-
 #include "dataset/neighbours.h"
 #include "dataset/patches.h"
 #include "model/params_layout.h"
