@@ -142,10 +142,10 @@ def _mesh_world(obj):
 
 def import_body(decimate_ratio):
     """The decimated body at x10 scale, transforms applied. Returns the mesh object."""
-    tmp = tempfile.mkdtemp(prefix="layersnet_body_")
-    with zipfile.ZipFile(HUMAN_ZAE) as z:
-        z.extract("human.dae", tmp)
-    bpy.ops.wm.collada_import(filepath=os.path.join(tmp, "human.dae"))
+    with tempfile.TemporaryDirectory(prefix="layersnet_body_") as tmp:  # gone once imported
+        with zipfile.ZipFile(HUMAN_ZAE) as z:
+            z.extract("human.dae", tmp)
+        bpy.ops.wm.collada_import(filepath=os.path.join(tmp, "human.dae"))
     body = bpy.data.objects["human-base"]
     for o in list(bpy.data.objects):
         if o is not body:
