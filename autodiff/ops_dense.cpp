@@ -145,13 +145,17 @@ void unary_backward(const Var<T>& x, const Var<T>& out, F&& f) {
 
 namespace {
 
-// 16 chunks for large N (balances 1, 2, 4, 8 threads); chunks of >= 256 rows otherwise, so that
-// a rollout's token projections (a few thousand rows) use the threads too.
-int64_t linear_chunks(int64_t n) { return std::clamp<int64_t>(n / 256, 1, 16); }
+// 16 chunks for large N (balances 1, 2, 4, 8 threads); chunks of >= 256 rows otherwise. Eigen's
+// product rounds a row by where it falls in the call, so the chunks fix the float32 results
+// (training's and float32 rollouts'). Under bf16 products, an inference-only mode, chunks of >= 64
+// rows split a frame's few hundred patch tokens over the threads with one fork per op, not one
+// per layer and row block inside it (docs/decisions.md, "Rollouts' threads spin a moment before
+// they sleep").
+int64_t linear_chunks(int64_t n, bool fine) { return std::clamp<int64_t>(n / (fine ? 64 : 256), 1, 16); }
 
 template <class F>
-void for_linear_chunks(int64_t n, int64_t width, F&& f) {
-  const int64_t chunks = linear_chunks(n);
+void for_linear_chunks(int64_t n, int64_t width, bool fine, F&& f) {
+  const int64_t chunks = linear_chunks(n, fine);
 #pragma omp parallel for schedule(dynamic, 1) if (chunks > 1 && run_parallel(n, width))
   for (int64_t k = 0; k < chunks; ++k) {
     const int64_t r0 = n * k / chunks, r1 = n * (k + 1) / chunks;
@@ -190,9 +194,9 @@ void dense_block(const T* x, int64_t n, const ConstMatMap<T>& W, const T* b, con
 // null; out: (N, Cout).
 template <class T>
 void linear_forward(const ConstMatMap<T>& x, const ConstMatMap<T>& W, const T* b, bool relu, MatMap<T> out,
-                    const T* residual = nullptr) {
+                    bool fine_chunks, const T* residual = nullptr) {
   const int64_t block = cache_block_rows(out.cols()), cin = x.cols(), cout = out.cols();
-  for_linear_chunks(x.rows(), cin + cout, [&](int64_t, int64_t c0, int64_t c_rows) {
+  for_linear_chunks(x.rows(), cin + cout, fine_chunks, [&](int64_t, int64_t c0, int64_t c_rows) {
     for (int64_t r0 = c0; r0 < c0 + c_rows; r0 += block)
       dense_block(x.data() + r0 * cin, std::min(block, c0 + c_rows - r0), W, b, residual ? residual + r0 * cout : nullptr,
                   relu, out.data() + r0 * cout);
@@ -207,13 +211,13 @@ void linear_forward(const ConstMatMap<T>& x, const ConstMatMap<T>& W, const T* b
 template <class T>
 void linear_backward(const ConstMatMap<T>& x, const ConstMatMap<T>& W, const ConstMatMap<T>& dy, T* dx, T* dW,
                      T* db, const T* y = nullptr, T* dz = nullptr, bool assign_dx = false) {
-  const int64_t n = x.rows(), cin = x.cols(), cout = W.rows(), chunks = linear_chunks(n);
+  const int64_t n = x.rows(), cin = x.cols(), cout = W.rows(), chunks = linear_chunks(n, false);
   // Per-chunk partials [dW_k (cout*cin) | db_k (cout)]; grows once, then reused.
   static thread_local std::vector<T> partial;
   const int64_t stride = cout * cin + cout;
   if (chunks > 1 && (dW || db)) partial.resize(static_cast<std::size_t>(chunks * stride));
   T* const base = partial.data();  // captured: inside the workers `partial` names THEIR buffer
-  for_linear_chunks(n, cin + cout, [&](int64_t k, int64_t r0, int64_t rows) {
+  for_linear_chunks(n, cin + cout, false, [&](int64_t k, int64_t r0, int64_t rows) {
     if (y) {
       MatMap<T> dz_k(dz + r0 * cout, rows, cout);
       dz_k = (ConstMatMap<T>(y + r0 * cout, rows, cout).array() > T(0)).select(dy.middleRows(r0, rows), T(0));
@@ -282,7 +286,8 @@ Var<T> linear_op(Tape<T>& tape, const Var<T>& x, const Var<T>& W, const Var<T>& 
   }
   const bool grad = tape.wants_grad({x, W, b, residual});
   Var<T> out = tape.new_var(x.rows, W.rows, grad);
-  linear_forward<T>({x.value, x.rows, x.cols}, {W.value, W.rows, W.cols}, b.value, relu, out.val(), residual.value);
+  linear_forward<T>({x.value, x.rows, x.cols}, {W.value, W.rows, W.cols}, b.value, relu, out.val(),
+                    tape.matmul_precision() == MatmulPrecision::kBFloat16, residual.value);
   if (grad) tape.record(relu ? OpKind::LinearRelu : OpKind::Linear, out, {x, W, b, residual});
   return out;
 }
@@ -369,7 +374,8 @@ Var<T> mlp(Tape<T>& tape, const Var<T>& x, std::span<const Var<T>> weights, std:
   for (int64_t i = 0; i < L; ++i) packed[i] = bf16_weights_of(tape, weights[i], "mlp");
 
   const int64_t block = cache_block_rows(widest);
-  for_linear_chunks(N, width_sum, [&](int64_t, int64_t c0, int64_t c_rows) {
+  const bool fine_chunks = tape.matmul_precision() == MatmulPrecision::kBFloat16;
+  for_linear_chunks(N, width_sum, fine_chunks, [&](int64_t, int64_t c0, int64_t c_rows) {
     T* ping = save ? nullptr : mlp_block_scratch<T>(static_cast<std::size_t>(2 * block * widest));
     for (int64_t r0 = c0; r0 < c0 + c_rows; r0 += block) {
       const int64_t n = std::min(block, c0 + c_rows - r0);

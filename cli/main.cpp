@@ -11,6 +11,7 @@
 #include <cstdlib>
 #include <exception>
 #include <map>
+#include <string_view>
 
 namespace layersnet::cli {
 std::vector<CommandEntry>& command_registry() {
@@ -26,6 +27,14 @@ std::vector<CommandEntry>& bench_registry() {
 namespace {
 using namespace layersnet::cli;
 
+// Rounds of libgomp's wait loop before an idle thread sleeps, for rollouts: about 1 ms of one
+// core per idle gap on the machine measured (docs/decisions.md).
+constexpr const char* kRolloutSpinCount = "30000";
+
+bool runs_rollouts(std::string_view command) {
+  return command == "simulate" || command == "eval" || command == "stress" || command == "export";
+}
+
 void add_entries(CLI::App& parent, std::vector<CommandEntry>& entries, std::map<CLI::App*, CommandAction>& actions) {
   std::sort(entries.begin(), entries.end(), [](const auto& a, const auto& b) { return a.name < b.name; });
   for (auto& entry : entries) {
@@ -40,8 +49,14 @@ int main(int argc, char** argv) {
   // (248 vs 25 ms/frame on the default model, even on an idle machine) and collapsed training
   // under load; sleeping waits cost ~12 % of 2-thread training throughput. libgomp reads the
   // policy once, when it loads, so set it and re-execute; an explicit user setting wins.
+  // A rollout forks a few hundred short regions a frame, tens of µs apart: a thread that spins a
+  // moment before it sleeps is caught awake instead of woken, and a second thread then pays in the
+  // network's forward too (docs/decisions.md, "Rollouts' threads spin a moment before they sleep").
+  // Training and generation, which run for hours beside other work, keep waits that sleep at once.
   if (!std::getenv("OMP_WAIT_POLICY")) {
     setenv("OMP_WAIT_POLICY", "PASSIVE", 1);
+    if (argc > 1 && runs_rollouts(argv[1]) && !std::getenv("GOMP_SPINCOUNT"))
+      setenv("GOMP_SPINCOUNT", kRolloutSpinCount, 1);
     execv("/proc/self/exe", argv);  // returns only on failure: then run with the default policy
   }
   // Past a file-size limit (ulimit -f) the kernel kills the writer with SIGXFSZ; ignored, the
