@@ -155,14 +155,16 @@ struct Hessian {
   std::vector<double> blocks;         // (nnz · 9) row-major 3×3
   std::vector<double> padded;         // (nnz · 12) the same blocks by columns, each padded to 4 (for the product)
   std::vector<Block> preconditioner;  // (N) inverse of each vertex's diagonal block; 0 on fixed rows
+  std::vector<Block> diagonal_sums;   // (N) the diagonal blocks while they are summed
 
   int64_t rows() const { return static_cast<int64_t>(preconditioner.size()); }
-  void pad_columns() {
-    const std::size_t nnz = blocks.size() / 9;
-    padded.assign(12 * nnz, 0.0);
-    for (std::size_t k = 0; k < nnz; ++k)
-      for (int r = 0; r < 3; ++r)
-        for (int c = 0; c < 3; ++c) padded[12 * k + 4 * c + r] = blocks[9 * k + 3 * r + c];
+  // The padded copy of the blocks of rows [r0, r1) (padded sized already).
+  void pad_columns(int64_t r0, int64_t r1) {
+    for (std::size_t k = static_cast<std::size_t>(pattern->offsets[r0]); k < static_cast<std::size_t>(pattern->offsets[r1]); ++k)
+      for (int c = 0; c < 3; ++c) {
+        for (int r = 0; r < 3; ++r) padded[12 * k + 4 * c + r] = blocks[9 * k + 3 * r + c];
+        padded[12 * k + 4 * c + 3] = 0.0;
+      }
   }
   // Rows [r0, r1) of y = H p, one row at a time: a gather, so no row is written twice; each block
   // adds its three columns times p's entries as 4-wide vectors.
@@ -182,11 +184,11 @@ struct Hessian {
 
 using RowBlock = Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>;
 
-// The layer contacts' blocks k n nᵀ on the outer garment's vertices inside the layer margin, with
+// The layer contacts' blocks k n nᵀ on the outer garment's vertices of rows [r0, r1) inside the layer margin, with
 // the nearest inner vertex and its normal held still (as the body contacts hold the body still):
 // without them the Newton step meets the layer term through its gradient alone.
 void add_layer_contacts(const PhysicsInput<double>& in, const Vec& x, const PhysicsSettings& s, const ContactsAt& at_x,
-                        std::vector<Block>& block) {
+                        int32_t r0, int32_t r1, std::vector<Block>& block) {
   const int64_t G = static_cast<int64_t>(in.garment_offsets.size()) - 1;
   if (G < 2 || s.collision_layer == 0) return;
   const int32_t o0 = in.garment_offsets[G - 1], o1 = in.garment_offsets[G];
@@ -195,7 +197,7 @@ void add_layer_contacts(const PhysicsInput<double>& in, const Vec& x, const Phys
                   "physics step: " << at_x.layer_nearest.size() << " layer contacts for " << o1 - o0 << " outer vertices");
   auto at = [&](int32_t v) { return Eigen::Vector3d(x[3 * v], x[3 * v + 1], x[3 * v + 2]); };
   const double root_k = std::sqrt(s.collision_stiffness * s.collision_layer);
-  for (int32_t v = o0; v < o1; ++v) {
+  for (int32_t v = std::max(o0, r0); v < std::min(o1, r1); ++v) {
     const Eigen::Vector3d n(&at_x.layer_normal[3 * static_cast<std::size_t>(v - o0)]);
     if ((at(v) - at(at_x.layer_nearest[v - o0])).dot(n) >= s.layer_margin) continue;
     const Eigen::Vector3d u = root_k * n;
@@ -203,100 +205,123 @@ void add_layer_contacts(const PhysicsInput<double>& in, const Vec& x, const Phys
   }
 }
 
-// `at_x`: the contacts the energy found at x (EnergyAt's).
-Hessian approximate_hessian(const PhysicsInput<double>& in, const HessianPattern& pattern, const Vec& x,
-                            const PhysicsSettings& s, const std::vector<uint8_t>& fixed, const ContactsAt& at_x) {
+// Rows a thread of the Hessian's fill takes at least (a choice timed on one outfit, as the solver's).
+constexpr int64_t kFillRowsPerThread = 1024;
+
+// Fills h at x on `pattern`, in h's own buffers: a Hessian kept from one step to the next is neither
+// allocated nor cleared again (every entry is written below). `at_x`: the contacts the energy
+// found at x (EnergyAt's). Each thread fills the block rows of one contiguous range of vertices,
+// walking every term in the same order and adding only to its own rows: every block sums its terms
+// in the single pass's order, so the Hessian is the same bits on any thread count.
+void fill_hessian(Hessian& h, const PhysicsInput<double>& in, const HessianPattern& pattern, const Vec& x,
+                  const PhysicsSettings& s, const std::vector<uint8_t>& fixed, const ContactsAt& at_x) {
   const int64_t N = static_cast<int64_t>(x.size() / 3);
-  Hessian h;
   h.pattern = &pattern;
-  h.blocks.assign(9 * pattern.columns.size(), 0.0);
+  h.blocks.resize(9 * pattern.columns.size());
+  h.padded.resize(12 * pattern.columns.size());
+  h.preconditioner.resize(N);
+  h.diagonal_sums.resize(N);
   // Off-diagonal blocks go to their place at once; the diagonal ones are summed in `block` first,
   // for their inverses (the preconditioner).
   auto matrix_block = [&](int32_t position) { return RowBlock(&h.blocks[9 * static_cast<std::size_t>(position)]); };
-  std::vector<Block> block(N, Block::Zero());
-  for (int64_t v = 0; v < N; ++v)
-    block[v].diagonal().setConstant(2 * s.inertia * in.inertia_weight[v] +
-                                    (in.drag_weight.empty() ? 0.0 : 2 * s.drag * in.drag_weight[v]));
-  for (std::size_t e = 0; e < in.edge_i.size(); ++e) {
-    const int32_t i = in.edge_i[e], j = in.edge_j[e];
-    const Eigen::Vector3d d(x[3 * i] - x[3 * j], x[3 * i + 1] - x[3 * j + 1], x[3 * i + 2] - x[3 * j + 2]);
-    const double l = d.norm(), k = 2 * s.stretch * in.edge_half_k[e];
-    Block K = Block::Zero();
-    if (l > 0) {
-      const Eigen::Vector3d u = d / l;
-      const Block along = u * u.transpose();
-      K = k * (along + std::max(0.0, 1 - in.edge_rest[e] / l) * (Block::Identity() - along));
-    }
-    matrix_block(pattern.spring[e][0]) -= K;
-    matrix_block(pattern.spring[e][1]) -= K;
-    block[i] += K, block[j] += K;
-  }
-  // The dihedral angle's gradient: each far corner moves along its face normal over its height
-  // above the hinge, and the hinge's ends take the opposite share by where the corner projects.
-  auto at = [&](int32_t v) { return Eigen::Vector3d(x[3 * v], x[3 * v + 1], x[3 * v + 2]); };
-  for (std::size_t k = 0; k < in.hinge_i.size() && s.bending != 0; ++k) {
-    const int32_t i = in.hinge_i[k], j = in.hinge_j[k], a = in.hinge_a[k], b = in.hinge_b[k];
-    const Eigen::Vector3d xi = at(i), e = at(j) - xi;
-    const double e2 = e.squaredNorm();
-    const double stiffness = s.bending * std::hypot(in.hinge_k_cos0[k], in.hinge_k_sin0[k]);
-    if (!(e2 > 0) || !(stiffness > 0)) continue;
-    std::array<Eigen::Vector3d, 4> u{Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(),
-                                     Eigen::Vector3d::Zero()};
-    bool degenerate = false;
-    // The corners lie on opposite sides of the hinge, so e × r points to opposite sides for them:
-    // rising together along (e × r_a, −e × r_b) folds the hinge, whatever the faces' winding.
-    const int32_t corner[2] = {a, b};
-    for (int f = 0; f < 2; ++f) {
-      const Eigen::Vector3d r = at(corner[f]) - xi;
-      const double t = r.dot(e) / e2;
-      const Eigen::Vector3d height = r - t * e;
-      const Eigen::Vector3d n = e.cross(r) * (f == 0 ? 1.0 : -1.0);
-      const double h2 = height.squaredNorm(), nn = n.norm();
-      if (!(h2 > 0) || !(nn > 0)) {
-        degenerate = true;
-        break;
-      }
-      const Eigen::Vector3d g = n / (nn * std::sqrt(h2));
-      u[2 + f] += g, u[0] -= (1 - t) * g, u[1] -= t * g;
-    }
-    if (degenerate) continue;
-    const double root_k = std::sqrt(stiffness);
-    for (auto& v : u) v *= root_k;
-    const int32_t rows[4] = {i, j, a, b};
-    int n = 0;
-    for (int p = 0; p < 4; ++p)
-      for (int q = 0; q < 4; ++q)
-        if (p == q)
-          block[rows[p]] += u[p] * u[p].transpose();
-        else
-          matrix_block(pattern.hinge[k][n++]) += u[p] * u[q].transpose();
-  }
+  std::vector<Block>& block = h.diagonal_sums;
   const int64_t B = static_cast<int64_t>(in.body_pos.size() / 3);
-  if (B > 0 && s.collision_body != 0) {
-    const std::vector<int32_t>& nearest = at_x.body_nearest;
-    LAYERSNET_CHECK(static_cast<int64_t>(nearest.size()) == N,
-                    "physics step: " << nearest.size() << " nearest body vertices for " << N << " rows");
-    const double root_k = std::sqrt(s.collision_stiffness * s.collision_body);
-    for (int64_t v = 0; v < N; ++v) {
-      const auto [n, r] = offset_from_body(in, nearest[v], Eigen::Vector3d(x[3 * v], x[3 * v + 1], x[3 * v + 2]));
-      if (r.dot(n) >= s.body_margin) continue;
-      const Eigen::Vector3d u = root_k * n;
-      block[v] += u * u.transpose();
+  const bool body_contacts = B > 0 && s.collision_body != 0;
+  LAYERSNET_CHECK(!body_contacts || static_cast<int64_t>(at_x.body_nearest.size()) == N,
+                  "physics step: " << at_x.body_nearest.size() << " nearest body vertices for " << N << " rows");
+  const int threads = omp_in_parallel() ? 1 : static_cast<int>(std::clamp<int64_t>(N / kFillRowsPerThread, 1, omp_get_max_threads()));
+#pragma omp parallel num_threads(threads) if (threads > 1)
+  {
+    const int64_t team = omp_get_num_threads(), me = omp_get_thread_num();
+    const auto r0 = static_cast<int32_t>(N * me / team), r1 = static_cast<int32_t>(N * (me + 1) / team);
+    auto mine = [&](int32_t v) { return v >= r0 && v < r1; };
+    std::fill(h.blocks.begin() + 9 * static_cast<std::ptrdiff_t>(pattern.offsets[r0]),
+              h.blocks.begin() + 9 * static_cast<std::ptrdiff_t>(pattern.offsets[r1]), 0.0);
+    for (int32_t v = r0; v < r1; ++v) {
+      block[v].setZero();
+      block[v].diagonal().setConstant(2 * s.inertia * in.inertia_weight[v] +
+                                      (in.drag_weight.empty() ? 0.0 : 2 * s.drag * in.drag_weight[v]));
     }
+    for (std::size_t e = 0; e < in.edge_i.size(); ++e) {
+      const int32_t i = in.edge_i[e], j = in.edge_j[e];
+      if (!mine(i) && !mine(j)) continue;
+      const Eigen::Vector3d d(x[3 * i] - x[3 * j], x[3 * i + 1] - x[3 * j + 1], x[3 * i + 2] - x[3 * j + 2]);
+      const double l = d.norm(), k = 2 * s.stretch * in.edge_half_k[e];
+      Block K = Block::Zero();
+      if (l > 0) {
+        const Eigen::Vector3d u = d / l;
+        const Block along = u * u.transpose();
+        K = k * (along + std::max(0.0, 1 - in.edge_rest[e] / l) * (Block::Identity() - along));
+      }
+      if (mine(i)) matrix_block(pattern.spring[e][0]) -= K, block[i] += K;
+      if (mine(j)) matrix_block(pattern.spring[e][1]) -= K, block[j] += K;
+    }
+    // The dihedral angle's gradient: each far corner moves along its face normal over its height
+    // above the hinge, and the hinge's ends take the opposite share by where the corner projects.
+    auto at = [&](int32_t v) { return Eigen::Vector3d(x[3 * v], x[3 * v + 1], x[3 * v + 2]); };
+    for (std::size_t k = 0; k < in.hinge_i.size() && s.bending != 0; ++k) {
+      const int32_t i = in.hinge_i[k], j = in.hinge_j[k], a = in.hinge_a[k], b = in.hinge_b[k];
+      if (!mine(i) && !mine(j) && !mine(a) && !mine(b)) continue;
+      const Eigen::Vector3d xi = at(i), e = at(j) - xi;
+      const double e2 = e.squaredNorm();
+      const double stiffness = s.bending * std::hypot(in.hinge_k_cos0[k], in.hinge_k_sin0[k]);
+      if (!(e2 > 0) || !(stiffness > 0)) continue;
+      std::array<Eigen::Vector3d, 4> u{Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero(),
+                                       Eigen::Vector3d::Zero()};
+      bool degenerate = false;
+      // The corners lie on opposite sides of the hinge, so e × r points to opposite sides for them:
+      // rising together along (e × r_a, −e × r_b) folds the hinge, whatever the faces' winding.
+      const int32_t corner[2] = {a, b};
+      for (int f = 0; f < 2; ++f) {
+        const Eigen::Vector3d r = at(corner[f]) - xi;
+        const double t = r.dot(e) / e2;
+        const Eigen::Vector3d height = r - t * e;
+        const Eigen::Vector3d n = e.cross(r) * (f == 0 ? 1.0 : -1.0);
+        const double h2 = height.squaredNorm(), nn = n.norm();
+        if (!(h2 > 0) || !(nn > 0)) {
+          degenerate = true;
+          break;
+        }
+        const Eigen::Vector3d g = n / (nn * std::sqrt(h2));
+        u[2 + f] += g, u[0] -= (1 - t) * g, u[1] -= t * g;
+      }
+      if (degenerate) continue;
+      const double root_k = std::sqrt(stiffness);
+      for (auto& v : u) v *= root_k;
+      const int32_t rows[4] = {i, j, a, b};
+      int n = 0;
+      for (int p = 0; p < 4; ++p)
+        for (int q = 0; q < 4; ++q) {
+          if (p == q) {
+            if (mine(rows[p])) block[rows[p]] += u[p] * u[p].transpose();
+          } else {
+            if (mine(rows[p])) matrix_block(pattern.hinge[k][n]) += u[p] * u[q].transpose();
+            ++n;
+          }
+        }
+    }
+    if (body_contacts) {
+      const double root_k = std::sqrt(s.collision_stiffness * s.collision_body);
+      for (int32_t v = r0; v < r1; ++v) {
+        const auto [n, r] = offset_from_body(in, at_x.body_nearest[v], Eigen::Vector3d(x[3 * v], x[3 * v + 1], x[3 * v + 2]));
+        if (r.dot(n) >= s.body_margin) continue;
+        const Eigen::Vector3d u = root_k * n;
+        block[v] += u * u.transpose();
+      }
+    }
+    add_layer_contacts(in, x, s, at_x, r0, r1, block);
+    for (std::size_t k = 0; k < in.friction_rows.size(); ++k) {
+      if (!mine(in.friction_rows[k])) continue;
+      const Eigen::Vector3d n(&in.friction_normal[3 * k]);
+      block[in.friction_rows[k]] += 2 * s.friction * in.friction_half_weight[k] * (Block::Identity() - n * n.transpose());
+    }
+    for (int32_t v = r0; v < r1; ++v) {
+      const bool usable = !fixed[v] && std::fabs(block[v].determinant()) > 1e-300;
+      h.preconditioner[v] = usable ? Block(block[v].inverse()) : Block::Zero();
+      matrix_block(pattern.diagonal[v]) = block[v];
+    }
+    h.pad_columns(r0, r1);
   }
-  add_layer_contacts(in, x, s, at_x, block);
-  for (std::size_t k = 0; k < in.friction_rows.size(); ++k) {
-    const Eigen::Vector3d n(&in.friction_normal[3 * k]);
-    block[in.friction_rows[k]] += 2 * s.friction * in.friction_half_weight[k] * (Block::Identity() - n * n.transpose());
-  }
-  h.preconditioner.resize(N);
-  for (int64_t v = 0; v < N; ++v) {
-    const bool usable = !fixed[v] && std::fabs(block[v].determinant()) > 1e-300;
-    h.preconditioner[v] = usable ? Block(block[v].inverse()) : Block::Zero();
-    matrix_block(pattern.diagonal[v]) = block[v];
-  }
-  h.pad_columns();
-  return h;
 }
 
 // The Hessian as a block CSR matrix over the free vertices (what Hessian::multiply applies),
@@ -375,8 +400,9 @@ dataset::Points minimise_step_energy(PhysicsInput<double> in, dataset::Points x0
   if (report) report->energy_start = e / std::max<int64_t>(N, 1), report->line_search_halvings = 0;
   const std::shared_ptr<const HessianPattern> pattern =
       settings.newton_iterations > 0 || system ? pattern_for(in, N) : nullptr;
+  thread_local Hessian h;  // its buffers serve every Newton iteration of every step on this thread
   for (int it = 0; it < settings.newton_iterations; ++it) {
-    const Hessian h = approximate_hessian(in, *pattern, x, s, fixed, contacts);
+    fill_hessian(h, in, *pattern, x, s, fixed, contacts);
     const Vec p = solve(h, g, fixed, settings.cg_iterations);
     const double slope = dot(g, p);
     if (!(slope < 0)) break;  // at a minimum, or no descent direction
@@ -403,7 +429,10 @@ dataset::Points minimise_step_energy(PhysicsInput<double> in, dataset::Points x0
     contacts = at.take_contacts();
   }
   if (report) report->energy_end = e / std::max<int64_t>(N, 1);
-  if (system) *system = assemble_system(in, approximate_hessian(in, *pattern, x, s, fixed, contacts), s, fixed);
+  if (system) {
+    fill_hessian(h, in, *pattern, x, s, fixed, contacts);
+    *system = assemble_system(in, h, s, fixed);
+  }
   for (int64_t v = 0; v < N; ++v)
     for (int c = 0; c < 3; ++c) x0(v, c) = static_cast<float>(x[3 * v + c]);
   return x0;
