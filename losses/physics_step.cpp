@@ -160,7 +160,8 @@ struct Hessian {
   int64_t rows() const { return static_cast<int64_t>(preconditioner.size()); }
   // The padded copy of the blocks of rows [r0, r1) (padded sized already).
   void pad_columns(int64_t r0, int64_t r1) {
-    for (std::size_t k = static_cast<std::size_t>(pattern->offsets[r0]); k < static_cast<std::size_t>(pattern->offsets[r1]); ++k)
+    const auto k0 = static_cast<std::size_t>(pattern->offsets[r0]), k1 = static_cast<std::size_t>(pattern->offsets[r1]);
+    for (std::size_t k = k0; k < k1; ++k)
       for (int c = 0; c < 3; ++c) {
         for (int r = 0; r < 3; ++r) padded[12 * k + 4 * c + r] = blocks[9 * k + 3 * r + c];
         padded[12 * k + 4 * c + 3] = 0.0;
@@ -184,9 +185,9 @@ struct Hessian {
 
 using RowBlock = Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>;
 
-// The layer contacts' blocks k n nᵀ on the outer garment's vertices of rows [r0, r1) inside the layer margin, with
-// the nearest inner vertex and its normal held still (as the body contacts hold the body still):
-// without them the Newton step meets the layer term through its gradient alone.
+// The layer contacts' blocks k n nᵀ on the outer garment's vertices of rows [r0, r1) inside the layer
+// margin, with the nearest inner vertex and its normal held still (as the body contacts hold the
+// body still): without them the Newton step meets the layer term through its gradient alone.
 void add_layer_contacts(const PhysicsInput<double>& in, const Vec& x, const PhysicsSettings& s, const ContactsAt& at_x,
                         int32_t r0, int32_t r1, std::vector<Block>& block) {
   const int64_t G = static_cast<int64_t>(in.garment_offsets.size()) - 1;
@@ -205,7 +206,7 @@ void add_layer_contacts(const PhysicsInput<double>& in, const Vec& x, const Phys
   }
 }
 
-// Rows a thread of the Hessian's fill takes at least (a choice timed on one outfit, as the solver's).
+// Rows a thread of the Hessian's fill takes at least: the solver's threshold, not timed on its own.
 constexpr int64_t kFillRowsPerThread = 1024;
 
 // Fills h at x on `pattern`, in h's own buffers: a Hessian kept from one step to the next is neither
@@ -229,7 +230,8 @@ void fill_hessian(Hessian& h, const PhysicsInput<double>& in, const HessianPatte
   const bool body_contacts = B > 0 && s.collision_body != 0;
   LAYERSNET_CHECK(!body_contacts || static_cast<int64_t>(at_x.body_nearest.size()) == N,
                   "physics step: " << at_x.body_nearest.size() << " nearest body vertices for " << N << " rows");
-  const int threads = omp_in_parallel() ? 1 : static_cast<int>(std::clamp<int64_t>(N / kFillRowsPerThread, 1, omp_get_max_threads()));
+  const int threads =
+      omp_in_parallel() ? 1 : static_cast<int>(std::clamp<int64_t>(N / kFillRowsPerThread, 1, omp_get_max_threads()));
 #pragma omp parallel num_threads(threads) if (threads > 1)
   {
     const int64_t team = omp_get_num_threads(), me = omp_get_thread_num();
@@ -303,7 +305,8 @@ void fill_hessian(Hessian& h, const PhysicsInput<double>& in, const HessianPatte
     if (body_contacts) {
       const double root_k = std::sqrt(s.collision_stiffness * s.collision_body);
       for (int32_t v = r0; v < r1; ++v) {
-        const auto [n, r] = offset_from_body(in, at_x.body_nearest[v], Eigen::Vector3d(x[3 * v], x[3 * v + 1], x[3 * v + 2]));
+        const Eigen::Vector3d xv(x[3 * v], x[3 * v + 1], x[3 * v + 2]);
+        const auto [n, r] = offset_from_body(in, at_x.body_nearest[v], xv);
         if (r.dot(n) >= s.body_margin) continue;
         const Eigen::Vector3d u = root_k * n;
         block[v] += u * u.transpose();
@@ -313,7 +316,8 @@ void fill_hessian(Hessian& h, const PhysicsInput<double>& in, const HessianPatte
     for (std::size_t k = 0; k < in.friction_rows.size(); ++k) {
       if (!mine(in.friction_rows[k])) continue;
       const Eigen::Vector3d n(&in.friction_normal[3 * k]);
-      block[in.friction_rows[k]] += 2 * s.friction * in.friction_half_weight[k] * (Block::Identity() - n * n.transpose());
+      const double weight = 2 * s.friction * in.friction_half_weight[k];
+      block[in.friction_rows[k]] += weight * (Block::Identity() - n * n.transpose());
     }
     for (int32_t v = r0; v < r1; ++v) {
       const bool usable = !fixed[v] && std::fabs(block[v].determinant()) > 1e-300;
