@@ -5,6 +5,11 @@
 #include <algorithm>
 
 namespace layersnet::dataset {
+namespace {
+// Each point's (or body vertex's) result is its own, so the threads change no bit; below this many
+// rows a fork costs more than the loop.
+constexpr Eigen::Index kParallelRows = 512;
+}  // namespace
 
 BodyTopology body_topology(const Faces& faces, int num_body_vertices) {
   BodyTopology t;
@@ -28,6 +33,7 @@ BodyTopology body_topology(const Faces& faces, int num_body_vertices) {
 BodyFrames body_frames(const Eigen::Ref<const Points>& body, const Faces& faces, const BodyTopology& topology) {
   const Points normals = vertex_normals(body, faces);
   BodyFrames frames(body.rows(), 9);
+#pragma omp parallel for schedule(static) if (body.rows() > kParallelRows)
   for (Eigen::Index i = 0; i < body.rows(); ++i) {
     const Eigen::Vector3f n = normals.row(i).transpose();
     Eigen::Vector3f u = (body.row(topology.tangent_neighbour[static_cast<size_t>(i)]) - body.row(i)).transpose();
@@ -45,42 +51,52 @@ SkinBinding bind_to_body(const Eigen::Ref<const Points>& x, const Eigen::Ref<con
   const NearestBody nearest = NearestVertexIndex::kept(body)->query(x);
   SkinBinding out;
   out.rotate = rotate;
-  out.carriers.assign(static_cast<size_t>(x.rows()), {});
-  for (Eigen::Index v = 0; v < x.rows(); ++v) {
+  const Eigen::Index Q = x.rows();
+  // A point's carriers are its nearest body vertex and that vertex's ring: their count is known
+  // first, so the points then fill their own slots on the threads, with no allocation each.
+  out.offsets.resize(static_cast<size_t>(Q) + 1);
+  out.offsets[0] = 0;
+  for (Eigen::Index v = 0; v < Q; ++v) {
+    const auto& ring = topology.neighbours[static_cast<size_t>(nearest.index[static_cast<size_t>(v)])];
+    out.offsets[static_cast<size_t>(v) + 1] = out.offsets[static_cast<size_t>(v)] + static_cast<int32_t>(ring.size()) + 1;
+  }
+  out.carriers.resize(static_cast<size_t>(out.offsets.back()));
+#pragma omp parallel for schedule(static) if (Q > kParallelRows)
+  for (Eigen::Index v = 0; v < Q; ++v) {
     const int32_t h = nearest.index[static_cast<size_t>(v)];
-    auto& list = out.carriers[static_cast<size_t>(v)];
-    const auto& ring = topology.neighbours[static_cast<size_t>(h)];
-    list.reserve(ring.size() + 1);
+    SkinBinding::Carrier* const first = out.carriers.data() + out.offsets[static_cast<size_t>(v)];
+    SkinBinding::Carrier* next = first;
     double total = 0;
     auto add = [&](int32_t c) {
       const Eigen::Vector3f d = (x.row(v) - body.row(c)).transpose();
       // Squared distance floored at a micro-unit, so a point on the body keeps finite weights.
       const double w = 1.0 / std::max(1e-12, static_cast<double>(d.squaredNorm()));
-      SkinBinding::Carrier k;
-      k.body_vertex = c;
-      k.weight = static_cast<float>(w);
-      k.offset = rotate ? Eigen::Vector3f(Eigen::Map<const Eigen::Matrix3f>(frames.row(c).data()).transpose() * d) : d;
+      next->body_vertex = c;
+      next->weight = static_cast<float>(w);
+      next->offset = rotate ? Eigen::Vector3f(Eigen::Map<const Eigen::Matrix3f>(frames.row(c).data()).transpose() * d) : d;
       total += w;
-      list.push_back(k);
+      ++next;
     };
     add(h);
-    for (const int32_t c : ring) add(c);
-    for (auto& k : list) k.weight = static_cast<float>(k.weight / total);
+    for (const int32_t c : topology.neighbours[static_cast<size_t>(h)]) add(c);
+    for (SkinBinding::Carrier* k = first; k != next; ++k) k->weight = static_cast<float>(k->weight / total);
   }
   return out;
 }
 
 Points carry_with_body(const SkinBinding& binding, const Eigen::Ref<const Points>& body, const BodyFrames& frames) {
-  Points x(static_cast<Eigen::Index>(binding.carriers.size()), 3);
+  Points x(binding.points(), 3);
+#pragma omp parallel for schedule(static) if (x.rows() > kParallelRows)
   for (Eigen::Index v = 0; v < x.rows(); ++v) {
     Eigen::Vector3f p = Eigen::Vector3f::Zero();
-    for (const auto& k : binding.carriers[static_cast<size_t>(v)]) {
-      Eigen::Vector3f q = body.row(k.body_vertex).transpose();
+    for (int32_t k = binding.offsets[static_cast<size_t>(v)]; k < binding.offsets[static_cast<size_t>(v) + 1]; ++k) {
+      const SkinBinding::Carrier& c = binding.carriers[static_cast<size_t>(k)];
+      Eigen::Vector3f q = body.row(c.body_vertex).transpose();
       if (binding.rotate)
-        q += Eigen::Map<const Eigen::Matrix3f>(frames.row(k.body_vertex).data()) * k.offset;
+        q += Eigen::Map<const Eigen::Matrix3f>(frames.row(c.body_vertex).data()) * c.offset;
       else
-        q += k.offset;
-      p += k.weight * q;
+        q += c.offset;
+      p += c.weight * q;
     }
     x.row(v) = p.transpose();
   }

@@ -37,8 +37,10 @@ struct SkinBinding {
     float weight = 0;        // the carriers of one point sum to 1
     Eigen::Vector3f offset;  // in the body vertex's frame, or world axes when not rotating
   };
-  std::vector<std::vector<Carrier>> carriers;  // (Q,)
+  std::vector<int32_t> offsets;   // (Q + 1): point q's carriers are carriers[offsets[q], offsets[q + 1])
+  std::vector<Carrier> carriers;  // every point's, point after point
   bool rotate = true;
+  int64_t points() const { return offsets.empty() ? 0 : static_cast<int64_t>(offsets.size()) - 1; }
 };
 
 // Binds points x (Q, 3) to the body (B, 3) whose frames are `frames` (ignored when !rotate).

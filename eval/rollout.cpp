@@ -46,7 +46,7 @@ Points SkinnedToBody::step(const dataset::Sequence& seq, int t, const Points&, c
   auto frames_of = [&](const Points& body) {
     return rotate_ ? dataset::body_frames(body, seq.info.body_faces, topology_) : dataset::BodyFrames{};
   };
-  if (binding_.carriers.size() != static_cast<size_t>(x_now.rows())) {
+  if (binding_.points() != x_now.rows()) {
     const Points body = seq.body_at(t);
     binding_ = dataset::bind_to_body(x_now, body, frames_of(body), topology_, rotate_);
   }
