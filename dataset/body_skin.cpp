@@ -56,9 +56,9 @@ SkinBinding bind_to_body(const Eigen::Ref<const Points>& x, const Eigen::Ref<con
   // first, so the points then fill their own slots on the threads, with no allocation each.
   out.offsets.resize(static_cast<size_t>(Q) + 1);
   out.offsets[0] = 0;
-  for (Eigen::Index v = 0; v < Q; ++v) {
-    const auto& ring = topology.neighbours[static_cast<size_t>(nearest.index[static_cast<size_t>(v)])];
-    out.offsets[static_cast<size_t>(v) + 1] = out.offsets[static_cast<size_t>(v)] + static_cast<int32_t>(ring.size()) + 1;
+  for (size_t v = 0; v < static_cast<size_t>(Q); ++v) {
+    const auto& ring = topology.neighbours[static_cast<size_t>(nearest.index[v])];
+    out.offsets[v + 1] = out.offsets[v] + static_cast<int32_t>(ring.size()) + 1;
   }
   out.carriers.resize(static_cast<size_t>(out.offsets.back()));
 #pragma omp parallel for schedule(static) if (Q > kParallelRows)
@@ -73,7 +73,8 @@ SkinBinding bind_to_body(const Eigen::Ref<const Points>& x, const Eigen::Ref<con
       const double w = 1.0 / std::max(1e-12, static_cast<double>(d.squaredNorm()));
       next->body_vertex = c;
       next->weight = static_cast<float>(w);
-      next->offset = rotate ? Eigen::Vector3f(Eigen::Map<const Eigen::Matrix3f>(frames.row(c).data()).transpose() * d) : d;
+      next->offset =
+          rotate ? Eigen::Vector3f(Eigen::Map<const Eigen::Matrix3f>(frames.row(c).data()).transpose() * d) : d;
       total += w;
       ++next;
     };

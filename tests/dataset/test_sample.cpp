@@ -210,9 +210,9 @@ TEST(Sample, SmoothingKeepsAUniformFieldAndEvensOutASpike) {
   EXPECT_EQ(none, spike);
 }
 
-TEST(Sample, SmoothedCarryIsTheCarryAveragedOverTheMesh) {
-  Sequence seq = scene(2, false);
-  // The body turns from frame 5 to 6, so the carry differs from vertex to vertex.
+// Frame 6's body is frame 5's turned by 0.4 rad about z (around the root), so that the carry from
+// frame 5 to 6 differs from vertex to vertex.
+void turn_body_after_frame_5(Sequence& seq) {
   const int B = seq.info.num_body_vertices;
   const Eigen::Matrix3f turn = Eigen::AngleAxisf(0.4f, Eigen::Vector3f::UnitZ()).toRotationMatrix();
   Points body = seq.body_at(5);
@@ -220,6 +220,11 @@ TEST(Sample, SmoothedCarryIsTheCarryAveragedOverTheMesh) {
   Points turned = body * turn.transpose();
   turned.rowwise() += seq.info.translation.row(6);
   seq.frames.body.middleRows(6 * static_cast<Eigen::Index>(B), B) = turned;
+}
+
+TEST(Sample, SmoothedCarryIsTheCarryAveragedOverTheMesh) {
+  Sequence seq = scene(2, false);
+  turn_body_after_frame_5(seq);
   const auto st = simple_stats();
   SampleOptions o;
   o.body_carry = true;
@@ -239,15 +244,8 @@ TEST(Sample, CarryIsTheSameBitsOnAnyThreadCount) {
   SyntheticOptions so;
   so.garments = 2, so.rings = 24, so.segments = 32, so.body_rings = 20, so.body_segments = 32;
   Sequence seq = make_synthetic_sequence(so);
-  const int B = seq.info.num_body_vertices;
-  ASSERT_GT(B, 512);
-  // The body turns from frame 5 to 6, so the carry differs from vertex to vertex.
-  const Eigen::Matrix3f turn = Eigen::AngleAxisf(0.4f, Eigen::Vector3f::UnitZ()).toRotationMatrix();
-  Points body = seq.body_at(5);
-  body.rowwise() -= seq.info.translation.row(5);
-  Points turned = body * turn.transpose();
-  turned.rowwise() += seq.info.translation.row(6);
-  seq.frames.body.middleRows(6 * static_cast<Eigen::Index>(B), B) = turned;
+  ASSERT_GT(seq.info.num_body_vertices, 512);
+  turn_body_after_frame_5(seq);
   SampleOptions o;
   o.body_carry = o.body_carry_prev = true;
   const int threads_before = omp_get_max_threads();
