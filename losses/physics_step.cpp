@@ -206,8 +206,17 @@ void add_layer_contacts(const PhysicsInput<double>& in, const Vec& x, const Phys
   }
 }
 
-// Rows a thread of the Hessian's fill takes at least: the solver's threshold, not timed on its own.
-constexpr int64_t kFillRowsPerThread = 1024;
+// Rows a thread of the step's threaded loops (the Hessian's fill, the conjugate gradients) takes at
+// least, so that the solver's three meetings an iteration stay small beside its share of the
+// product (about 80 µs for 3,120 rows). A choice timed only on that outfit and only for the solver,
+// where two threads took 0.63× the time of one.
+constexpr int64_t kRowsPerThread = 1024;
+
+// Threads for a loop over N rows: those OpenMP offers outside a parallel region (one inside it,
+// as in training's samples), at least kRowsPerThread rows each.
+int step_threads(int64_t N) {
+  return omp_in_parallel() ? 1 : static_cast<int>(std::clamp<int64_t>(N / kRowsPerThread, 1, omp_get_max_threads()));
+}
 
 // Fills h at x on `pattern`, in h's own buffers: a Hessian kept from one step to the next is neither
 // allocated nor cleared again (every entry is written below). `at_x`: the contacts the energy
@@ -230,8 +239,7 @@ void fill_hessian(Hessian& h, const PhysicsInput<double>& in, const HessianPatte
   const bool body_contacts = B > 0 && s.collision_body != 0;
   LAYERSNET_CHECK(!body_contacts || static_cast<int64_t>(at_x.body_nearest.size()) == N,
                   "physics step: " << at_x.body_nearest.size() << " nearest body vertices for " << N << " rows");
-  const int threads =
-      omp_in_parallel() ? 1 : static_cast<int>(std::clamp<int64_t>(N / kFillRowsPerThread, 1, omp_get_max_threads()));
+  const int threads = step_threads(N);
 #pragma omp parallel num_threads(threads) if (threads > 1)
   {
     const int64_t team = omp_get_num_threads(), me = omp_get_thread_num();
@@ -353,11 +361,6 @@ dataset::BlockSystem<float> assemble_system(const PhysicsInput<double>& in, cons
   return out;
 }
 
-// Rows a thread of the conjugate gradients takes at least, so that the three meetings an iteration
-// stay small beside its share of the product (about 80 µs for 3,120 rows; the threshold itself is
-// a choice, timed only on that outfit, where two threads took 0.63× the time of one).
-constexpr int64_t kSolveRowsPerThread = 1024;
-
 // Conjugate gradients on H p = −g over the free rows (fixed rows stay 0), on the threads OpenMP
 // offers outside a parallel region.
 Vec solve(const Hessian& h, const Vec& g, const std::vector<uint8_t>& fixed, int iterations) {
@@ -375,8 +378,8 @@ Vec solve(const Hessian& h, const Vec& g, const std::vector<uint8_t>& fixed, int
       for (int c = 0; c < 3; ++c) to[3 * v + c] = y[c];
     }
   };
-  const int threads = omp_in_parallel() ? 1 : static_cast<int>(std::clamp<int64_t>(N / kSolveRowsPerThread, 1, omp_get_max_threads()));
-  return ad::conjugate_gradients(std::move(r), multiply, precondition, iterations, 1e-8, threads);  // relative residual 1e-4
+  const double stop_ratio = 1e-8;  // a relative residual of 1e-4
+  return ad::conjugate_gradients(std::move(r), multiply, precondition, iterations, stop_ratio, step_threads(N));
 }
 
 }  // namespace
