@@ -30,6 +30,7 @@
 #include <iterator>
 #include <iostream>
 #include <memory>
+#include <numeric>
 #include <optional>
 #include <sstream>
 
@@ -145,12 +146,16 @@ std::size_t item_of_local(const Ranks& ranks, std::size_t j) {
 
 // run(j, tape) for j = 0..m-1 on the OpenMP threads, one item per iteration, each thread on its
 // own tape (tapes[thread]); the kernels inside run single-threaded (no nested parallelism), a lone
-// item keeps the threads for its kernels. The first error (by index) is rethrown.
+// item keeps the threads for its kernels. `start_order`, when given, is the order in which the
+// items are handed out (a permutation of 0..m-1): the costliest first keeps threads from idling
+// behind one long item at the end. The first error (by index) is rethrown.
 template <class Work>
-void for_each_on_threads(std::size_t m, const std::vector<std::unique_ptr<ad::Tape<float>>>& tapes, Work&& run) {
+void for_each_on_threads(std::size_t m, const std::vector<std::unique_ptr<ad::Tape<float>>>& tapes, Work&& run,
+                         const std::vector<std::size_t>& start_order = {}) {
   std::vector<std::string> errors(m);
 #pragma omp parallel for schedule(dynamic, 1) if (m > 1)
-  for (std::size_t j = 0; j < m; ++j) {
+  for (std::size_t k = 0; k < m; ++k) {
+    const std::size_t j = start_order.empty() ? k : start_order[k];
     try {
       run(j, *tapes[static_cast<std::size_t>(omp_get_thread_num())]);
     } catch (const std::exception& e) {
@@ -651,11 +656,20 @@ void Run::replicate_weights() {
 std::vector<SampleOutcome> Run::train_samples(Batch& batch) {
   const PhysicsStep physics = physics_step_at(config_.physics, adam_->step_count());
   std::vector<SampleOutcome> local(batch.windows.size());
-  for_each_on_threads(local.size(), tapes_, [&](std::size_t j, ad::Tape<float>& tape) {
-    const std::size_t i = item_of_local(ranks_, j);
-    local[j] = train_sample(*train_, batch.windows[j], batch.refs[i].t, batch.self_fed[i], config_, tape, *slots_[j],
-                            physics);
+  // A sample costs about one model step per self-fed step, plus its trained step: longest first.
+  std::vector<std::size_t> longest_first(local.size());
+  std::iota(longest_first.begin(), longest_first.end(), std::size_t{0});
+  std::stable_sort(longest_first.begin(), longest_first.end(), [&](std::size_t a, std::size_t b) {
+    return batch.self_fed[item_of_local(ranks_, a)] > batch.self_fed[item_of_local(ranks_, b)];
   });
+  for_each_on_threads(
+      local.size(), tapes_,
+      [&](std::size_t j, ad::Tape<float>& tape) {
+        const std::size_t i = item_of_local(ranks_, j);
+        local[j] = train_sample(*train_, batch.windows[j], batch.refs[i].t, batch.self_fed[i], config_, tape,
+                                *slots_[j], physics);
+      },
+      longest_first);
   return local;
 }
 
