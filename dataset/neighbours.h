@@ -100,6 +100,8 @@ class NearestVertexIndex {
   ~NearestVertexIndex();
   NearestVertexIndex(const NearestVertexIndex&) = delete;
   NearestVertexIndex& operator=(const NearestVertexIndex&) = delete;
+  // A thread that asks again about the points it asked about last (the physics step: its
+  // friction's contacts, then its energy at the same start) gets the answer it was given.
   NearestBody query(const Eigen::Ref<const Points>& queries) const;
   // The nearest point within max_distance (scene units) of each query, else index 0 and
   // distance +inf. Where it finds one it equals query(); the bound prunes the tree walk, which
@@ -114,6 +116,7 @@ class NearestVertexIndex {
  private:
   struct Tree;
   std::unique_ptr<Tree> tree_;
+  uint64_t id_;  // unique in the process: what query()'s kept answer belongs to (an address may be reused)
 };
 
 // ---- template implementation

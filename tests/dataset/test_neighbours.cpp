@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <memory>
 #include <random>
 
 namespace layersnet::dataset {
@@ -183,6 +184,27 @@ TEST(NearestBody, KeptIndexIsTheSameForTheSamePointsOnly) {
   const NearestBody fresh = nearest_body(q, moved), from_kept = other->query(q);
   EXPECT_EQ(from_kept.index, fresh.index);
   EXPECT_EQ(from_kept.distance, fresh.distance);
+}
+
+// query() hands a thread its last answer again only for the same index and the same points: an
+// index made afresh at a freed one's address, or points moved by one coordinate, are asked anew.
+TEST(NearestBody, RepeatedQueryAnswersOnlyForTheSameIndexAndPoints) {
+  const Points body = random_points(2000, 1.f, 7), other_body = random_points(2000, 1.f, 11);
+  Points q = random_points(300, 1.5f, 8), moved = q;
+  moved(17, 0) += 0.5f;
+  // The expected answers first: nearest_body asks an index of its own, on this thread too.
+  const NearestBody expected = nearest_body(q, other_body), expected_moved = nearest_body(moved, other_body);
+  auto first = std::make_unique<NearestVertexIndex>(body);
+  const NearestBody a = first->query(q);
+  EXPECT_EQ(first->query(q).index, a.index);
+  first.reset();
+  const auto second = std::make_unique<NearestVertexIndex>(other_body);  // often at the same address
+  const NearestBody b = second->query(q);
+  EXPECT_EQ(b.index, expected.index);
+  EXPECT_EQ(b.distance, expected.distance);
+  const NearestBody c = second->query(moved);
+  EXPECT_EQ(c.index, expected_moved.index);
+  EXPECT_EQ(c.distance, expected_moved.distance);
 }
 
 }  // namespace
