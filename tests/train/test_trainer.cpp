@@ -267,10 +267,11 @@ TEST_F(TrainerTest, SameSeedAndThreadsGiveIdenticalParameters) {
 // of unequal length and rollout validation. The shipped recipe trains on every core because of it.
 TEST_F(TrainerTest, TrainingIsTheSameBitsOnAnyThreadCount) {
   const std::string data = make_dataset(3, 1, 9);
-  const std::vector<std::string> common = {"train.epochs=2",          "train.rollout_steps=[0, 3]",
+  const std::vector<std::string> common = {"train.epochs=2",           "train.rollout_steps=[0, 3]",
                                            "model.velocity_base=physics", "physics.weight=0.5",
-                                           "train.val_rollout_frames=4", "train.batch_size=3"};
-  const Config one = tiny_config(data, common, {"train.threads=1"}), two = tiny_config(data, common, {"train.threads=2"});
+                                           "train.val_rollout_frames=4",  "train.batch_size=3"};
+  const Config one = tiny_config(data, common, {"train.threads=1"});
+  const Config two = tiny_config(data, common, {"train.threads=2"});
   const TrainSummary a = train(one, options("one"));
   const TrainSummary b = train(two, options("two"));
   ASSERT_GT(a.updates, 1);
