@@ -141,10 +141,7 @@ struct PointsAdaptor {
 };
 using KdTree = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<float, PointsAdaptor>, PointsAdaptor, 3,
                                                    uint32_t>;
-}  // namespace
-
-namespace {
-std::atomic<uint64_t> next_index_id{1};
+std::atomic<uint64_t> next_index_id{1};  // NearestVertexIndex ids
 }  // namespace
 
 struct NearestVertexIndex::Tree {
