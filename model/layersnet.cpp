@@ -427,19 +427,17 @@ Correction<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfig
     W = rotation_map_impl(tape, p, cfg, "decoder.rot_mapping.weight");  // (d, 3k)
     Wt = transpose_of(tape, W);                                          // (3k, d)
   }
-  // (I_k ⊗ R_i) z_i for every row i: z (n, 3k) read as n·k 3-vectors, R_host (n, 9).
-  auto rotate_k_blocks = [&](const std::vector<T>& R_host, const Var<T>& z, int64_t k) {
+  // (I_k ⊗ R_i) z_i for every row i: z (n, 3k) read as n·k 3-vectors, R (n, 9) a constant.
+  auto rotate_k_blocks = [&](const Var<T>& R, const Var<T>& z, int64_t k) {
     const int64_t n = z.rows;
-    if (k == 1) return ad::rotate3(tape, constant(tape, R_host, n, 9), z);
+    if (k == 1) return ad::rotate3(tape, R, z);
     std::vector<T> R_rep(n * k * 9);
     for (int64_t i = 0; i < n; ++i)
-      for (int64_t j = 0; j < k; ++j) std::copy_n(&R_host[9 * i], 9, &R_rep[9 * (i * k + j)]);
+      for (int64_t j = 0; j < k; ++j) std::copy_n(&R.value[9 * i], 9, &R_rep[9 * (i * k + j)]);
     const Var<T> y = ad::rotate3(tape, constant(tape, R_rep, n * k, 9), ad::reshape(z, n * k, 3));
     return ad::reshape(y, n, 3 * k);
   };
-  auto rotate_blocks = [&](const std::vector<T>& R_host, const Var<T>& z) {
-    return rotate_k_blocks(R_host, z, cfg.decoder_ret_channels);
-  };
+  auto rotate_blocks = [&](const Var<T>& R, const Var<T>& z) { return rotate_k_blocks(R, z, cfg.decoder_ret_channels); };
 
   const std::vector<T>& Rp_host = frames.patch_host;
   const Var<T>& Rp = frames.patch;
@@ -447,10 +445,13 @@ Correction<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfig
   const Var<T> phi_v = ad::gather_rows(tape, body_tab, body_index(in.vertex_body));
   const std::vector<T>& Rv_host = frames.vertex_host;
   const Var<T>& Rv = frames.vertex;
-  // Candidate rows: owning vertex, its frame, and R_v (s_v − s_p) as four 3-vectors (raw units).
+  // Candidate rows: owning vertex, its frame, and R_v (s_v − s_p) as four 3-vectors (raw units),
+  // written straight into tape constants (every entry below; no host copy to zero and copy over).
   const int64_t Ec = static_cast<int64_t>(in.cand_patches.size());
   std::vector<int32_t> cand_vertex(Ec);
-  std::vector<T> rel(Ec * 12), Re(Ec * 9);
+  Var<T> rel_v = tape.new_var(Ec, 12, false);
+  const Var<T> Re_v = tape.new_var(Ec, 9, false);
+  T *rel = rel_v.value, *Re = Re_v.value;
   for (int64_t v = 0; v < N; ++v)
     for (int32_t k = in.cand_offsets[v]; k < in.cand_offsets[v + 1]; ++k) {
       cand_vertex[k] = static_cast<int32_t>(v);
@@ -464,28 +465,26 @@ Correction<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfig
           rel[12 * k + 3 * blk + c] = ret ? R[3 * c] * dlt[0] + R[3 * c + 1] * dlt[1] + R[3 * c + 2] * dlt[2] : dlt[c];
       }
     }
-  Var<T> rel_v = constant(tape, rel, Ec, 12);
   if (delta.active()) {  // d(s_v − s_p), rotated by R_v per 3-vector as rel is
     const Var<T> d_rel = ad::sub(tape, ad::gather_rows(tape, delta.vertex, cand_vertex),
                                  ad::gather_rows(tape, delta.patch, in.cand_patches));
-    rel_v = ad::add(tape, rel_v, ret ? rotate_k_blocks(Re, d_rel, 4) : d_rel);
+    rel_v = ad::add(tape, rel_v, ret ? rotate_k_blocks(Re_v, d_rel, 4) : d_rel);
   }
   // Row i of a per-vertex (or per-patch) feature table f (·, dim) picked by rows[i], each 3-vector
-  // turned into frame R_i (RET): (n, dim).
-  auto rotated_rows = [&](const std::vector<T>& R_host, const std::vector<T>& f, const std::vector<int32_t>& rows,
-                          int dim) {
+  // turned into frame R_i (RET; R_host (n, 9)): (n, dim).
+  auto rotated_rows = [&](const T* R_host, const std::vector<T>& f, const std::vector<int32_t>& rows, int dim) {
     const int64_t n = static_cast<int64_t>(rows.size());
-    std::vector<T> out(n * dim);
+    const Var<T> out = tape.new_var(n, dim, false);
     for (int64_t k = 0; k < n; ++k) {
       const T* R = &R_host[9 * k];
       const T* x = &f[dim * static_cast<int64_t>(rows[k])];
-      T* o = &out[dim * k];
+      T* o = &out.value[dim * k];
       for (int blk = 0; blk < dim / 3; ++blk)
         for (int c = 0; c < 3; ++c)
           o[3 * blk + c] = ret ? R[3 * c] * x[3 * blk] + R[3 * c + 1] * x[3 * blk + 1] + R[3 * c + 2] * x[3 * blk + 2]
                                : x[3 * blk + c];
     }
-    return constant(tape, out, n, dim);
+    return out;
   };
   // The vertex's local features per candidate row, in the vertex's frame.
   const bool local = cfg.vertex_local_features;
@@ -502,7 +501,7 @@ Correction<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfig
     std::vector<int32_t> patches(P);
     for (int64_t i = 0; i < P; ++i) patches[i] = static_cast<int32_t>(i);
     wind_v = rotated_rows(Re, in.wind_force, cand_vertex, 3);
-    wind_p = rotated_rows(Rp_host, in.wind_force_patch, patches, 3);
+    wind_p = rotated_rows(Rp_host.data(), in.wind_force_patch, patches, 3);
   }
   // The vertex's own velocity base per candidate row, [c_v, c_v − c̄_p] / σ_v in the row's frame
   // (p the row's patch). A carried base is implied (run/config.cpp) and checked in forward().
@@ -558,29 +557,29 @@ Correction<T> decode(ad::Tape<T>& tape, const ParamView<T>& p, const ModelConfig
                                             ad::linear(tape, ad::slice_cols(tape, W1, 12, 12 + d), Wt),
                                             ad::linear(tape, ad::slice_cols(tape, W1, 12 + d, 12 + 2 * d), Wt)});
     const Var<T> z_p = ad::linear(tape, emb, Wt);  // Wᵀ e_p  (P, 3k)
-    const Var<T> feat_p = with_extra_input(tape.zeros(P, 12), rotate_blocks(Rp_host, z_p),
-                                           rotate_blocks(Rp_host, ad::linear(tape, phi_p, Wt)), false);
-    const Var<T> zh_v = rotate_blocks(Rv_host, ad::linear(tape, phi_v, Wt));  // (I⊗R_v) Wᵀ h_v  (N, 3k)
-    const Var<T> ze_v = rotate_blocks(Re, ad::gather_rows(tape, z_p, in.cand_patches));
+    const Var<T> feat_p = with_extra_input(tape.zeros(P, 12), rotate_blocks(Rp, z_p),
+                                           rotate_blocks(Rp, ad::linear(tape, phi_p, Wt)), false);
+    const Var<T> zh_v = rotate_blocks(Rv, ad::linear(tape, phi_v, Wt));  // (I⊗R_v) Wᵀ h_v  (N, 3k)
+    const Var<T> ze_v = rotate_blocks(Re_v, ad::gather_rows(tape, z_p, in.cand_patches));
     const Var<T> feat_v = with_extra_input(rel_v, ze_v, ad::gather_rows(tape, zh_v, cand_vertex), true);
     a_p = decode(feat_p, with_extra_weight(M, false));
     a_e = decode(feat_v, with_extra_weight(M, true));
   } else {
     // Patch branch: [0 (12), φ(R_p) e_p, φ(R_p) h_p]; vertex branch: [rel, φ(R_v) e_p, φ(R_v) h_v].
     // k = 1: the fused W R Wᵀ op; k > 1: W (I⊗R) Wᵀ composed.
-    auto phi = [&](const std::vector<T>& R_host, const Var<T>& R, const Var<T>& x) {
+    auto phi = [&](const Var<T>& R, const Var<T>& x) {
       if (cfg.decoder_ret_channels == 1) return ad::rot_map_apply(tape, W, R, x);
-      return ad::linear(tape, rotate_blocks(R_host, ad::linear(tape, x, Wt)), W);
+      return ad::linear(tape, rotate_blocks(R, ad::linear(tape, x, Wt)), W);
     };
-    const Var<T> He_p = ret ? phi(Rp_host, Rp, emb) : emb;
-    const Var<T> Hh_p = ret ? phi(Rp_host, Rp, phi_p) : phi_p;
+    const Var<T> He_p = ret ? phi(Rp, emb) : emb;
+    const Var<T> Hh_p = ret ? phi(Rp, phi_p) : phi_p;
     const Var<T> W1 = p("decoder.proj.0.weight");
     a_p = decode(with_extra_input(tape.zeros(P, 12), He_p, Hh_p, false), with_extra_weight(W1, false));
     Var<T> He_v, Hh_v;
     if (ret) {
-      const Var<T> z_e = rotate_blocks(Re, ad::gather_rows(tape, ad::linear(tape, emb, Wt), in.cand_patches));
+      const Var<T> z_e = rotate_blocks(Re_v, ad::gather_rows(tape, ad::linear(tape, emb, Wt), in.cand_patches));
       He_v = ad::linear(tape, z_e, W);  // W (I⊗R_v) Wᵀ e_p  (Ec, d)
-      Hh_v = ad::gather_rows(tape, phi(Rv_host, Rv, phi_v), cand_vertex);
+      Hh_v = ad::gather_rows(tape, phi(Rv, phi_v), cand_vertex);
     } else {
       He_v = ad::gather_rows(tape, emb, in.cand_patches);
       Hh_v = ad::gather_rows(tape, phi_v, cand_vertex);
