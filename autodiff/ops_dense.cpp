@@ -1,6 +1,7 @@
 #include "autodiff/ops_dense.h"
 
 #include "autodiff/bf16_gemm.h"
+#include "autodiff/gemm_f32.h"
 #include "autodiff/row_blocks.h"
 
 #include <algorithm>
@@ -169,12 +170,31 @@ void for_linear_chunks(int64_t n, int64_t width, bool fine, F&& f) {
 // ReLU, for outputs `width` wide (a narrow x makes the output's passes the main cost).
 int64_t cache_block_rows(int64_t width) { return std::max<int64_t>(64, (int64_t{64} << 10) / std::max<int64_t>(1, width)); }
 
+// Whether this tape type's products run on the float32 kernel of autodiff/gemm_f32.h (float
+// tapes where it is chosen); Eigen's product otherwise.
+template <class T>
+bool own_gemm() {
+  if constexpr (std::is_same_v<T, float>) return f32_gemm_kernel() == F32GemmKernel::kAvx512;
+  return false;
+}
+
+// Wᵀ (Cin, Cout) row-major, which the own kernel reads as B of x Wᵀ; empty where Eigen runs.
+template <class T>
+std::vector<T> transposed_for_gemm(const ConstMatMap<T>& W) {
+  if (!own_gemm<T>()) return {};
+  std::vector<T> t(static_cast<std::size_t>(W.size()));
+  MatMap<T>(t.data(), W.cols(), W.rows()) = W.transpose();
+  return t;
+}
+
 // out = residual + x Wᵀ + b (then max(., 0) with relu) for one block of n rows, serially: one
 // GEMM accumulating into rows pre-filled with the residual and the bias (Eigen's `=` product
 // would zero-fill first anyway, so both cost no extra pass). x: (n, Cin); W: (Cout, Cin);
-// b: (Cout) or null; residual: (n, Cout) or null; out: (n, Cout).
+// Wt: W's transposed_for_gemm, empty for Eigen; b: (Cout) or null; residual: (n, Cout) or
+// null; out: (n, Cout).
 template <class T>
-void dense_block(const T* x, int64_t n, const ConstMatMap<T>& W, const T* b, const T* residual, bool relu, T* out) {
+void dense_block(const T* x, int64_t n, const ConstMatMap<T>& W, const std::vector<T>& Wt, const T* b,
+                 const T* residual, bool relu, T* out) {
   MatMap<T> rows(out, n, W.rows());
   if (residual) {
     const ConstMatMap<T> res(residual, n, W.rows());
@@ -185,7 +205,10 @@ void dense_block(const T* x, int64_t n, const ConstMatMap<T>& W, const T* b, con
   } else {
     rows.setZero();
   }
-  rows.noalias() += ConstMatMap<T>(x, n, W.cols()) * W.transpose();
+  if constexpr (std::is_same_v<T, float>) {
+    if (!Wt.empty()) gemm_f32(n, W.rows(), W.cols(), x, W.cols(), 1, Wt.data(), W.rows(), out, W.rows(), false);
+  }
+  if (Wt.empty()) rows.noalias() += ConstMatMap<T>(x, n, W.cols()) * W.transpose();
   if (relu) rows = rows.cwiseMax(T(0));
 }
 
@@ -196,10 +219,11 @@ template <class T>
 void linear_forward(const ConstMatMap<T>& x, const ConstMatMap<T>& W, const T* b, bool relu, MatMap<T> out,
                     bool fine_chunks, const T* residual = nullptr) {
   const int64_t block = cache_block_rows(out.cols()), cin = x.cols(), cout = out.cols();
+  const std::vector<T> Wt = transposed_for_gemm(W);
   for_linear_chunks(x.rows(), cin + cout, fine_chunks, [&](int64_t, int64_t c0, int64_t c_rows) {
     for (int64_t r0 = c0; r0 < c0 + c_rows; r0 += block)
-      dense_block(x.data() + r0 * cin, std::min(block, c0 + c_rows - r0), W, b, residual ? residual + r0 * cout : nullptr,
-                  relu, out.data() + r0 * cout);
+      dense_block(x.data() + r0 * cin, std::min(block, c0 + c_rows - r0), W, Wt, b,
+                  residual ? residual + r0 * cout : nullptr, relu, out.data() + r0 * cout);
   });
 }
 
@@ -217,22 +241,31 @@ void linear_backward(const ConstMatMap<T>& x, const ConstMatMap<T>& W, const Con
   const int64_t stride = cout * cin + cout;
   if (chunks > 1 && (dW || db)) partial.resize(static_cast<std::size_t>(chunks * stride));
   T* const base = partial.data();  // captured: inside the workers `partial` names THEIR buffer
+  const bool own = own_gemm<T>();
   for_linear_chunks(n, cin + cout, false, [&](int64_t k, int64_t r0, int64_t rows) {
     if (y) {
       MatMap<T> dz_k(dz + r0 * cout, rows, cout);
       dz_k = (ConstMatMap<T>(y + r0 * cout, rows, cout).array() > T(0)).select(dy.middleRows(r0, rows), T(0));
     }
     const ConstMatMap<T> dy_k((y ? dz : dy.data()) + r0 * cout, rows, cout);
-    if (dx && assign_dx) MatMap<T>(dx + r0 * cin, rows, cin).noalias() = dy_k * W;
-    else if (dx) MatMap<T>(dx + r0 * cin, rows, cin).noalias() += dy_k * W;
-    if (chunks == 1) {  // no partials: straight into the gradients
-      if (dW) MatMap<T>(dW, cout, cin).noalias() += dy_k.transpose() * x.middleRows(r0, rows);
+    T* const dW_k = chunks == 1 ? dW : base + k * stride;  // no partials: straight into the gradients
+    if constexpr (std::is_same_v<T, float>) {
+      if (own) {
+        if (dx) gemm_f32(rows, cin, cout, dy_k.data(), cout, 1, W.data(), cin, dx + r0 * cin, cin, assign_dx);
+        if (dW) gemm_f32(cout, cin, rows, dy_k.data(), 1, cout, x.data() + r0 * cin, cin, dW_k, cin, chunks > 1);
+      }
+    }
+    if (!own) {
+      if (dx && assign_dx) MatMap<T>(dx + r0 * cin, rows, cin).noalias() = dy_k * W;
+      else if (dx) MatMap<T>(dx + r0 * cin, rows, cin).noalias() += dy_k * W;
+      if (dW && chunks == 1) MatMap<T>(dW, cout, cin).noalias() += dy_k.transpose() * x.middleRows(r0, rows);
+      else if (dW) MatMap<T>(dW_k, cout, cin).noalias() = dy_k.transpose() * x.middleRows(r0, rows);
+    }
+    if (chunks == 1) {
       if (db) RowVecMap<T>(db, cout) += dy_k.colwise().sum();
       return;
     }
-    T* p = base + k * stride;
-    if (dW) MatMap<T>(p, cout, cin).noalias() = dy_k.transpose() * x.middleRows(r0, rows);
-    if (db) RowVecMap<T>(p + cout * cin, cout) = dy_k.colwise().sum();
+    if (db) RowVecMap<T>(base + k * stride + cout * cin, cout) = dy_k.colwise().sum();
   });
   if (chunks == 1 || !(dW || db)) return;
   // Add the partials in chunk order, in parallel over the entries of [dW | db].
@@ -372,6 +405,9 @@ Var<T> mlp(Tape<T>& tape, const Var<T>& x, std::span<const Var<T>> weights, std:
   // Per layer: bf16 packed weights where the matmul precision asks for them (as linear).
   std::vector<std::shared_ptr<const Bf16PackedWeights>> packed(static_cast<std::size_t>(L));
   for (int64_t i = 0; i < L; ++i) packed[i] = bf16_weights_of(tape, weights[i], "mlp");
+  std::vector<std::vector<T>> transposed(static_cast<std::size_t>(L));
+  for (int64_t i = 0; i < L; ++i)
+    if (!packed[i]) transposed[i] = transposed_for_gemm<T>({weights[i].value, weights[i].rows, weights[i].cols});
 
   const int64_t block = cache_block_rows(widest);
   const bool fine_chunks = tape.matmul_precision() == MatmulPrecision::kBFloat16;
@@ -394,7 +430,7 @@ Var<T> mlp(Tape<T>& tape, const Var<T>& x, std::span<const Var<T>> weights, std:
             continue;
           }
         }
-        dense_block<T>(a, n, {W.value, W.rows, W.cols}, biases[i].value, nullptr, relu, dst);
+        dense_block<T>(a, n, {W.value, W.rows, W.cols}, transposed[i], biases[i].value, nullptr, relu, dst);
         a = dst, offset += N * W.rows;
       }
     }

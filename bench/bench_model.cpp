@@ -10,6 +10,7 @@
 // GFLOP/s use the reference's FLOP count (`flops_forward.total`, train step = 3x forward), so
 // FLOPs our formulation skips (e.g. the factored decoder) show up as a higher rate.
 #include "bench/bench_model.h"
+#include "autodiff/gemm_f32.h"
 #include "autodiff/optim.h"
 #include "bench/bench_util.h"
 #include "dataset/file_io.h"
@@ -28,9 +29,11 @@
 #include <algorithm>
 #include <array>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <set>
 #include <sstream>
 #include <stdexcept>
 
@@ -105,16 +108,91 @@ struct Ours {
   std::vector<double> train_ms, infer_ms, gemm_gflops;
 };
 
-// Plain Eigen GEMM of the decoder's shape (rows x 268 by 268 x 268), GFLOP/s.
-double gemm_rate(Eigen::Index rows) {
-  const Eigen::Index k = 268;
-  Eigen::MatrixXf a = Eigen::MatrixXf::Random(rows, k), b = Eigen::MatrixXf::Random(k, k), c(rows, k);
-  std::vector<double> ts;
-  for (int r = 0; r < 5; ++r) {
-    const double t0 = now_ms();
-    c.noalias() = a * b;
-    ts.push_back(now_ms() - t0);
+// ---- the reference's BLAS
+// OpenBLAS picks its kernel when it loads and takes an older one for a CPU newer than itself:
+// Debian 12's 0.3.21 ran an AMD Zen 5 on its AVX2 Haswell kernel and an Intel Emerald Rapids on
+// Prescott's SSE3 one, 12.8 GF/s where its SkylakeX kernel gives 135. A ratio against that
+// measures the library's age, so the reference runs on the fastest kernel this CPU can run.
+struct ReferenceBlas {
+  std::string forced;   // OPENBLAS_CORETYPE the reference runs with; empty: the library's choice
+  std::string how;      // "fastest of the probes", "OPENBLAS_CORETYPE", "library's choice", "--reference-blas"
+  eval::BlasProbe chosen;
+  std::vector<std::pair<std::string, eval::BlasProbe>> probes;  // (forced core or "", what it gave)
+};
+
+// One rows x 268 by 268 x 268 float32 product in the reference's python at `threads`, the shape
+// gemm_rate times ours on; median of 21 after 8 untimed (the first few run at a third of the
+// rate: measured 27-32 against 95-190 GF/s on an AMD EPYC).
+eval::BlasProbe probe_reference_blas(const BenchModelOptions& o, const std::string& core, Eigen::Index rows,
+                                     int threads) {
+  const fs::path out = fs::temp_directory_path() / ("layersnet_bench_blas_" + std::to_string(::getpid()) + ".txt");
+  std::ostringstream cmd;
+  cmd << "OPENBLAS_VERBOSE=2 ";
+  if (!core.empty()) cmd << "OPENBLAS_CORETYPE=" << core << " ";
+  cmd << o.python << " -c \"import time, torch; torch.set_num_threads(" << threads << "); "
+      << "a = torch.randn(" << rows << ", 268); b = torch.randn(268, 268); [a @ b for _ in range(8)]; ts = []\n"
+      << "for _ in range(21): t = time.perf_counter(); a @ b; ts.append(time.perf_counter() - t)\n"
+      << "print('gemm_gflops', 2.0 * " << rows << " * 268 * 268 / sorted(ts)[10] / 1e9)\" > " << out.string()
+      << " 2>&1";
+  const int rc = std::system(cmd.str().c_str());
+  std::ifstream f(out);
+  std::stringstream text;
+  text << f.rdbuf();
+  fs::remove(out);
+  eval::BlasProbe p = eval::parse_blas_probe(text.str());
+  if (rc != 0) p.gflops = 0;  // a kernel the CPU cannot run ends the probe
+  return p;
+}
+
+ReferenceBlas choose_reference_blas(const BenchModelOptions& o, Eigen::Index rows) {
+  ReferenceBlas r;
+  auto probe = [&](const std::string& core) {
+    r.probes.emplace_back(core, probe_reference_blas(o, core, rows, 1));
+    return r.probes.back().second;
+  };
+  const char* env = std::getenv("OPENBLAS_CORETYPE");
+  const bool env_set = env && *env;
+  if (o.reference_blas == "default") {
+    r.how = env_set ? "OPENBLAS_CORETYPE" : "library's choice", r.chosen = probe("");
+  } else if (o.reference_blas != "auto") {
+    r.how = "--reference-blas", r.forced = o.reference_blas, r.chosen = probe(o.reference_blas);
+  } else {
+    // A set OPENBLAS_CORETYPE is one of the candidates, not the answer: machines set it for
+    // their own reasons (one here held Zen 5 to Haswell's kernel, at half SkylakeX's rate).
+    r.how = "fastest of the probes", r.chosen = probe("");
+    for (const std::string& core : eval::openblas_cores_for_this_cpu()) {
+      const eval::BlasProbe p = probe(core);
+      if (p.gflops > r.chosen.gflops * 1.05) r.forced = core, r.chosen = p;  // 5 %: the probes' noise
+    }
   }
+  return r;
+}
+
+// A GEMM of the decoder's shape (rows x 268 by 268 x 268) on the float32 kernel the model's
+// linear layers run (autodiff/gemm_f32.h: ours or Eigen's) on `threads` threads, GFLOP/s;
+// median of 5 after 3.
+double gemm_rate(Eigen::Index rows, int threads) {
+  const Eigen::Index k = 268;
+  using RowMajor = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+  RowMajor a = RowMajor::Random(rows, k), b = RowMajor::Random(k, k), c(rows, k);
+  const bool own = ad::f32_gemm_kernel() == ad::F32GemmKernel::kAvx512;
+  std::vector<double> ts;
+  for (int r = 0; r < 8; ++r) {
+    const double t0 = now_ms();
+    if (own) {
+#pragma omp parallel num_threads(threads)
+      {
+        const Eigen::Index t = omp_get_thread_num(), n = omp_get_num_threads();
+        const Eigen::Index r0 = rows * t / n, r1 = rows * (t + 1) / n;
+        ad::gemm_f32(r1 - r0, k, k, a.data() + r0 * k, k, 1, b.data(), k, c.data() + r0 * k, k, true);
+      }
+    } else {
+      Eigen::setNbThreads(threads);
+      c.noalias() = a * b;
+    }
+    if (r >= 3) ts.push_back(now_ms() - t0);
+  }
+  Eigen::setNbThreads(1);  // the model's products thread by rows themselves
   return 2.0 * rows * k * k / (median(ts) * 1e-3) / 1e9;
 }
 
@@ -124,7 +202,7 @@ struct Reference {
   nlohmann::json scene, raw;
 };
 
-Reference run_reference(const BenchModelOptions& o, const fs::path& script, int threads) {
+Reference run_reference(const BenchModelOptions& o, const ReferenceBlas& blas, const fs::path& script, int threads) {
   Reference r;
   const fs::path out = fs::temp_directory_path() / ("layersnet_bench_model_" + std::to_string(::getpid()) + ".json");
   // The reference keeps only iterations with < 0.1 foreign cores and fails (empty median) when
@@ -136,6 +214,7 @@ Reference run_reference(const BenchModelOptions& o, const fs::path& script, int 
        << "', '--warmup', '" << o.warmup << "', '--max-wait', '" << o.max_wait << "', '--json', '" << out.string()
        << "'";
   std::ostringstream cmd;
+  if (!blas.forced.empty()) cmd << "OPENBLAS_CORETYPE=" << blas.forced << " ";
   cmd << o.python << " -c \"import sys; sys.path.insert(0, '" << script.parent_path().string()
       << "'); import " << script.stem().string() << " as L; "
       << (o.torch_filter ? "" : "L.FOREIGN_MAX = float('inf'); ") << "sys.argv = ['" << script.filename().string()
@@ -197,6 +276,47 @@ void print_profile(const StepProfile& p, int threads, const std::string& size) {
 }  // namespace
 
 namespace layersnet::eval {
+
+BlasProbe parse_blas_probe(const std::string& output) {
+  BlasProbe p;
+  std::istringstream in(output);
+  std::string line;
+  while (std::getline(in, line)) {
+    std::istringstream words(line);
+    std::string key, value;
+    words >> key >> value;
+    if (key == "Core:") p.core = value;
+    if (key == "gemm_gflops" && !value.empty()) {
+      char* end = nullptr;
+      const double rate = std::strtod(value.c_str(), &end);
+      if (end && *end == '\0' && std::isfinite(rate) && rate > 0) p.gflops = rate;
+    }
+  }
+  return p;
+}
+
+std::vector<std::string> openblas_cores_for_this_cpu() {
+  std::ifstream f("/proc/cpuinfo");
+  std::string line;
+  std::set<std::string> flags;
+  while (std::getline(f, line))
+    if (line.rfind("flags", 0) == 0) {
+      std::istringstream words(line.substr(line.find(':') + 1));
+      for (std::string w; words >> w;) flags.insert(w);
+      break;
+    }
+  auto has = [&](std::initializer_list<const char*> need) {
+    return std::all_of(need.begin(), need.end(), [&](const char* n) { return flags.count(n) > 0; });
+  };
+  std::vector<std::string> cores;
+  if (has({"avx2", "fma"})) cores.push_back("Haswell");
+  if (has({"avx2", "fma", "avx512f", "avx512bw", "avx512vl", "avx512dq", "avx512cd"})) {
+    cores.push_back("SkylakeX");
+    if (has({"avx512_bf16"})) cores.push_back("Cooperlake");
+    if (has({"avx512_bf16", "amx_tile", "amx_bf16"})) cores.push_back("SapphireRapids");
+  }
+  return cores;
+}
 
 int run_bench_model(const BenchModelOptions& o) {
   // The product's malloc tuning, which is also the reference's default (--malloc heap); perf:
@@ -293,8 +413,27 @@ int run_bench_model(const BenchModelOptions& o) {
   // for descheduled peers (small scene, 2 threads, load 7: train 130 ms vs 270-2800 ms).
   const char* wait_policy = std::getenv("OMP_WAIT_POLICY");
   std::printf("bench model --size %s: %d passes x (ours %d iters, reference %d iters) per thread count, "
-              "input build %.1f ms, OMP_WAIT_POLICY=%s\n",
-              o.size.c_str(), o.passes, o.iters, o.iters, build_ms, wait_policy ? wait_policy : "(default)");
+              "input build %.1f ms, OMP_WAIT_POLICY=%s, float32 GEMM kernel %s\n",
+              o.size.c_str(), o.passes, o.iters, o.iters, build_ms, wait_policy ? wait_policy : "(default)",
+              ad::f32_gemm_kernel_name(ad::f32_gemm_kernel()));
+  ReferenceBlas blas;
+  if (with_ref) {
+    const Eigen::Index rows = std::max<Eigen::Index>(8000, 4 * in.N);
+    blas = choose_reference_blas(o, rows);
+    const double ours_gemm = gemm_rate(rows, 1);
+    std::printf("reference BLAS: OpenBLAS kernel %s (%s), %.1f GF/s on the %lld x 268 GEMM at 1 thread, ours %.1f;",
+                blas.chosen.core.empty() ? "(none reported)" : blas.chosen.core.c_str(), blas.how.c_str(),
+                blas.chosen.gflops, static_cast<long long>(rows), ours_gemm);
+    std::printf(" probed:");
+    for (const auto& [core, p] : blas.probes)
+      std::printf(" %s %.1f", core.empty() ? ("as set " + p.core).c_str() : core.c_str(), p.gflops);
+    std::printf("\n");
+    if (blas.chosen.gflops < 0.5 * ours_gemm)
+      std::printf("bench model: the reference's BLAS runs at %.2fx our GEMM rate, so the ratios below measure its "
+                  "BLAS more than its model; set OPENBLAS_CORETYPE to a kernel this CPU runs faster "
+                  "(OpenBLAS's list: Haswell, SkylakeX, Cooperlake, SapphireRapids, Zen)\n",
+                  ours_gemm > 0 ? blas.chosen.gflops / ours_gemm : 0.0);
+  }
   for (int pass = 0; pass < o.passes; ++pass)
     for (int t : threads) {
       omp_set_num_threads(t);
@@ -319,12 +458,11 @@ int run_bench_model(const BenchModelOptions& o) {
       }
       u.train_ms.push_back(median(tr));
       u.infer_ms.push_back(median(inf));
-      Eigen::setNbThreads(t);  // the plain GEMM reference uses every thread
-      u.gemm_gflops.push_back(gemm_rate(std::max<Eigen::Index>(8000, 4 * in.N)));
+      u.gemm_gflops.push_back(gemm_rate(std::max<Eigen::Index>(8000, 4 * in.N), t));
       std::printf("  pass %d threads %d: ours train %.1f ms infer %.1f ms (load %.2f)", pass + 1, t,
                   u.train_ms.back(), u.infer_ms.back(), eval::load_average_1min());
       if (with_ref) {
-        refs[t].push_back(run_reference(o, script, t));
+        refs[t].push_back(run_reference(o, blas, script, t));
         const auto& r = refs[t].back();
         if (r.ok) std::printf(" | torch train %.1f ms infer %.1f ms (load %.2f)", r.train_ms, r.infer_ms, eval::load_average_1min());
       }
@@ -347,8 +485,15 @@ int run_bench_model(const BenchModelOptions& o) {
 
   // ---- summary: best-of-pass medians
   const double peak = vm_hwm_mib();
-  nlohmann::json out = {{"size", o.size}, {"omp_wait_policy", wait_policy ? wait_policy : ""}, {"scene_ours", ours_scene}, {"scene_torch", ref_scene},
+  nlohmann::json out = {{"size", o.size}, {"f32_gemm_kernel", ad::f32_gemm_kernel_name(ad::f32_gemm_kernel())}, {"omp_wait_policy", wait_policy ? wait_policy : ""}, {"scene_ours", ours_scene}, {"scene_torch", ref_scene},
                         {"input_build_ms", build_ms}, {"peak_rss_mib_ours", peak}, {"rows", nlohmann::json::array()}};
+  if (with_ref) {
+    nlohmann::json probes = nlohmann::json::array();
+    for (const auto& [core, p] : blas.probes)
+      probes.push_back({{"openblas_coretype", core}, {"core", p.core}, {"gemm_gflops_1_thread", p.gflops}});
+    out["reference_blas"] = {{"core", blas.chosen.core}, {"openblas_coretype", blas.forced}, {"chosen_by", blas.how},
+                             {"gemm_gflops_1_thread", blas.chosen.gflops}, {"probes", probes}};
+  }
   std::printf("\n%7s %10s %10s %7s %10s %10s %7s %9s %9s %9s %8s %9s %9s %6s\n", "threads", "train_ms", "torch_ms",
               "ratio", "infer_ms", "torch_ms", "ratio", "GF/s_trn", "GF/s_inf", "GEMM_GF/s", "trn/GEMM",
               "peak_MiB", "torch_MiB", "load");

@@ -20,6 +20,11 @@ LAYERSNET_BENCH(model, "Training and inference step vs the PyTorch reference", [
   sub.add_option("--python", o->python, "python with torch")->capture_default_str();
   sub.add_option("--max-wait", o->max_wait, "reference's quiet-machine wait per block, s")->capture_default_str();
   sub.add_flag("--no-reference", o->no_reference, "time ours only");
+  sub.add_option("--reference-blas", o->reference_blas,
+                 "the reference's OpenBLAS kernel: auto (the fastest of those this CPU runs, a set "
+                 "OPENBLAS_CORETYPE among them), default (the environment's: OPENBLAS_CORETYPE or the "
+                 "library's choice) or a kernel's name")
+      ->capture_default_str();
   sub.add_flag("--torch-filter", o->torch_filter,
                "keep the reference's contention filter (drops iterations with foreign load; fails on a busy machine)");
   sub.add_option("--json", o->json, "write the figures as JSON");

@@ -2,6 +2,7 @@
 #include "eval/eval_run.h"
 
 #include "autodiff/bf16_gemm.h"
+#include "autodiff/gemm_f32.h"
 #include "dataset/manifest.h"
 #include "dataset/sha256.h"
 #include "dataset/stats.h"
@@ -152,10 +153,11 @@ void run_evaluation(EvalRunOptions o) {
               step_from.empty() ? "the step with its default settings" : ("the step of " + step_from).c_str());
 
   std::printf("eval: %s split '%s', %zu model(s), %zu replay(s) + %zu baselines, up to %d frames from %s, %d thread(s), "
-              "products %s%s%s\n",
+              "products %s%s%s, float32 GEMM kernel %s\n",
               root.c_str(), eo.split.c_str(), model_count, o.replays.size(), baseline_count, eo.frames,
               start_description(eo).c_str(),
-              omp_get_max_threads(), o.precision_label.c_str(), any_bf16 ? ", bf16 kernel " : "", any_bf16 ? ad::bf16_kernel_name() : "");
+              omp_get_max_threads(), o.precision_label.c_str(), any_bf16 ? ", bf16 kernel " : "", any_bf16 ? ad::bf16_kernel_name() : "",
+              ad::f32_gemm_kernel_name(ad::f32_gemm_kernel()));
   std::vector<MethodResult> results = evaluate(manifest, predictors, eo, true);
   for (size_t p = 0; p < results.size(); ++p) {
     results[p].kind = kinds[p];
