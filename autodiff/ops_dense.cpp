@@ -268,14 +268,18 @@ void linear_backward(const ConstMatMap<T>& x, const ConstMatMap<T>& W, const Con
     if (db) RowVecMap<T>(base + k * stride + cout * cin, cout) = dy_k.colwise().sum();
   });
   if (chunks == 1 || !(dW || db)) return;
-  // Add the partials in chunk order, in parallel over the entries of [dW | db].
-  for_row_blocks(stride / 64 + 1, 64, [&](int64_t b0, int64_t nb) {
-    const int64_t j0 = b0 * 64, j1 = std::min(stride, (b0 + nb) * 64);
-    for (int64_t j = j0; j < j1; ++j) {
-      if (j < cout * cin ? !dW : !db) continue;
-      T acc = 0;
-      for (int64_t k = 0; k < chunks; ++k) acc += base[k * stride + j];
-      (j < cout * cin ? dW[j] : db[j - cout * cin]) += acc;
+  // Add the partials in chunk order, in parallel over the entries of [dW | db] that are wanted,
+  // 64 at a time (so that the adds vectorise; each entry's sum keeps the chunk order).
+  const int64_t lo = dW ? 0 : cout * cin, hi = db ? stride : cout * cin;
+  for_row_blocks((hi - lo + 63) / 64, 64, [&](int64_t b0, int64_t nb) {
+    for (int64_t j0 = lo + b0 * 64; j0 < std::min(hi, lo + (b0 + nb) * 64); j0 += 64) {
+      const int64_t width = std::min<int64_t>(64, hi - j0);
+      T acc[64] = {};
+      for (int64_t k = 0; k < chunks; ++k) {
+        const T* part = base + k * stride + j0;
+        for (int64_t j = 0; j < width; ++j) acc[j] += part[j];
+      }
+      for (int64_t j = 0; j < width; ++j) (j0 + j < cout * cin ? dW[j0 + j] : db[j0 + j - cout * cin]) += acc[j];
     }
   });
 }

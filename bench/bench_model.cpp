@@ -122,7 +122,9 @@ struct ReferenceBlas {
 
 // One rows x 268 by 268 x 268 float32 product in the reference's python at `threads`, the shape
 // gemm_rate times ours on; median of 21 after 8 untimed (the first few run at a third of the
-// rate: measured 27-32 against 95-190 GF/s on an AMD EPYC).
+// rate: measured 27-32 against 95-190 GF/s on an AMD EPYC). The product goes into a buffer made
+// once: a fresh 80,000-row output each time costs more in page faults than the product itself
+// (27 GF/s against 163 with the same kernel, measured).
 eval::BlasProbe probe_reference_blas(const BenchModelOptions& o, const std::string& core, Eigen::Index rows,
                                      int threads) {
   const fs::path out = fs::temp_directory_path() / ("layersnet_bench_blas_" + std::to_string(::getpid()) + ".txt");
@@ -130,8 +132,9 @@ eval::BlasProbe probe_reference_blas(const BenchModelOptions& o, const std::stri
   cmd << "OPENBLAS_VERBOSE=2 ";
   if (!core.empty()) cmd << "OPENBLAS_CORETYPE=" << core << " ";
   cmd << o.python << " -c \"import time, torch; torch.set_num_threads(" << threads << "); "
-      << "a = torch.randn(" << rows << ", 268); b = torch.randn(268, 268); [a @ b for _ in range(8)]; ts = []\n"
-      << "for _ in range(21): t = time.perf_counter(); a @ b; ts.append(time.perf_counter() - t)\n"
+      << "a = torch.randn(" << rows << ", 268); b = torch.randn(268, 268); c = torch.empty(" << rows << ", 268); "
+      << "[torch.mm(a, b, out=c) for _ in range(8)]; ts = []\n"
+      << "for _ in range(21): t = time.perf_counter(); torch.mm(a, b, out=c); ts.append(time.perf_counter() - t)\n"
       << "print('gemm_gflops', 2.0 * " << rows << " * 268 * 268 / sorted(ts)[10] / 1e9)\" > " << out.string()
       << " 2>&1";
   const int rc = std::system(cmd.str().c_str());
@@ -418,7 +421,7 @@ int run_bench_model(const BenchModelOptions& o) {
               ad::f32_gemm_kernel_name(ad::f32_gemm_kernel()));
   ReferenceBlas blas;
   if (with_ref) {
-    const Eigen::Index rows = std::max<Eigen::Index>(8000, 4 * in.N);
+    const Eigen::Index rows = 8000;  // the kernels' order does not depend on the size
     blas = choose_reference_blas(o, rows);
     const double ours_gemm = gemm_rate(rows, 1);
     std::printf("reference BLAS: OpenBLAS kernel %s (%s), %.1f GF/s on the %lld x 268 GEMM at 1 thread, ours %.1f;",
