@@ -92,7 +92,8 @@ F32GemmKernel choose_kernel() {
     F32GemmKernel k;
     if (name == "avx512") k = F32GemmKernel::kAvx512;
     else if (name == "eigen") k = F32GemmKernel::kEigen;
-    else throw std::runtime_error("LAYERSNET_F32_GEMM=" + name + ": unknown float32 GEMM kernel; choose avx512 or eigen");
+    else
+      throw std::runtime_error("LAYERSNET_F32_GEMM=" + name + ": unknown float32 GEMM kernel; choose avx512 or eigen");
     if (!f32_gemm_kernel_available(k))
       throw std::runtime_error("LAYERSNET_F32_GEMM=" + name +
                                ": this build has no such kernel (it needs AVX-512F at compile time: build with "

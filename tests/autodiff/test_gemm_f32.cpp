@@ -75,7 +75,8 @@ TEST_F(GemmF32, EveryOutputIsTheOrderedFmaChainForAnyShapeAndLayout) {
 TEST_F(GemmF32, ARowGivesTheSameBitsWhereverItFallsInTheCall) {
   std::mt19937 rng(11);
   const int64_t m = 37, n = 40, k = 270;
-  const auto a = random_values(static_cast<std::size_t>(m * k), rng), b = random_values(static_cast<std::size_t>(k * n), rng);
+  const auto a = random_values(static_cast<std::size_t>(m * k), rng);
+  const auto b = random_values(static_cast<std::size_t>(k * n), rng);
   std::vector<float> whole(static_cast<std::size_t>(m * n)), part(static_cast<std::size_t>(5 * n));
   gemm_f32(m, n, k, a.data(), k, 1, b.data(), n, whole.data(), n, true);
   gemm_f32(5, n, k, a.data() + 30 * k, k, 1, b.data(), n, part.data(), n, true);  // rows 30..34 alone
@@ -112,7 +113,10 @@ TEST(GemmF32Linear, FloatLinearMatchesDoubleForwardAndBackward) {
   const auto f = run(0.0f), d = run(0.0);
   ASSERT_EQ(f.size(), d.size());
   double worst = 0, scale = 0;
-  for (std::size_t i = 0; i < f.size(); ++i) worst = std::max(worst, std::abs(f[i] - d[i])), scale = std::max(scale, std::abs(d[i]));
+  for (std::size_t i = 0; i < f.size(); ++i) {
+    worst = std::max(worst, std::abs(f[i] - d[i]));
+    scale = std::max(scale, std::abs(d[i]));
+  }
   EXPECT_LT(worst, 2e-5 * scale) << "largest difference " << worst << " of values up to " << scale;
 }
 
