@@ -35,8 +35,8 @@ void block(int64_t kb, const float* a, int64_t lda, const float* b, int64_t ldb,
   for (int64_t p = 0; p < kb; ++p, a += ATransposed ? lda : 1, b += ldb) {
     const __m512 b0 = _mm512_maskz_loadu_ps(m0, b);
     const __m512 b1 = V == 2 ? _mm512_maskz_loadu_ps(m1, b + 16) : b0;
-  #pragma GCC unroll 12
-  for (int r = 0; r < R; ++r) {
+#pragma GCC unroll 12
+    for (int r = 0; r < R; ++r) {
       const __m512 av = _mm512_set1_ps(ATransposed ? a[r] : a[r * lda]);
       c0[r] = _mm512_fmadd_ps(av, b0, c0[r]);
       if constexpr (V == 2) c1[r] = _mm512_fmadd_ps(av, b1, c1[r]);

@@ -120,18 +120,17 @@ struct ReferenceBlas {
   std::vector<std::pair<std::string, eval::BlasProbe>> probes;  // (forced core or "", what it gave)
 };
 
-// One rows x 268 by 268 x 268 float32 product in the reference's python at `threads`, the shape
+// One rows x 268 by 268 x 268 float32 product in the reference's python at 1 thread, the shape
 // gemm_rate times ours on; median of 21 after 8 untimed (the first few run at a third of the
 // rate: measured 27-32 against 95-190 GF/s on an AMD EPYC). The product goes into a buffer made
 // once: a fresh 80,000-row output each time costs more in page faults than the product itself
 // (27 GF/s against 163 with the same kernel, measured).
-eval::BlasProbe probe_reference_blas(const BenchModelOptions& o, const std::string& core, Eigen::Index rows,
-                                     int threads) {
+eval::BlasProbe probe_reference_blas(const BenchModelOptions& o, const std::string& core, Eigen::Index rows) {
   const fs::path out = fs::temp_directory_path() / ("layersnet_bench_blas_" + std::to_string(::getpid()) + ".txt");
   std::ostringstream cmd;
   cmd << "OPENBLAS_VERBOSE=2 ";
   if (!core.empty()) cmd << "OPENBLAS_CORETYPE=" << core << " ";
-  cmd << o.python << " -c \"import time, torch; torch.set_num_threads(" << threads << "); "
+  cmd << o.python << " -c \"import time, torch; torch.set_num_threads(1); "
       << "a = torch.randn(" << rows << ", 268); b = torch.randn(268, 268); c = torch.empty(" << rows << ", 268); "
       << "[torch.mm(a, b, out=c) for _ in range(8)]; ts = []\n"
       << "for _ in range(21): t = time.perf_counter(); torch.mm(a, b, out=c); ts.append(time.perf_counter() - t)\n"
@@ -150,7 +149,7 @@ eval::BlasProbe probe_reference_blas(const BenchModelOptions& o, const std::stri
 ReferenceBlas choose_reference_blas(const BenchModelOptions& o, Eigen::Index rows) {
   ReferenceBlas r;
   auto probe = [&](const std::string& core) {
-    r.probes.emplace_back(core, probe_reference_blas(o, core, rows, 1));
+    r.probes.emplace_back(core, probe_reference_blas(o, core, rows));
     return r.probes.back().second;
   };
   const char* env = std::getenv("OPENBLAS_CORETYPE");
