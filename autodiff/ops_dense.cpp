@@ -174,7 +174,7 @@ int64_t cache_block_rows(int64_t width) { return std::max<int64_t>(64, (int64_t{
 // tapes where it is chosen); Eigen's product otherwise.
 template <class T>
 bool own_gemm() {
-  if constexpr (std::is_same_v<T, float>) return f32_gemm_kernel() == F32GemmKernel::kAvx512;
+  if constexpr (std::is_same_v<T, float>) return f32_gemm_kernel() != F32GemmKernel::kEigen;
   return false;
 }
 
@@ -206,7 +206,8 @@ void dense_block(const T* x, int64_t n, const ConstMatMap<T>& W, const std::vect
     rows.setZero();
   }
   if constexpr (std::is_same_v<T, float>) {
-    if (!Wt.empty()) gemm_f32(n, W.rows(), W.cols(), x, W.cols(), 1, Wt.data(), W.rows(), out, W.rows(), false);
+    if (!Wt.empty())
+      gemm_f32(f32_gemm_kernel(), n, W.rows(), W.cols(), x, W.cols(), 1, Wt.data(), W.rows(), out, W.rows(), false);
   }
   if (Wt.empty()) rows.noalias() += ConstMatMap<T>(x, n, W.cols()) * W.transpose();
   if (relu) rows = rows.cwiseMax(T(0));
@@ -242,6 +243,7 @@ void linear_backward(const ConstMatMap<T>& x, const ConstMatMap<T>& W, const Con
   if (chunks > 1 && (dW || db)) partial.resize(static_cast<std::size_t>(chunks * stride));
   T* const base = partial.data();  // captured: inside the workers `partial` names THEIR buffer
   const bool own = own_gemm<T>();
+  const F32GemmKernel kernel = f32_gemm_kernel();
   for_linear_chunks(n, cin + cout, false, [&](int64_t k, int64_t r0, int64_t rows) {
     if (y) {
       MatMap<T> dz_k(dz + r0 * cout, rows, cout);
@@ -251,8 +253,9 @@ void linear_backward(const ConstMatMap<T>& x, const ConstMatMap<T>& W, const Con
     T* const dW_k = chunks == 1 ? dW : base + k * stride;  // no partials: straight into the gradients
     if constexpr (std::is_same_v<T, float>) {
       if (own) {
-        if (dx) gemm_f32(rows, cin, cout, dy_k.data(), cout, 1, W.data(), cin, dx + r0 * cin, cin, assign_dx);
-        if (dW) gemm_f32(cout, cin, rows, dy_k.data(), 1, cout, x.data() + r0 * cin, cin, dW_k, cin, chunks > 1);
+        if (dx) gemm_f32(kernel, rows, cin, cout, dy_k.data(), cout, 1, W.data(), cin, dx + r0 * cin, cin, assign_dx);
+        if (dW)
+          gemm_f32(kernel, cout, cin, rows, dy_k.data(), 1, cout, x.data() + r0 * cin, cin, dW_k, cin, chunks > 1);
       }
     }
     if (!own) {

@@ -177,7 +177,8 @@ double gemm_rate(Eigen::Index rows, int threads) {
   const Eigen::Index k = 268;
   using RowMajor = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
   RowMajor a = RowMajor::Random(rows, k), b = RowMajor::Random(k, k), c(rows, k);
-  const bool own = ad::f32_gemm_kernel() == ad::F32GemmKernel::kAvx512;
+  const ad::F32GemmKernel kernel = ad::f32_gemm_kernel();
+  const bool own = kernel != ad::F32GemmKernel::kEigen;
   std::vector<double> ts;
   for (int r = 0; r < 8; ++r) {
     const double t0 = now_ms();
@@ -186,7 +187,7 @@ double gemm_rate(Eigen::Index rows, int threads) {
       {
         const Eigen::Index t = omp_get_thread_num(), n = omp_get_num_threads();
         const Eigen::Index r0 = rows * t / n, r1 = rows * (t + 1) / n;
-        ad::gemm_f32(r1 - r0, k, k, a.data() + r0 * k, k, 1, b.data(), k, c.data() + r0 * k, k, true);
+        ad::gemm_f32(kernel, r1 - r0, k, k, a.data() + r0 * k, k, 1, b.data(), k, c.data() + r0 * k, k, true);
       }
     } else {
       Eigen::setNbThreads(threads);

@@ -1,6 +1,7 @@
-// The float32 kernel of autodiff/gemm_f32.h: every output is the fused multiply-add chain over
-// k in order from its start value, bit for bit, whatever the shape, the tails, the k and m
-// blocks or the layout of A; and the linear layers that run on it agree with double precision.
+// The float32 kernels of autodiff/gemm_f32.h (avx512 and avx2, each where the build has it):
+// every output is the fused multiply-add chain over k in order from its start value, bit for
+// bit, whatever the shape, the tails, the k and m blocks or the layout of A; and the linear
+// layers that run on the chosen one agree with double precision.
 #include "autodiff/gemm_f32.h"
 #include "autodiff/ops_dense.h"
 #include "autodiff/tape.h"
@@ -8,8 +9,10 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <random>
+#include <string>
 #include <vector>
 
 namespace {
@@ -34,19 +37,20 @@ float chain(int64_t i, int64_t j, int64_t k, const std::vector<float>& a, int64_
   return acc;
 }
 
-class GemmF32 : public ::testing::Test {
+class GemmF32 : public ::testing::TestWithParam<F32GemmKernel> {
  protected:
   void SetUp() override {
-    if (!f32_gemm_kernel_available(F32GemmKernel::kAvx512)) GTEST_SKIP() << "this build has no avx512 float32 kernel";
+    if (!f32_gemm_kernel_available(GetParam()))
+      GTEST_SKIP() << "this build has no " << f32_gemm_kernel_name(GetParam()) << " float32 kernel";
   }
 };
 
-TEST_F(GemmF32, EveryOutputIsTheOrderedFmaChainForAnyShapeAndLayout) {
+TEST_P(GemmF32, EveryOutputIsTheOrderedFmaChainForAnyShapeAndLayout) {
   std::mt19937 rng(7);
-  // Row counts through the 12-row register block and the 240-row m block, columns through the
-  // 16 and 32 lane tails, k through the 256-deep k block.
-  for (const int64_t m : {1, 5, 12, 13, 25, 250})
-    for (const int64_t n : {1, 15, 16, 17, 32, 45})
+  // Row counts through the 6- and 12-row register blocks and the 240-row m block, columns
+  // through the 8-, 16- and 32-lane tails, k through the 256-deep k block.
+  for (const int64_t m : {1, 5, 6, 7, 12, 13, 25, 250})
+    for (const int64_t n : {1, 7, 8, 9, 15, 16, 17, 24, 32, 45})
       for (const int64_t k : {0, 1, 7, 300})
         for (const bool transposed_a : {false, true})
           for (const bool assign : {false, true}) {
@@ -56,7 +60,7 @@ TEST_F(GemmF32, EveryOutputIsTheOrderedFmaChainForAnyShapeAndLayout) {
             const auto b = random_values(static_cast<std::size_t>(k * ldb + 1), rng);
             auto c = random_values(static_cast<std::size_t>(m * ldc), rng);
             const auto start = c;
-            gemm_f32(m, n, k, a.data(), a_row, a_col, b.data(), ldb, c.data(), ldc, assign);
+            gemm_f32(GetParam(), m, n, k, a.data(), a_row, a_col, b.data(), ldb, c.data(), ldc, assign);
             for (int64_t i = 0; i < m; ++i)
               for (int64_t j = 0; j < ldc; ++j) {
                 const float before = start[i * ldc + j], got = c[i * ldc + j];
@@ -72,21 +76,39 @@ TEST_F(GemmF32, EveryOutputIsTheOrderedFmaChainForAnyShapeAndLayout) {
           }
 }
 
-TEST_F(GemmF32, ARowGivesTheSameBitsWhereverItFallsInTheCall) {
+TEST_P(GemmF32, ARowGivesTheSameBitsWhereverItFallsInTheCall) {
   std::mt19937 rng(11);
   const int64_t m = 37, n = 40, k = 270;
   const auto a = random_values(static_cast<std::size_t>(m * k), rng);
   const auto b = random_values(static_cast<std::size_t>(k * n), rng);
   std::vector<float> whole(static_cast<std::size_t>(m * n)), part(static_cast<std::size_t>(5 * n));
-  gemm_f32(m, n, k, a.data(), k, 1, b.data(), n, whole.data(), n, true);
-  gemm_f32(5, n, k, a.data() + 30 * k, k, 1, b.data(), n, part.data(), n, true);  // rows 30..34 alone
+  gemm_f32(GetParam(), m, n, k, a.data(), k, 1, b.data(), n, whole.data(), n, true);
+  gemm_f32(GetParam(), 5, n, k, a.data() + 30 * k, k, 1, b.data(), n, part.data(), n, true);  // rows 30..34 alone
   for (int64_t i = 0; i < 5; ++i)
     for (int64_t j = 0; j < n; ++j) ASSERT_TRUE(same_bits(part[i * n + j], whole[(30 + i) * n + j])) << i << ", " << j;
 }
 
-TEST_F(GemmF32, AWithoutAUnitStrideIsRefused) {
+TEST_P(GemmF32, AWithoutAUnitStrideIsRefused) {
   std::vector<float> a(16), b(16), c(16);
-  EXPECT_THROW(gemm_f32(2, 2, 2, a.data(), 2, 3, b.data(), 2, c.data(), 2, true), std::logic_error);
+  EXPECT_THROW(gemm_f32(GetParam(), 2, 2, 2, a.data(), 2, 3, b.data(), 2, c.data(), 2, true), std::logic_error);
+}
+
+INSTANTIATE_TEST_SUITE_P(Kernels, GemmF32, ::testing::Values(F32GemmKernel::kAvx512, F32GemmKernel::kAvx2),
+                         [](const auto& info) { return std::string(f32_gemm_kernel_name(info.param)); });
+
+TEST(GemmF32Kernels, EigenIsNotAKernelOfOurOwn) {
+  std::vector<float> a(4), b(4), c(4);
+  EXPECT_THROW(gemm_f32(F32GemmKernel::kEigen, 2, 2, 2, a.data(), 2, 1, b.data(), 2, c.data(), 2, true),
+               std::logic_error);
+}
+
+// The chosen kernel is the fastest the build has; Eigen only where it has neither.
+TEST(GemmF32Kernels, TheFastestAvailableKernelIsChosen) {
+  if (std::getenv("LAYERSNET_F32_GEMM")) GTEST_SKIP() << "LAYERSNET_F32_GEMM picks the kernel";
+  const F32GemmKernel want = f32_gemm_kernel_available(F32GemmKernel::kAvx512) ? F32GemmKernel::kAvx512
+                             : f32_gemm_kernel_available(F32GemmKernel::kAvx2) ? F32GemmKernel::kAvx2
+                                                                                : F32GemmKernel::kEigen;
+  EXPECT_EQ(f32_gemm_kernel(), want);
 }
 
 // The linear layer's forward and backward on a float tape (which run on the chosen kernel)
