@@ -63,7 +63,7 @@ struct Avx2 {
 #endif
 
 // Blocks over k and m that keep a strip of B (kKBlock rows of 2 vectors) in L1 and kMBlock rows
-// of A in L2; multiples of both kernels' kRows.
+// of A in L2; kMBlock is a multiple of both kernels' kRows.
 constexpr int64_t kKBlock = 256, kMBlock = 240;
 
 // C[0..R) x [0..V vectors) (+)= A[0..R) x [0..kb) * B[0..kb) x [0..V vectors). Full: every
