@@ -1,6 +1,6 @@
 // `layersnet bench model`'s choice of the reference's BLAS kernel: the probe's parsing, the
 // kernels offered for this CPU, and the whole choice end to end against a stand-in python whose
-// GEMM rate depends on OPENBLAS_CORETYPE.
+// GEMM rate depends on OPENBLAS_CORETYPE; and an unknown float32 GEMM kernel in LAYERSNET_F32_GEMM.
 #include "bench/bench_model.h"
 
 #include "tests/eval/cli_test_util.h"
@@ -13,6 +13,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <string>
 
 namespace {
 
@@ -83,6 +84,22 @@ esac
   const double expected_rank = rank(expected.empty() ? own : expected);
   EXPECT_EQ(j["rows"][0]["torch_peak_rss_mib"].get<double>(), expected_rank) << out;
   fs::remove_all(dir);
+}
+
+// A float32 GEMM kernel named in LAYERSNET_F32_GEMM that does not exist is an error naming the
+// variable and the choices, before any work.
+TEST(BenchModelGemmKernel, AnUnknownKernelIsAnErrorNamingTheVariable) {
+  const char* before = std::getenv("LAYERSNET_F32_GEMM");
+  const std::string saved = before ? before : "";
+  ::setenv("LAYERSNET_F32_GEMM", "sse", 1);
+  int code = 0;
+  const std::string out = layersnet::eval::cli_test::run_cli(
+      "bench model --size small --threads 1 --no-reference --passes 1 --iters 1 --warmup 0", &code);
+  if (before) ::setenv("LAYERSNET_F32_GEMM", saved.c_str(), 1);
+  else ::unsetenv("LAYERSNET_F32_GEMM");
+  EXPECT_EQ(code, 1) << out;
+  EXPECT_NE(out.find("LAYERSNET_F32_GEMM=sse"), std::string::npos) << out;
+  EXPECT_NE(out.find("choose avx512, avx2 or eigen"), std::string::npos) << out;
 }
 
 }  // namespace
