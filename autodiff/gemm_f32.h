@@ -16,8 +16,10 @@
 // give the same bits:
 // - "avx512": 12 x 32 register blocks of zmm accumulators, when compiled with __AVX512F__
 //   (-march=native on a CPU that has it). Debian 12's Eigen 3.4 runs its AVX-512 GEMM at
-//   0.5-0.8x this kernel's rate (docs/decisions.md, "A float32 GEMM of our own").
-// - "avx2": 6 x 16 register blocks of ymm accumulators, when compiled with __AVX2__ and __FMA__.
+//   0.5-0.8x this kernel's rate on an AMD EPYC (Zen 5) and level with it on an Intel Xeon
+//   (docs/decisions.md, "A float32 GEMM of our own", "The float32 GEMM of our own on AVX2").
+// - "avx2": 6 x 16 register blocks of ymm accumulators, when compiled with __AVX2__ and __FMA__;
+//   1.1-1.2x Eigen's AVX2 GEMM on an AMD EPYC, level with it on an Intel Xeon.
 // - "eigen": Eigen's product, which the callers run themselves (autodiff/ops_dense.cpp); its
 //   rounding depends on where a row falls in the call, so there the callers fix the row blocks.
 // LAYERSNET_F32_GEMM=avx512|avx2|eigen picks one (for measurements; naming one the build lacks
