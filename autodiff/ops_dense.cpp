@@ -599,26 +599,60 @@ void backward_hinge_sq(const Node<T>& node) {
 
 // ---- layer_norm -----------------------------------------------------------------------------
 
+// A row's sums add its columns one by one in order, each term rounded before it is added (never
+// fused into the add), so a row's bits are those of a plain loop over its columns. One row's chain
+// waits on every add's latency; kNormRows rows side by side keep the adders busy: their terms are
+// first written column-major into a (C, kNormRows) buffer, so that the sums are vector adds with
+// one row in each lane (and no multiply for the compiler to fuse into them).
+constexpr int64_t kNormRows = 8;
+
+// sums[j] = Σ_c terms[c * kNormRows + j] over c = 0..C-1 in order, for every lane j.
+template <class T>
+void column_sums(const T* terms, int64_t C, T* sums) {
+  T acc[kNormRows] = {};
+  for (int64_t c = 0; c < C; ++c)
+    for (int64_t j = 0; j < kNormRows; ++j) acc[j] += terms[c * kNormRows + j];
+  std::copy_n(acc, kNormRows, sums);
+}
+
+// A (C, kNormRows) buffer per thread for the terms of column_sums (two of them in backward).
+template <class T>
+T* norm_terms(int64_t C, int count) {
+  static thread_local std::vector<T> buffer;
+  const auto size = static_cast<std::size_t>(count * C * kNormRows);
+  if (buffer.size() < size) buffer.assign(size, T(0));
+  return buffer.data();
+}
+
 // x, out: (N, C); gamma, beta: (C) or null; mean, rstd: (N) saved for backward.
 template <class T>
 void layer_norm_forward(const T* x, const T* gamma, const T* beta, T eps, int64_t N, int64_t C, T* out, T* mean,
                         T* rstd) {
   for_row_blocks(N, C, [&](int64_t r0, int64_t n) {
+    T* const terms = norm_terms<T>(C, 1);
+    T sums[kNormRows];
+    for (int64_t g = r0; g < r0 + n; g += kNormRows) {
+      const int64_t rows = std::min(kNormRows, r0 + n - g);
+      // The mean, then the variance around it (two passes: no cancellation for rows with a large mean).
+      for (int64_t j = 0; j < rows; ++j)
+        for (int64_t c = 0; c < C; ++c) terms[c * kNormRows + j] = x[(g + j) * C + c];
+      column_sums(terms, C, sums);
+      for (int64_t j = 0; j < rows; ++j) mean[g + j] = sums[j] / T(C);
+      for (int64_t j = 0; j < rows; ++j)
+        for (int64_t c = 0; c < C; ++c) {
+          const T d = x[(g + j) * C + c] - mean[g + j];
+          terms[c * kNormRows + j] = d * d;
+        }
+      column_sums(terms, C, sums);
+      for (int64_t j = 0; j < rows; ++j) rstd[g + j] = T(1) / std::sqrt(sums[j] / T(C) + eps);
+    }
     for (int64_t r = r0; r < r0 + n; ++r) {
-      const T* xr = x + r * C;
+      const T *xr = x + r * C, m = mean[r], rs = rstd[r];
       T* yr = out + r * C;
-      T m = 0;
-      for (int64_t c = 0; c < C; ++c) m += xr[c];
-      m /= T(C);
-      T v = 0;  // two passes: no cancellation for rows with a large mean
-      for (int64_t c = 0; c < C; ++c) v += (xr[c] - m) * (xr[c] - m);
-      const T rs = T(1) / std::sqrt(v / T(C) + eps);
       for (int64_t c = 0; c < C; ++c) {
         const T xh = (xr[c] - m) * rs;
         yr[c] = (gamma ? xh * gamma[c] : xh) + (beta ? beta[c] : T(0));
       }
-      mean[r] = m;
-      rstd[r] = rs;
     }
   });
 }
@@ -630,21 +664,31 @@ void layer_norm_backward(const T* x, const T* gamma, const T* mean, const T* rst
                          T* dx, T* dgamma, T* dbeta) {
   if (dx) {
     for_row_blocks(N, C, [&](int64_t r0, int64_t n) {
-      for (int64_t r = r0; r < r0 + n; ++r) {
-        const T *xr = x + r * C, *gr = dy + r * C;
-        const T m = mean[r], rs = rstd[r];
-        T s1 = 0, s2 = 0;
-        for (int64_t c = 0; c < C; ++c) {
-          const T dxh = gamma ? gr[c] * gamma[c] : gr[c];
-          s1 += dxh;
-          s2 += dxh * (xr[c] - m) * rs;
+      T* const dxh_terms = norm_terms<T>(C, 2);
+      T* const dxh_xh_terms = dxh_terms + C * kNormRows;
+      T mean_dxh[kNormRows], mean_dxh_xh[kNormRows];
+      for (int64_t g = r0; g < r0 + n; g += kNormRows) {
+        const int64_t rows = std::min(kNormRows, r0 + n - g);
+        for (int64_t j = 0; j < rows; ++j) {
+          const T *xr = x + (g + j) * C, *gr = dy + (g + j) * C;
+          const T m = mean[g + j], rs = rstd[g + j];
+          for (int64_t c = 0; c < C; ++c) {
+            const T dxh = gamma ? gr[c] * gamma[c] : gr[c];
+            dxh_terms[c * kNormRows + j] = dxh;
+            dxh_xh_terms[c * kNormRows + j] = dxh * (xr[c] - m) * rs;
+          }
         }
-        s1 /= T(C);
-        s2 /= T(C);
-        T* dr = dx + r * C;
-        for (int64_t c = 0; c < C; ++c) {
-          const T dxh = gamma ? gr[c] * gamma[c] : gr[c];
-          dr[c] += rs * (dxh - s1 - (xr[c] - m) * rs * s2);
+        column_sums(dxh_terms, C, mean_dxh);
+        column_sums(dxh_xh_terms, C, mean_dxh_xh);
+        for (int64_t j = 0; j < rows; ++j) {
+          const int64_t r = g + j;
+          const T *xr = x + r * C, *gr = dy + r * C;
+          const T m = mean[r], rs = rstd[r], s1 = mean_dxh[j] / T(C), s2 = mean_dxh_xh[j] / T(C);
+          T* dr = dx + r * C;
+          for (int64_t c = 0; c < C; ++c) {
+            const T dxh = gamma ? gr[c] * gamma[c] : gr[c];
+            dr[c] += rs * (dxh - s1 - (xr[c] - m) * rs * s2);
+          }
         }
       }
     });

@@ -532,6 +532,38 @@ TEST(DenseForward, BadShapesThrow) {
   EXPECT_THROW(squared_error(t, x, wrong), CheckError);
 }
 
+TEST(LayerNormRows, EachRowIsItsPlainLoopWhateverRowsSurroundIt) {
+  // 37 rows (four groups of rows summed side by side and a tail of 5) of 23 columns: a row's mean
+  // and variance are its columns added one by one, each squared term rounded first, and a row's
+  // output and gradient are the same bits in the whole tensor as alone.
+  const int64_t N = 37, C = 23;
+  const float eps = 1e-5f;
+  const RowMat<float> x = (random_matrix(N, C, 70, -2, 3).array() + 10.0).matrix().cast<float>();
+  const RowMat<float> weights = random_matrix(N, C, 71).cast<float>();
+  auto run = [&](int64_t r0, int64_t rows) {
+    Tape<float> t;
+    const RowMat<float> xs = x.middleRows(r0, rows), ws = weights.middleRows(r0, rows);
+    const auto xv = t.leaf(xs.data(), rows, C);
+    const auto y = layer_norm(t, xv, Var<float>{}, Var<float>{}, eps);
+    t.backward(sum_all(t, mul(t, y, t.constant(ws.data(), rows, C))));
+    return std::pair<RowMat<float>, RowMat<float>>{y.val(), xv.grd()};
+  };
+  const auto [y, dx] = run(0, N);
+  for (int64_t r = 0; r < N; ++r) {
+    float sum = 0, squares = 0;
+    for (int64_t c = 0; c < C; ++c) sum += x(r, c);
+    const float mean = sum / float(C);
+    std::vector<float> squared(C);
+    for (int64_t c = 0; c < C; ++c) squared[c] = (x(r, c) - mean) * (x(r, c) - mean);
+    for (int64_t c = 0; c < C; ++c) squares += squared[c];
+    const float rstd = 1.0f / std::sqrt(squares / float(C) + eps);
+    for (int64_t c = 0; c < C; ++c) ASSERT_EQ(y(r, c), (x(r, c) - mean) * rstd) << "row " << r << ", column " << c;
+    const auto [y_alone, dx_alone] = run(r, 1);
+    EXPECT_EQ(RowMat<float>(y.row(r)), y_alone) << "row " << r;
+    EXPECT_EQ(RowMat<float>(dx.row(r)), dx_alone) << "row " << r;
+  }
+}
+
 TEST(DenseDeterminism, ReductionsAreIdenticalForOneAndTwoThreads) {
   // Large enough to run in parallel; column sums, LayerNorm gradients and linear's weight
   // and bias gradients must not depend on the thread count.
