@@ -171,32 +171,74 @@ NearestBody NearestVertexIndex::query(const Eigen::Ref<const Points>& queries) c
   return answer;
 }
 
+namespace {
+
+// The answers a thread was last given for queries of this many rows against this many points: the
+// starting guesses of its next such walk (a rollout asks about the same cloth vertices against each
+// body frame several times a frame, and the cloth moves little between asks).
+struct LastAnswer {
+  Eigen::Index queries = 0, points = 0;
+  std::vector<int32_t> index;
+};
+
+LastAnswer& last_answer_for(Eigen::Index queries, Eigen::Index points) {
+  thread_local std::vector<LastAnswer> recent;  // most recently used first
+  auto it = std::find_if(recent.begin(), recent.end(),
+                         [&](const LastAnswer& a) { return a.queries == queries && a.points == points; });
+  if (it == recent.end()) {
+    if (recent.size() == 4) recent.pop_back();
+    recent.insert(recent.begin(), LastAnswer{queries, points, {}});
+  } else {
+    std::rotate(recent.begin(), it, it + 1);
+  }
+  return recent.front();
+}
+
+}  // namespace
+
 NearestBody NearestVertexIndex::query_within(const Eigen::Ref<const Points>& queries, float max_distance) const {
   NearestBody out;
-  const Eigen::Index Q = queries.rows();
+  const Eigen::Index Q = queries.rows(), P = tree_->points.rows();
   out.index.assign(Q, 0);
   out.distance.assign(Q, std::numeric_limits<float>::infinity());
-  if (tree_->points.rows() == 0) return out;
+  if (P == 0) return out;
   // Slightly above max_distance², so that a point at exactly max_distance is found; the walk
   // only adds points strictly closer than the current bound.
   const float bound = std::isfinite(max_distance) ? std::nextafter(max_distance * max_distance, std::numeric_limits<float>::max())
                                                   : std::numeric_limits<float>::max();
+  // A guess (the point this thread was last given for the same row) tightens the walk's starting
+  // bound to a little above the guess's distance, which prunes most of the tree at once. The answer
+  // is the one a walk from `bound` gives: that answer is the first point at the least distance in
+  // the walk's order, the order does not depend on the bound, and no subtree holding a point at
+  // the least distance is pruned while the bound stays above it (the slack covers the rounding of
+  // the walk's box distances).
+  LastAnswer& last = last_answer_for(Q, P);
+  const bool guessed = static_cast<Eigen::Index>(last.index.size()) == Q;
+  const Points& points = tree_->points;
   // A query costs about a microsecond; from a few hundred on, a second thread pays on a machine
   // whose cores are free (on one loaded by other processes it may not: docs/decisions.md,
   // "Nearest-vertex queries on the threads again").
 #pragma omp parallel for schedule(static) if (Q > 512)
   for (Eigen::Index q = 0; q < Q; ++q) {
     const float pt[3] = {queries(q, 0), queries(q, 1), queries(q, 2)};
+    float start = bound;
+    if (guessed) {
+      const int32_t g = last.index[q];
+      float d2 = 0;
+      for (int c = 0; c < 3; ++c) d2 += (pt[c] - points(g, c)) * (pt[c] - points(g, c));
+      start = std::min(bound, std::max(d2 * 1.001f, std::numeric_limits<float>::min()));
+    }
     uint32_t idx = 0;
     float d2 = 0;
     nanoflann::KNNResultSet<float, uint32_t> result(1);
     result.init(&idx, &d2);
-    d2 = bound;  // the walk's initial worst distance
+    d2 = start;  // the walk's initial worst distance
     tree_->kd.findNeighbors(result, pt, nanoflann::SearchParams());
     if (result.size() == 0) continue;
     out.index[q] = static_cast<int32_t>(idx);
     out.distance[q] = std::sqrt(d2);
   }
+  last.index = out.index;
   return out;
 }
 

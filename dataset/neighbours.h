@@ -105,7 +105,9 @@ class NearestVertexIndex {
   NearestBody query(const Eigen::Ref<const Points>& queries) const;
   // The nearest point within max_distance (scene units) of each query, else index 0 and
   // distance +inf. Where it finds one it equals query(); the bound prunes the tree walk, which
-  // costs far less when most queries only ask whether a point is near.
+  // costs far less when most queries only ask whether a point is near. The calling thread's last
+  // answers for as many queries against as many points start the walks: faster where the queries
+  // moved little, and the same answers.
   NearestBody query_within(const Eigen::Ref<const Points>& queries, float max_distance) const;
   // The index of `points` from the calling thread's last few, built only when these points (by
   // value) are not among them: a rollout asks for each body frame's index several times (the

@@ -5,7 +5,9 @@
 
 #include <cmath>
 #include <memory>
+#include <limits>
 #include <random>
+#include <thread>
 
 namespace layersnet::dataset {
 namespace {
@@ -167,6 +169,34 @@ TEST(NearestBody, BoundedSearchAgreesWithinTheBoundAndFindsNothingBeyond) {
   EXPECT_EQ(edge.index[0], 0);
   EXPECT_EQ(edge.distance[0], 0.25f);
   EXPECT_TRUE(std::isinf(NearestVertexIndex(one).query_within(at, 0.2499f).distance[0]));
+}
+
+// A thread's guesses (its last answers for as many queries against as many points) prune the walk
+// but never change the answer: it is what a thread without guesses gives, for guesses near and far,
+// bounded or not, with ties between duplicated points, on one thread and on the threads.
+TEST(NearestBody, GuessesFromTheLastAnswerChangeNoAnswer) {
+  Points body = random_points(2000, 1.f, 11);
+  body.bottomRows(200) = body.topRows(200);  // 200 points twice: ties
+  const NearestVertexIndex index(body);
+  auto without_guesses = [&](const Points& q, float bound) {
+    NearestBody answer;
+    std::thread fresh([&] { answer = index.query_within(q, bound); });  // a new thread has no guesses
+    fresh.join();
+    return answer;
+  };
+  for (const int rows : {300, 3000}) {
+    const Points far = random_points(rows, 1.5f, 12);
+    Points near = far + 0.01f * random_points(rows, 1.f, 13);
+    for (int i = 0; i < 100; ++i) near.row(i) = body.row(1900 + i % 100);  // exactly on a duplicated point
+    for (const float bound : {std::numeric_limits<float>::infinity(), 0.08f}) {
+      // The guesses: from far for near, from near for far.
+      for (const Points* q : std::initializer_list<const Points*>{&far, &near, &far}) {
+        const NearestBody guessed = index.query_within(*q, bound), fresh = without_guesses(*q, bound);
+        EXPECT_EQ(guessed.index, fresh.index) << rows << " rows, bound " << bound;
+        EXPECT_EQ(guessed.distance, fresh.distance) << rows << " rows, bound " << bound;
+      }
+    }
+  }
 }
 
 // A kept index is handed out again for the same points (by value, not by address), a new one for
