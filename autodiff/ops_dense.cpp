@@ -615,21 +615,12 @@ void column_sums(const T* terms, int64_t C, T* sums) {
   std::copy_n(acc, kNormRows, sums);
 }
 
-// A (C, kNormRows) buffer per thread for the terms of column_sums (two of them in backward).
-template <class T>
-T* norm_terms(int64_t C, int count) {
-  static thread_local std::vector<T> buffer;
-  const auto size = static_cast<std::size_t>(count * C * kNormRows);
-  if (buffer.size() < size) buffer.assign(size, T(0));
-  return buffer.data();
-}
-
 // x, out: (N, C); gamma, beta: (C) or null; mean, rstd: (N) saved for backward.
 template <class T>
 void layer_norm_forward(const T* x, const T* gamma, const T* beta, T eps, int64_t N, int64_t C, T* out, T* mean,
                         T* rstd) {
   for_row_blocks(N, C, [&](int64_t r0, int64_t n) {
-    T* const terms = norm_terms<T>(C, 1);
+    T* const terms = backward_scratch<T, kScratchLayerNorm>(static_cast<std::size_t>(C * kNormRows));
     T sums[kNormRows];
     for (int64_t g = r0; g < r0 + n; g += kNormRows) {
       const int64_t rows = std::min(kNormRows, r0 + n - g);
@@ -664,7 +655,7 @@ void layer_norm_backward(const T* x, const T* gamma, const T* mean, const T* rst
                          T* dx, T* dgamma, T* dbeta) {
   if (dx) {
     for_row_blocks(N, C, [&](int64_t r0, int64_t n) {
-      T* const dxh_terms = norm_terms<T>(C, 2);
+      T* const dxh_terms = backward_scratch<T, kScratchLayerNorm>(static_cast<std::size_t>(2 * C * kNormRows));
       T* const dxh_xh_terms = dxh_terms + C * kNormRows;
       T mean_dxh[kNormRows], mean_dxh_xh[kNormRows];
       for (int64_t g = r0; g < r0 + n; g += kNormRows) {

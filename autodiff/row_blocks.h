@@ -60,7 +60,8 @@ const T* reduce_row_blocks(int64_t rows, int64_t cols, int64_t width, F&& f) {
 
 // Scratch for one op kind's backward on this thread: grows to the largest request, then is
 // reused by every later call, so what only backward needs is not held on the tape from the
-// forward on. Contents are unspecified; valid until the next call with the same Slot.
+// forward on (a forward's buffers that die with the call use it too). Contents are unspecified;
+// valid until the next call with the same Slot.
 template <class T, int Slot>
 T* backward_scratch(std::size_t count) {
   static thread_local std::vector<T> buffer;
@@ -79,7 +80,8 @@ enum ScratchSlot : int {
   kScratchRotMapU,
   kScratchRotMapT,
   kScratchMlpGradA,
-  kScratchMlpGradB
+  kScratchMlpGradB,
+  kScratchLayerNorm
 };
 
 }  // namespace layersnet::ad

@@ -181,19 +181,6 @@ struct LastAnswer {
   std::vector<int32_t> index;
 };
 
-LastAnswer& last_answer_for(Eigen::Index queries, Eigen::Index points) {
-  thread_local std::vector<LastAnswer> recent;  // most recently used first
-  auto it = std::find_if(recent.begin(), recent.end(),
-                         [&](const LastAnswer& a) { return a.queries == queries && a.points == points; });
-  if (it == recent.end()) {
-    if (recent.size() == 4) recent.pop_back();
-    recent.insert(recent.begin(), LastAnswer{queries, points, {}});
-  } else {
-    std::rotate(recent.begin(), it, it + 1);
-  }
-  return recent.front();
-}
-
 }  // namespace
 
 NearestBody NearestVertexIndex::query_within(const Eigen::Ref<const Points>& queries, float max_distance) const {
@@ -212,8 +199,11 @@ NearestBody NearestVertexIndex::query_within(const Eigen::Ref<const Points>& que
   // the walk's order, the order does not depend on the bound, and no subtree holding a point at
   // the least distance is pruned while the bound stays above it (the slack covers the rounding of
   // the walk's box distances).
-  LastAnswer& last = last_answer_for(Q, P);
-  const bool guessed = static_cast<Eigen::Index>(last.index.size()) == Q;
+  thread_local std::vector<std::shared_ptr<const LastAnswer>> recent;
+  const auto last = kept_or_made(
+      recent, 4, [&](const LastAnswer& a) { return a.queries == Q && a.points == P; },
+      [&] { return std::make_shared<const LastAnswer>(LastAnswer{Q, P, {}}); });
+  const bool guessed = static_cast<Eigen::Index>(last->index.size()) == Q;
   const Points& points = tree_->points;
   // A query costs about a microsecond; from a few hundred on, a second thread pays on a machine
   // whose cores are free (on one loaded by other processes it may not: docs/decisions.md,
@@ -223,7 +213,7 @@ NearestBody NearestVertexIndex::query_within(const Eigen::Ref<const Points>& que
     const float pt[3] = {queries(q, 0), queries(q, 1), queries(q, 2)};
     float start = bound;
     if (guessed) {
-      const int32_t g = last.index[q];
+      const int32_t g = last->index[q];
       float d2 = 0;
       for (int c = 0; c < 3; ++c) d2 += (pt[c] - points(g, c)) * (pt[c] - points(g, c));
       start = std::min(bound, std::max(d2 * 1.001f, std::numeric_limits<float>::min()));
@@ -238,7 +228,7 @@ NearestBody NearestVertexIndex::query_within(const Eigen::Ref<const Points>& que
     out.index[q] = static_cast<int32_t>(idx);
     out.distance[q] = std::sqrt(d2);
   }
-  last.index = out.index;
+  recent.front() = std::make_shared<const LastAnswer>(LastAnswer{Q, P, out.index});
   return out;
 }
 
