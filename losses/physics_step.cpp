@@ -153,19 +153,20 @@ std::shared_ptr<const HessianPattern> pattern_for(const PhysicsInput<double>& in
 struct Hessian {
   const HessianPattern* pattern = nullptr;
   std::vector<double> blocks;         // (nnz · 9) row-major 3×3
-  std::vector<double> padded;         // (nnz · 12) the same blocks by columns, each padded to 4 (for the product)
+  // (nnz · 9 + 1) the same blocks by columns, then one 0, for the product: it reads a column as four
+  // doubles, the fourth being the next column's (or the next block's, or that 0) and ignored.
+  // Unpadded, a product streams 72 bytes a block instead of 96.
+  std::vector<double> by_columns;
   std::vector<Block> preconditioner;  // (N) inverse of each vertex's diagonal block; 0 on fixed rows
   std::vector<Block> diagonal_sums;   // (N) the diagonal blocks while they are summed
 
   int64_t rows() const { return static_cast<int64_t>(preconditioner.size()); }
-  // The padded copy of the blocks of rows [r0, r1) (padded sized already).
-  void pad_columns(int64_t r0, int64_t r1) {
+  // The by-columns copy of the blocks of rows [r0, r1) (by_columns sized already).
+  void copy_by_columns(int64_t r0, int64_t r1) {
     const auto k0 = static_cast<std::size_t>(pattern->offsets[r0]), k1 = static_cast<std::size_t>(pattern->offsets[r1]);
     for (std::size_t k = k0; k < k1; ++k)
-      for (int c = 0; c < 3; ++c) {
-        for (int r = 0; r < 3; ++r) padded[12 * k + 4 * c + r] = blocks[9 * k + 3 * r + c];
-        padded[12 * k + 4 * c + 3] = 0.0;
-      }
+      for (int c = 0; c < 3; ++c)
+        for (int r = 0; r < 3; ++r) by_columns[9 * k + 3 * c + r] = blocks[9 * k + 3 * r + c];
   }
   // Rows [r0, r1) of y = H p, one row at a time: a gather, so no row is written twice; each block
   // adds its three columns times p's entries as 4-wide vectors.
@@ -174,9 +175,9 @@ struct Hessian {
     for (int64_t v = r0; v < r1; ++v) {
       V4 acc = V4::Zero();
       for (int32_t k = pattern->offsets[v]; k < pattern->offsets[v + 1]; ++k) {
-        const double* b = &padded[12 * static_cast<std::size_t>(k)];
+        const double* b = &by_columns[9 * static_cast<std::size_t>(k)];
         const double* q = &p[3 * static_cast<std::size_t>(pattern->columns[k])];
-        acc += Eigen::Map<const V4>(b) * q[0] + Eigen::Map<const V4>(b + 4) * q[1] + Eigen::Map<const V4>(b + 8) * q[2];
+        acc += Eigen::Map<const V4>(b) * q[0] + Eigen::Map<const V4>(b + 3) * q[1] + Eigen::Map<const V4>(b + 6) * q[2];
       }
       y[3 * v] = acc[0], y[3 * v + 1] = acc[1], y[3 * v + 2] = acc[2];
     }
@@ -228,7 +229,8 @@ void fill_hessian(Hessian& h, const PhysicsInput<double>& in, const HessianPatte
   const int64_t N = static_cast<int64_t>(x.size() / 3);
   h.pattern = &pattern;
   h.blocks.resize(9 * pattern.columns.size());
-  h.padded.resize(12 * pattern.columns.size());
+  h.by_columns.resize(9 * pattern.columns.size() + 1);
+  h.by_columns.back() = 0.0;
   h.preconditioner.resize(N);
   h.diagonal_sums.resize(N);
   // Off-diagonal blocks go to their place at once; the diagonal ones are summed in `block` first,
@@ -332,7 +334,7 @@ void fill_hessian(Hessian& h, const PhysicsInput<double>& in, const HessianPatte
       h.preconditioner[v] = usable ? Block(block[v].inverse()) : Block::Zero();
       matrix_block(pattern.diagonal[v]) = block[v];
     }
-    h.pad_columns(r0, r1);
+    h.copy_by_columns(r0, r1);
   }
 }
 
