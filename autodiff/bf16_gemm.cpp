@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <bit>
+#include <chrono>
 #include <cstdlib>
 #include <cstring>
 #include <map>
@@ -13,9 +14,11 @@
 #include <string>
 #include <tuple>
 
+#if defined(__x86_64__) && defined(__GNUC__)
+#include <cpuid.h>
+#endif
 #if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
 #define LAYERSNET_AMX_KERNEL 1
-#include <cpuid.h>
 #include <sys/syscall.h>
 #include <unistd.h>
 #endif
@@ -110,6 +113,79 @@ const char* bf16_kernel_name(Bf16Kernel kernel) {
 const char* bf16_kernel_name() { return bf16_kernel_name(bf16_kernel()); }
 
 bool bf16_available() { return bf16_kernel() != Bf16Kernel::kScalar; }
+
+namespace {
+
+bool amd_cpu() {
+#if defined(__x86_64__) && defined(__GNUC__)
+  unsigned a = 0, b = 0, c = 0, d = 0;
+  if (!__get_cpuid(0, &a, &b, &c, &d)) return false;
+  char vendor[13] = {};
+  std::memcpy(vendor, &b, 4);
+  std::memcpy(vendor + 4, &d, 4);
+  std::memcpy(vendor + 8, &c, 4);
+  return std::strcmp(vendor, "AuthenticAMD") == 0;
+#else
+  return false;
+#endif
+}
+
+}  // namespace
+
+bool bf16_outruns_float32() {
+  switch (bf16_kernel()) {
+    case Bf16Kernel::kAmx: return true;
+    case Bf16Kernel::kAvx512: return amd_cpu();
+    case Bf16Kernel::kScalar: return false;
+  }
+  return false;
+}
+
+#ifdef __AVX512BF16__
+namespace {
+
+// Seconds for `iters` rounds of 24 independent accumulations acc = step(acc, operand), no loads.
+template <class Operand, class Step>
+double time_accumulations(long iters, Operand operand, Step step) {
+  __m512 acc[24];
+  for (__m512& a : acc) a = _mm512_setzero_ps();
+  const auto start = std::chrono::steady_clock::now();
+  for (long i = 0; i < iters; ++i) {
+#pragma GCC unroll 24
+    for (int j = 0; j < 24; ++j) acc[j] = step(acc[j], operand);
+    __asm__ volatile("" : "+v"(operand));  // a new operand each round: no step is hoisted or merged
+  }
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  __m512 sum = acc[0];
+  for (int j = 1; j < 24; ++j) sum = _mm512_add_ps(sum, acc[j]);
+  alignas(64) float lanes[16];
+  _mm512_store_ps(lanes, sum);
+  volatile float kept = lanes[0];  // the accumulations are used
+  (void)kept;
+  return seconds;
+}
+
+}  // namespace
+#endif
+
+DotRates measure_dot_rates(int rounds) {
+  DotRates r;
+#ifdef __AVX512BF16__
+  const __m512i ones = _mm512_set1_epi32(0x3F803F80);  // bf16 pairs (1, 1)
+  const __m512bh w = reinterpret_cast<const __m512bh&>(ones);
+  const __m512 x = _mm512_set1_ps(1.0f);
+  constexpr long kIters = 200000;
+  for (int k = 0; k < rounds; ++k) {
+    const double t_bf16 = time_accumulations(kIters, w, [](__m512 a, __m512bh v) { return _mm512_dpbf16_ps(a, v, v); });
+    const double t_fma = time_accumulations(kIters, x, [](__m512 a, __m512 v) { return _mm512_fmadd_ps(v, v, a); });
+    r.bf16_gmacs = std::max(r.bf16_gmacs, 24.0 * 32 * kIters / t_bf16 * 1e-9);
+    r.fma_gmacs = std::max(r.fma_gmacs, 24.0 * 16 * kIters / t_fma * 1e-9);
+  }
+#else
+  (void)rounds;
+#endif
+  return r;
+}
 
 const char* matmul_precision_name(MatmulPrecision p) {
   return p == MatmulPrecision::kBFloat16 ? "bf16" : "float32";

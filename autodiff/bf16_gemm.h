@@ -68,8 +68,24 @@ Bf16Kernel bf16_kernel();
 const char* bf16_kernel_name(Bf16Kernel kernel);
 const char* bf16_kernel_name();  // of bf16_kernel()
 
-// True when bf16_kernel() is a vector kernel (faster than float32); false for the scalar one.
+// True when bf16_kernel() is a vector kernel; false for the scalar one.
 bool bf16_available();
+
+// True where the bf16 products out-run float32 ones: the AMX kernel, or the AVX-512 BF16 kernel on
+// an AMD core. An Intel core without usable AMX (e.g. under a hypervisor that hides the tiles)
+// issues VDPBF16PS at a quarter of the FMA's rate, half its multiply-adds a second
+// (docs/decisions.md, "bf16 products only where they out-run float32"). `simulate
+// --precision auto` takes bf16 only here.
+bool bf16_outruns_float32();
+
+// One core's multiply-adds per second (10⁹) in a loop of independent VDPBF16PS and of
+// VFMADD231PS on 512-bit registers, best of `rounds` (about 0.05 s each); 0 where the build
+// lacks AVX-512 BF16. For `bench linear`: the instructions' own rates, free of memory.
+struct DotRates {
+  double bf16_gmacs = 0;
+  double fma_gmacs = 0;
+};
+DotRates measure_dot_rates(int rounds = 5);
 
 // float <-> bfloat16 bits (rounding as above).
 uint16_t float_to_bf16(float f);

@@ -9,6 +9,8 @@
 //            inference only): x and W rounded to bfloat16, float accumulation; the weights
 //            are packed once (cache) and checked against the cache on every call, as in a
 //            rollout. Its speed-up is fwd0 / bf16; its error is reported against float.
+// Peak:      one core's multiply-adds a second in register-only loops of VDPBF16PS and of
+//            VFMADD231PS, and the precision `simulate --precision auto` takes on this CPU.
 // Goals: forward >= 0.8 of the GEMM rate, backward <= 2.2x the forward time.
 #include "bench/bench_linear.h"
 #include "autodiff/bf16_gemm.h"
@@ -223,6 +225,12 @@ int run_bench_linear(const LinearBenchOptions& o) {
                 r.fwd_norecord_ms, r.bf16_ms, gf / r.fwd_norecord_ms, gf / r.bf16_ms, r.fwd_norecord_ms / r.bf16_ms,
                 r.min_bf16_speedup, r.cpu_fwd0_ms, r.cpu_bf16_ms, r.cpu_fwd0_ms / r.cpu_bf16_ms, r.bf16_rel_err);
   }
+  const DotRates rates = measure_dot_rates();
+  if (rates.fma_gmacs > 0)
+    std::printf("one core's peak, no memory: VDPBF16PS %.1f, VFMADD231PS %.1f 10^9 multiply-adds/s "
+                "(bf16/float32 %.2f)\n",
+                rates.bf16_gmacs, rates.fma_gmacs, rates.bf16_gmacs / rates.fma_gmacs);
+  std::printf("simulate --precision auto here: %s\n", bf16_outruns_float32() ? "bf16" : "float32");
   print_load("after");
   if (o.relu) {
     std::printf("\nrelu(linear(x)) forward + backward (the memcpy seeding dy included in both):\n");
@@ -260,7 +268,12 @@ int run_bench_linear(const LinearBenchOptions& o) {
       rows.push_back(row);
     }
     const nlohmann::ordered_json out = {
-        {"bench", "linear"}, {"reps", o.reps}, {"bf16_kernel", bf16_kernel_name()}, {"results", rows}};
+        {"bench", "linear"},
+        {"reps", o.reps},
+        {"bf16_kernel", bf16_kernel_name()},
+        {"peak_gmacs", {{"vdpbf16ps", rates.bf16_gmacs}, {"vfmadd231ps", rates.fma_gmacs}}},
+        {"auto_precision", bf16_outruns_float32() ? "bf16" : "float32"},
+        {"results", rows}};
     layersnet::io::write_file_atomic(o.json, out.dump(2) + "\n");
   }
   return 0;

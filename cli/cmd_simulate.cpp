@@ -92,10 +92,10 @@ int run_simulate(SimulateCliOptions& o) {
   if (o.threads > 0) omp_set_num_threads(o.threads);
   auto model = eval::load_model_predictor(checkpoint, checkpoint, nullptr);
   model->apply_eval_settings(eval::simulate_rollout_settings(model->config().eval, o.settings));
-  // bf16 products cost no measurable accuracy and save a quarter of the step with the AMX or the
-  // AVX-512 BF16 kernel (docs/decisions.md, "AMX tiles for the bf16 products"); the scalar
-  // reference would be slower than float32.
-  if (o.precision == "auto") o.precision = ad::bf16_available() ? "bf16" : "float32";
+  // bf16 products cost no measurable accuracy and save a quarter of the step where they out-run
+  // float32 (docs/decisions.md, "AMX tiles for the bf16 products", "bf16 products only where they
+  // out-run float32"); elsewhere float32 is both faster and exact.
+  if (o.precision == "auto") o.precision = ad::bf16_outruns_float32() ? "bf16" : "float32";
   model->set_matmul_precision(ad::parse_matmul_precision(o.precision));
   const auto& garments = scene.sequence.info.garments;
   const bool any_pins = std::any_of(garments.begin(), garments.end(), [](const auto& g) { return g.num_pinned() > 0; });
@@ -170,7 +170,8 @@ LAYERSNET_COMMAND(
       sub.add_option("--set", o->settings, "rollout setting of the model, e.g. --set eval.constraints=false");
       sub.add_option("--precision", o->precision,
                      "linear products of the model: float32, bf16 (bfloat16 inputs, float32 sums: faster, the "
-                     "same accuracy within 0.1 %), or auto = bf16 where this CPU runs the AMX or AVX-512 BF16 kernel")
+                     "same accuracy within 0.1 %), or auto = bf16 where it out-runs float32 on this CPU (AMX "
+                     "tiles, or AVX-512 BF16 on an AMD core; `layersnet bench linear` shows the rates)")
           ->check(CLI::IsMember({"auto", "float32", "fp32", "bf16", "bfloat16"}))
           ->default_val("auto");
       sub.add_option("--threads", o->threads, "OpenMP threads of the rollout (0 = all of them against 1, timed on the first steps and again every 100, the faster kept; the positions are the same at any count)")->check(CLI::NonNegativeNumber)->default_val(0);

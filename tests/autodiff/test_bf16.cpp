@@ -17,9 +17,11 @@
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
+#include <fstream>
 #include <iostream>
 #include <limits>
 #include <random>
+#include <string>
 #include <vector>
 
 #ifdef __AVX512BF16__
@@ -222,6 +224,32 @@ TEST(Bf16, TheFastestAvailableKernelRuns) {
   EXPECT_EQ(bf16_kernel(), expected);
   EXPECT_EQ(bf16_available(), expected != Bf16Kernel::kScalar);
   EXPECT_STREQ(bf16_kernel_name(), bf16_kernel_name(expected));
+}
+
+// The CPU's vendor as Linux reports it ("" where /proc/cpuinfo has no vendor_id line).
+std::string cpuinfo_vendor() {
+  std::ifstream in("/proc/cpuinfo");
+  for (std::string line; std::getline(in, line);)
+    if (line.rfind("vendor_id", 0) == 0) return line.substr(line.find(':') + 2);
+  return "";
+}
+
+// bf16 is preferred with AMX tiles, and with the AVX-512 BF16 kernel only on an AMD core; never
+// with the scalar reference. The peak-rate probe runs where the build has AVX-512 BF16.
+TEST(Bf16, PreferredOverFloat32OnlyWhereItOutrunsIt) {
+  switch (bf16_kernel()) {
+    case Bf16Kernel::kAmx: EXPECT_TRUE(bf16_outruns_float32()); break;
+    case Bf16Kernel::kAvx512: EXPECT_EQ(bf16_outruns_float32(), cpuinfo_vendor() == "AuthenticAMD"); break;
+    case Bf16Kernel::kScalar: EXPECT_FALSE(bf16_outruns_float32()); break;
+  }
+  const DotRates r = measure_dot_rates(1);
+  if (bf16_kernel_available(Bf16Kernel::kAvx512)) {
+    EXPECT_TRUE(std::isfinite(r.bf16_gmacs) && r.bf16_gmacs > 0) << r.bf16_gmacs;
+    EXPECT_TRUE(std::isfinite(r.fma_gmacs) && r.fma_gmacs > 0) << r.fma_gmacs;
+  } else {
+    EXPECT_EQ(r.bf16_gmacs, 0.0);
+    EXPECT_EQ(r.fma_gmacs, 0.0);
+  }
 }
 
 // ---- the hook in linear / linear_relu ---------------------------------------------------------
