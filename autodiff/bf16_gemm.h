@@ -79,7 +79,7 @@ bool bf16_available();
 bool bf16_outruns_float32();
 
 // One core's multiply-adds per second (10⁹) in a loop of independent VDPBF16PS and of
-// VFMADD231PS on 512-bit registers, best of `rounds` (about 0.05 s each); 0 where the build
+// VFMADD231PS on 512-bit registers, best of `rounds` (about 5 ms each); 0 where the build
 // lacks AVX-512 BF16. For `bench linear`: the instructions' own rates, free of memory.
 struct DotRates {
   double bf16_gmacs = 0;
