@@ -226,11 +226,12 @@ int run_bench_linear(const LinearBenchOptions& o) {
                 r.min_bf16_speedup, r.cpu_fwd0_ms, r.cpu_bf16_ms, r.cpu_fwd0_ms / r.cpu_bf16_ms, r.bf16_rel_err);
   }
   const DotRates rates = measure_dot_rates();
+  const char* auto_precision = bf16_outruns_float32() ? "bf16" : "float32";
   if (rates.fma_gmacs > 0)
     std::printf("one core's peak, no memory: VDPBF16PS %.1f, VFMADD231PS %.1f 10^9 multiply-adds/s "
                 "(bf16/float32 %.2f)\n",
                 rates.bf16_gmacs, rates.fma_gmacs, rates.bf16_gmacs / rates.fma_gmacs);
-  std::printf("simulate --precision auto here: %s\n", bf16_outruns_float32() ? "bf16" : "float32");
+  std::printf("simulate --precision auto here: %s\n", auto_precision);
   print_load("after");
   if (o.relu) {
     std::printf("\nrelu(linear(x)) forward + backward (the memcpy seeding dy included in both):\n");
@@ -272,7 +273,7 @@ int run_bench_linear(const LinearBenchOptions& o) {
         {"reps", o.reps},
         {"bf16_kernel", bf16_kernel_name()},
         {"peak_gmacs", {{"vdpbf16ps", rates.bf16_gmacs}, {"vfmadd231ps", rates.fma_gmacs}}},
-        {"auto_precision", bf16_outruns_float32() ? "bf16" : "float32"},
+        {"auto_precision", auto_precision},
         {"results", rows}};
     layersnet::io::write_file_atomic(o.json, out.dump(2) + "\n");
   }
